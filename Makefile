@@ -1,0 +1,40 @@
+# Every target installs what it needs into .venv from nothing.
+PYTHON ?= python3.11
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.installed
+export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
+
+.PHONY: venv run test test-all bench lint clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q torch==2.13.0
+	$(PIP) install -q -e '.[dev]'
+	touch $(STAMP)
+
+## The main job on the embedded default.
+run: venv
+	$(VENV)/bin/nbake render cornell_box --spp 64 --width 256 --height 256 -o out/cornell_box.exr --aov
+
+## The default test suite (what CI runs).
+test: venv
+	$(VENV)/bin/pytest -q
+
+## Including slow accuracy checks.
+test-all: venv
+	$(VENV)/bin/pytest -q -m ''
+
+bench: venv
+	$(PY) -m tests.bench
+
+lint: venv
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

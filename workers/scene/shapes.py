@@ -1,0 +1,140 @@
+"""Turn a shape description into a checked triangle mesh in the shape's local space."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workers.scene import spec
+from workers.scene.errors import SceneError
+
+DEGENERATE_AREA = 1e-14  # relative to the squared bounding-box diagonal
+
+
+@dataclass(frozen=True)
+class MeshData:
+    """Indexed triangles; optional per-vertex shading normals and UVs."""
+
+    vertices: np.ndarray  # (V, 3) float64
+    faces: np.ndarray  # (F, 3) int64
+    normals: np.ndarray | None = None  # (V, 3)
+    uvs: np.ndarray | None = None  # (V, 2)
+
+    @property
+    def num_triangles(self) -> int:
+        return len(self.faces)
+
+
+def rectangle() -> MeshData:
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
+    n = np.tile([0.0, 0.0, 1.0], (4, 1))
+    return MeshData(v, np.array([[0, 1, 2], [0, 2, 3]]), n, uv)
+
+
+def box() -> MeshData:
+    """Six rectangles rotated to face outward; flat normals, per-face UVs."""
+    face = rectangle()
+    rotations = [  # maps +z to each face normal
+        np.eye(3),
+        np.diag([1.0, -1.0, -1.0]),
+        np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=np.float64),
+        np.array([[0, 0, -1], [0, 1, 0], [1, 0, 0]], dtype=np.float64),
+        np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], dtype=np.float64),
+        np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], dtype=np.float64),
+    ]
+    verts, faces, normals, uvs = [], [], [], []
+    for k, r in enumerate(rotations):
+        verts.append(face.vertices @ r.T + r[:, 2])
+        normals.append(face.normals @ r.T)
+        faces.append(face.faces + 4 * k)
+        uvs.append(face.uvs)
+    return MeshData(np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), np.concatenate(uvs))
+
+
+def sphere(center, radius: float, subdivisions: int) -> MeshData:
+    """An icosphere with smooth normals and spherical UVs (seam triangles share vertices; fine for tests)."""
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    unit = np.asarray(mesh.vertices, dtype=np.float64)
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    u = np.arctan2(unit[:, 0], -unit[:, 2]) / (2 * np.pi) % 1.0
+    v = np.arccos(np.clip(unit[:, 1], -1, 1)) / np.pi
+    return MeshData(
+        unit * radius + np.asarray(center), np.asarray(mesh.faces, dtype=np.int64), unit, np.stack([u, v], 1)
+    )
+
+
+def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> MeshData:
+    """The checked local-space mesh of `shape`; `field` names it in errors."""
+    match shape:
+        case spec.RectangleShape():
+            mesh = rectangle()
+        case spec.BoxShape():
+            mesh = box()
+        case spec.SphereShape():
+            mesh = sphere(shape.center, shape.radius, shape.subdivisions)
+        case spec.MeshShape():
+            from workers.scene.meshio import load_mesh_file
+
+            path = Path(shape.path)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            mesh = load_mesh_file(path, f"{field}.path")
+        case spec.ProceduralShape():
+            from workers.scene.procedural import generate
+
+            mesh = generate(shape.generator, shape.params, field)
+        case _:
+            raise SceneError(field, f"unsupported shape {type(shape).__name__}")
+    return check_mesh(mesh, field, repair=getattr(shape, "repair", False))
+
+
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
+    """Reject (or, with `repair`, drop) what would break the renderer: non-finite data, bad indices, slivers."""
+    v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+        raise SceneError(field, f"expected (V, 3) vertices and (F, 3) faces, got {v.shape} and {f.shape}")
+    if len(f) == 0:
+        raise SceneError(field, "mesh has no triangles")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise SceneError(
+            field, f"{int(bad.sum())} vertices are NaN or Inf (first at index {int(np.argmax(bad))})"
+        )
+    if f.min() < 0 or f.max() >= len(v):
+        raise SceneError(field, f"face indices out of range [0, {len(v)})")
+    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
+    areas = triangle_areas(v, f)
+    degenerate = areas <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
+    normals, uvs = mesh.normals, mesh.uvs
+    if degenerate.all():
+        raise SceneError(field, "every triangle is degenerate (zero area)")
+    if degenerate.any():
+        if not repair:
+            raise SceneError(
+                field,
+                f"{int(degenerate.sum())} degenerate (zero-area) triangles, first at index "
+                f"{int(np.argmax(degenerate))}; set `repair: true` on the shape to drop them",
+            )
+        f = f[~degenerate]
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float64)
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        if normals.shape != v.shape or not np.isfinite(normals).all() or (length < 1e-12).any():
+            normals = None  # unusable shading normals: fall back to flat shading
+        else:
+            normals = normals / length
+    if uvs is not None:
+        uvs = np.asarray(uvs, dtype=np.float64)
+        if uvs.shape != (len(v), 2) or not np.isfinite(uvs).all():
+            raise SceneError(field, "texture coordinates are malformed or not finite")
+    return MeshData(v, f, normals, uvs)

@@ -1,0 +1,331 @@
+"""The scene description users write (YAML or JSON) and every component reads.
+
+A `SceneSpec` is small and serialisable: geometry is referenced (mesh files,
+analytic shapes, named procedural generators), never inlined, so a spec can be
+hashed for job identity and shipped to Ray workers cheaply.
+
+Conventions: right-handed, y-up; colours are linear RGB; roughness is the GGX
+`alpha` (as Mitsuba's `alpha`); angles are in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+
+Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+NonNegRGB = tuple[
+    Annotated[FiniteFloat, Field(ge=0)],
+    Annotated[FiniteFloat, Field(ge=0)],
+    Annotated[FiniteFloat, Field(ge=0)],
+]
+Albedo = tuple[
+    Annotated[FiniteFloat, Field(ge=0, le=1)],
+    Annotated[FiniteFloat, Field(ge=0, le=1)],
+    Annotated[FiniteFloat, Field(ge=0, le=1)],
+]
+Roughness = Annotated[FiniteFloat, Field(ge=0, le=1, description="GGX alpha")]
+
+
+class Model(BaseModel):
+    """Base: unknown fields are errors, so typos are caught at upload."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+class Transform(Model):
+    """Scale, then rotate (Euler X, then Y, then Z, degrees), then translate; or a 4x4 matrix."""
+
+    translate: Vec3 = (0.0, 0.0, 0.0)
+    rotate: Vec3 = (0.0, 0.0, 0.0)
+    scale: Vec3 | FiniteFloat = 1.0
+    matrix: tuple[Vec3 | tuple[FiniteFloat, ...], ...] | None = Field(
+        default=None, description="row-major 4x4 (or 3x4) affine matrix; overrides the other fields"
+    )
+
+    @field_validator("matrix")
+    @classmethod
+    def _matrix_shape(cls, m):
+        if m is None:
+            return m
+        if len(m) not in (3, 4) or any(len(row) != 4 for row in m):
+            raise ValueError("matrix must have 3 or 4 rows of 4 numbers")
+        if len(m) == 4 and tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
+            raise ValueError("the last row of an affine matrix must be (0, 0, 0, 1)")
+        if abs(np.linalg.det(np.asarray(m, dtype=np.float64)[:3, :3])) < 1e-12:
+            raise ValueError("matrix is singular (zero volume)")
+        return m
+
+    @field_validator("scale")
+    @classmethod
+    def _scale_nonzero(cls, s):
+        values = (s,) if isinstance(s, float | int) else s
+        if any(abs(v) < 1e-12 for v in values):
+            raise ValueError("scale must be non-zero on every axis")
+        return s
+
+    def to_matrix(self) -> np.ndarray:
+        """The 4x4 float64 matrix taking local points to the parent space."""
+        if self.matrix is not None:
+            m = np.eye(4)
+            m[: len(self.matrix)] = np.asarray(self.matrix, dtype=np.float64)
+            return m
+        s = np.broadcast_to(np.asarray(self.scale, dtype=np.float64), (3,))
+        m = np.eye(4)
+        m[:3, :3] = euler_xyz(self.rotate) @ np.diag(s)
+        m[:3, 3] = self.translate
+        return m
+
+
+def euler_xyz(degrees: Vec3) -> np.ndarray:
+    """Rotation about X, then Y, then Z (R = Rz @ Ry @ Rx), angles in degrees."""
+    ax, ay, az = (math.radians(a) for a in degrees)
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+# --------------------------------------------------------------------------- textures
+
+
+class ImageTexture(Model):
+    """An 8-bit (sRGB-decoded) or EXR (linear) image addressed by UV; wraps (repeat)."""
+
+    type: Literal["image"] = "image"
+    path: str
+
+
+class CheckerTexture(Model):
+    """A procedural checkerboard in UV space, useful for tests without files."""
+
+    type: Literal["checker"] = "checker"
+    color0: Albedo = (0.8, 0.8, 0.8)
+    color1: Albedo = (0.2, 0.2, 0.2)
+    scale: Annotated[FiniteFloat, Field(gt=0)] = 8.0
+
+
+Texture = Annotated[ImageTexture | CheckerTexture, Field(discriminator="type")]
+ColorOrTexture = Albedo | Texture
+
+
+# --------------------------------------------------------------------------- materials
+
+
+class Diffuse(Model):
+    type: Literal["diffuse"] = "diffuse"
+    reflectance: ColorOrTexture = (0.5, 0.5, 0.5)
+
+
+class Conductor(Model):
+    """GGX microfacet metal whose Fresnel term is the specular colour (Mitsuba `material: none`)."""
+
+    type: Literal["conductor"] = "conductor"
+    roughness: Roughness = 0.1
+    specular: Albedo = (1.0, 1.0, 1.0)
+
+
+class Plastic(Model):
+    """A diffuse base under a GGX dielectric coat; energy-conserving by construction."""
+
+    type: Literal["plastic"] = "plastic"
+    diffuse: ColorOrTexture = (0.5, 0.5, 0.5)
+    roughness: Roughness = 0.1
+    ior: Annotated[FiniteFloat, Field(gt=1.0, le=4.0)] = 1.5
+
+
+class Dielectric(Model):
+    """Glass: smooth when roughness is 0, GGX rough otherwise. `ior` is interior over exterior."""
+
+    type: Literal["dielectric"] = "dielectric"
+    ior: Annotated[FiniteFloat, Field(gt=1.0, le=4.0)] = 1.5
+    roughness: Roughness = 0.0
+
+
+Material = Annotated[Diffuse | Conductor | Plastic | Dielectric, Field(discriminator="type")]
+
+
+# --------------------------------------------------------------------------- shapes
+
+
+class MeshShape(Model):
+    """A mesh file (OBJ, PLY, glTF/GLB, STL) read with trimesh; relative paths resolve against the scene file."""
+
+    type: Literal["mesh"] = "mesh"
+    path: str
+    repair: bool = Field(
+        default=False, description="drop degenerate triangles instead of rejecting the mesh"
+    )
+
+
+class SphereShape(Model):
+    type: Literal["sphere"] = "sphere"
+    center: Vec3 = (0.0, 0.0, 0.0)
+    radius: Annotated[FiniteFloat, Field(gt=0)] = 1.0
+    subdivisions: Annotated[int, Field(ge=0, le=7)] = 5
+
+
+class RectangleShape(Model):
+    """The square [-1, 1]^2 in the z = 0 plane facing +z (Mitsuba's `rectangle`)."""
+
+    type: Literal["rectangle"] = "rectangle"
+
+
+class BoxShape(Model):
+    """The cube [-1, 1]^3 with outward faces (Mitsuba's `cube`)."""
+
+    type: Literal["box"] = "box"
+
+
+class ProceduralShape(Model):
+    """Geometry made by a named generator in `workers.scene.procedural`, deterministic for its params."""
+
+    type: Literal["procedural"] = "procedural"
+    generator: str
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+Shape = Annotated[
+    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape, Field(discriminator="type")
+]
+
+
+class SceneObject(Model):
+    """A shape with a material, placed once per instance (geometry is shared between instances)."""
+
+    name: str = Field(min_length=1, max_length=128)
+    shape: Shape
+    material: str = Field(description="a key of SceneSpec.materials")
+    emission: NonNegRGB | None = Field(default=None, description="area-light radiance (one-sided, front)")
+    two_sided_emission: bool = False
+    transform: Transform = Transform()
+    instances: list[Transform] | None = Field(
+        default=None, description="extra placements, each applied before `transform`"
+    )
+
+    def instance_matrices(self) -> list[np.ndarray]:
+        base = self.transform.to_matrix()
+        if not self.instances:
+            return [base]
+        return [base @ t.to_matrix() for t in self.instances]
+
+
+# --------------------------------------------------------------------------- lights
+
+
+class PointLight(Model):
+    type: Literal["point"] = "point"
+    position: Vec3
+    intensity: NonNegRGB = Field(description="radiant intensity, W/sr")
+
+
+class DirectionalLight(Model):
+    type: Literal["directional"] = "directional"
+    direction: Vec3 = Field(description="the direction light travels")
+    irradiance: NonNegRGB
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, d):
+        if math.hypot(*d) < 1e-12:
+            raise ValueError("direction must be non-zero")
+        return d
+
+
+Light = Annotated[PointLight | DirectionalLight, Field(discriminator="type")]
+
+
+class EnvironmentMap(Model):
+    """A lat-long HDR map (Mitsuba's convention: u = atan2(x, -z) / 2pi, v = acos(y) / pi).
+
+    `path` is an EXR file, `procedural` names a generator in `workers.scene.envmaps`
+    (`sky`, `studio`) with `params`, and `builtin` names an HDRI shipped in `assets/hdri`.
+    """
+
+    type: Literal["envmap"] = "envmap"
+    path: str | None = None
+    procedural: str | None = None
+    builtin: str | None = None
+    params: dict[str, Any] = Field(default_factory=dict)
+    rotate: Vec3 = (0.0, 0.0, 0.0)
+    scale: Annotated[FiniteFloat, Field(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        given = [x for x in (self.path, self.procedural, self.builtin) if x is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of `path`, `procedural` or `builtin`")
+        return self
+
+
+class ConstantBackground(Model):
+    type: Literal["constant"] = "constant"
+    radiance: NonNegRGB = (1.0, 1.0, 1.0)
+
+
+Environment = Annotated[EnvironmentMap | ConstantBackground, Field(discriminator="type")]
+
+
+# --------------------------------------------------------------------------- camera
+
+
+class Camera(Model):
+    """A pinhole camera; `fov` is the vertical field of view in degrees."""
+
+    position: Vec3 = (0.0, 0.0, 5.0)
+    target: Vec3 = (0.0, 0.0, 0.0)
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: Annotated[FiniteFloat, Field(gt=0.1, lt=179.0)] = 40.0
+    width: Annotated[int, Field(ge=1, le=16384)] = 256
+    height: Annotated[int, Field(ge=1, le=16384)] = 256
+
+    @model_validator(mode="after")
+    def _well_posed(self):
+        forward = np.subtract(self.target, self.position)
+        n = np.linalg.norm(forward)
+        if n < 1e-9:
+            raise ValueError("camera target coincides with its position")
+        up = np.asarray(self.up, dtype=np.float64)
+        if np.linalg.norm(up) < 1e-9:
+            raise ValueError("camera up vector is zero")
+        if np.linalg.norm(np.cross(forward / n, up / np.linalg.norm(up))) < 1e-6:
+            raise ValueError("camera looks along its up vector; choose another `up`")
+        return self
+
+
+# --------------------------------------------------------------------------- scene
+
+
+class SceneSpec(Model):
+    """A complete scene: named materials, objects, lights, an environment and a camera."""
+
+    name: str = "scene"
+    materials: dict[str, Material]
+    objects: list[SceneObject] = Field(min_length=1)
+    lights: list[Light] = Field(default_factory=list)
+    environment: Environment | None = None
+    camera: Camera = Camera()
+
+    @model_validator(mode="after")
+    def _references(self):
+        names = set()
+        for i, obj in enumerate(self.objects):
+            if obj.material not in self.materials:
+                known = ", ".join(sorted(self.materials)) or "none"
+                raise ValueError(
+                    f"objects[{i}].material: unknown material {obj.material!r} (known: {known})"
+                )
+            if obj.name in names:
+                raise ValueError(f"objects[{i}].name: duplicate object name {obj.name!r}")
+            names.add(obj.name)
+        return self
+
+    def emitters_present(self) -> bool:
+        return bool(self.lights) or self.environment is not None or any(o.emission for o in self.objects)
