@@ -1,0 +1,177 @@
+"""Batch streams: batches in index order, made in-process or by a pool of Ray sampler actors.
+
+Both streams hand out batch i as the i-th item whoever made it, so training does not depend on how many
+samplers ran or whether one died. The Ray pool keeps at most `max_in_flight` batches requested but not yet
+consumed: a slow trainer stalls the samplers instead of letting results pile up in the object store.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import ray
+from ray.exceptions import ObjectLostError, RayActorError
+
+from workers.runtime.sources import Batch, SourceSpec
+
+SAMPLER_FAILURES = (RayActorError, ObjectLostError)
+REPLACEMENTS_PER_BATCH = 3  # a batch whose fresh samplers keep dying points at a broken source, not bad luck
+
+
+class BatchStream(Protocol):
+    """An iterator over batches by index that can be repositioned (for resume)."""
+
+    position: int
+
+    def seek(self, index: int) -> None: ...
+
+    def __next__(self) -> Batch: ...
+
+    def close(self) -> None: ...
+
+
+class InProcessBatches:
+    """Batches made on the caller's thread: the fallback for tests and `quick` runs, and the reference."""
+
+    def __init__(self, spec: SourceSpec, start: int = 0) -> None:
+        self.source = spec.build()
+        self.position = start
+
+    def seek(self, index: int) -> None:
+        self.position = index
+
+    def __iter__(self) -> InProcessBatches:
+        return self
+
+    def __next__(self) -> Batch:
+        batch = self.source.batch(self.position)
+        self.position += 1
+        return batch
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> InProcessBatches:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@ray.remote
+class SamplerActor:
+    """Runs one sample source in its own process; counts what it produced so back-pressure is observable."""
+
+    def __init__(self, spec: SourceSpec) -> None:
+        self.source = spec.build()
+        self.batches_made = 0
+
+    def batch(self, index: int) -> Batch:
+        self.batches_made += 1
+        return self.source.batch(index)
+
+    def produced(self) -> int:
+        return self.batches_made
+
+
+class SamplerPool:
+    """A fixed number of sampler actors feeding batches in index order with a bounded read-ahead.
+
+    Requests go to the actor with the fewest outstanding ones. When fetching a batch reports its actor dead,
+    that actor is replaced by a fresh one and every index it still owed is requested again from the new one.
+    """
+
+    def __init__(
+        self,
+        spec: SourceSpec,
+        actors: int = 2,
+        max_in_flight: int | None = None,
+        actor_options: dict[str, Any] | None = None,
+        start: int = 0,
+    ) -> None:
+        if actors < 1:
+            raise ValueError(f"a sampler pool needs at least one actor, got {actors}")
+        self.spec = spec
+        self.max_in_flight = max_in_flight or 2 * actors
+        if self.max_in_flight < 1:
+            raise ValueError(f"max_in_flight must be at least 1, got {self.max_in_flight}")
+        self.actor_options = actor_options or {"num_cpus": 1}
+        self.actors = [self._start_actor() for _ in range(actors)]
+        self.replacements = 0
+        self.pending: dict[int, tuple[ray.ObjectRef, int]] = {}  # index -> (result, actor slot)
+        self.position = start
+        self._fill()
+
+    @property
+    def in_flight(self) -> int:
+        """Batches requested from actors and not yet handed to the consumer."""
+        return len(self.pending)
+
+    def _start_actor(self) -> ray.actor.ActorHandle:
+        return SamplerActor.options(**self.actor_options).remote(self.spec)
+
+    def _request(self, index: int, slot: int) -> None:
+        self.pending[index] = (self.actors[slot].batch.remote(index), slot)
+
+    def _least_busy_slot(self) -> int:
+        load = [0] * len(self.actors)
+        for _, slot in self.pending.values():
+            load[slot] += 1
+        return min(range(len(self.actors)), key=load.__getitem__)
+
+    def _fill(self) -> None:
+        for index in range(self.position, self.position + self.max_in_flight):
+            if index not in self.pending:
+                self._request(index, self._least_busy_slot())
+
+    def _replace(self, slot: int) -> None:
+        ray.kill(self.actors[slot], no_restart=True)
+        self.actors[slot] = self._start_actor()
+        self.replacements += 1
+        for index in sorted(i for i, (_, s) in self.pending.items() if s == slot):
+            self._request(index, slot)
+
+    def seek(self, index: int) -> None:
+        self.pending.clear()  # dropped results are freed by Ray once their references are gone
+        self.position = index
+        self._fill()
+
+    def __iter__(self) -> SamplerPool:
+        return self
+
+    def __next__(self) -> Batch:
+        for _ in range(REPLACEMENTS_PER_BATCH + 1):
+            ref, slot = self.pending[self.position]
+            try:
+                batch = ray.get(ref)
+                break
+            except SAMPLER_FAILURES:
+                self._replace(slot)
+        else:
+            raise RuntimeError(
+                f"sampler actors died {REPLACEMENTS_PER_BATCH + 1} times making batch {self.position}; "
+                "check that the sample source can be built and run in a Ray worker"
+            )
+        del self.pending[self.position]
+        self.position += 1
+        self._fill()
+        return batch
+
+    def close(self) -> None:
+        for actor in self.actors:
+            ray.kill(actor, no_restart=True)
+        self.actors = []
+        self.pending.clear()
+
+    def __enter__(self) -> SamplerPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_batches(spec: SourceSpec, samplers: int, max_in_flight: int | None = None) -> BatchStream:
+    """A Ray pool of `samplers` actors, or the in-process stream when `samplers` is 0."""
+    if samplers == 0:
+        return InProcessBatches(spec)
+    return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight)
