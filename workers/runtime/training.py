@@ -158,16 +158,14 @@ def train(
             loss = loss_fn(model, batch)
         scaler.scale(loss).backward()
         scaler.unscale_(optimizer)
-        grads = [p.grad for p in parameters if p.grad is not None]
-        if config.grad_clip_norm is not None:
-            grad_norm = torch.nn.utils.clip_grad_norm_(parameters, config.grad_clip_norm)
-        else:
-            grad_norm = torch.nn.utils.get_total_norm(grads)
+        grad_norm = torch.nn.utils.get_total_norm([p.grad for p in parameters if p.grad is not None])
         loss_value, grad_norm_value = torch.stack([loss.detach().float(), grad_norm.float()]).tolist()
         if not math.isfinite(loss_value):
             raise TrainingDiverged(step, "loss", loss_value)
         if not amp and not math.isfinite(grad_norm_value):  # with AMP the scaler skips such steps itself
             raise TrainingDiverged(step, *_first_nonfinite_gradient(model))
+        if config.grad_clip_norm is not None:
+            torch.nn.utils.clip_grads_with_norm_(parameters, config.grad_clip_norm, grad_norm)
         scaler.step(optimizer)
         scaler.update()
         optimizer.zero_grad(set_to_none=True)

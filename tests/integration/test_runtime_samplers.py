@@ -1,0 +1,104 @@
+import time
+
+import pytest
+import ray
+import torch
+
+from workers.runtime.resources import ResourceRequest, actor_options
+from workers.runtime.samplers import InProcessBatches, SamplerPool, open_batches
+from workers.runtime.sources import AnalyticSource, AnalyticSourceConfig, SourceSpec
+from workers.runtime.training import Progress, TrainConfig, train
+
+SPEC = SourceSpec(AnalyticSource, AnalyticSourceConfig(batch_size=128, samples_per_point=8), seed=5)
+
+
+def reference_batches(count: int) -> list[dict[str, torch.Tensor]]:
+    stream = InProcessBatches(SPEC)
+    return [next(stream) for _ in range(count)]
+
+
+def assert_same_sequence(actual, expected) -> None:
+    assert len(actual) == len(expected)
+    for index, (a, b) in enumerate(zip(actual, expected, strict=True)):
+        assert a.keys() == b.keys()
+        assert all(torch.equal(a[k], b[k]) for k in a), f"batch {index} differs"
+
+
+def test_actors_produce_the_in_process_batches_in_order(ray_cluster):
+    with SamplerPool(SPEC, actors=2, max_in_flight=3) as pool:
+        batches = [next(pool) for _ in range(10)]
+        pool.seek(4)
+        after_seek = next(pool)
+    assert_same_sequence(batches, reference_batches(10))
+    assert_same_sequence([after_seek], reference_batches(5)[4:])
+
+
+def test_a_slow_consumer_bounds_what_samplers_make(ray_cluster):
+    max_in_flight = 3
+    with SamplerPool(SPEC, actors=2, max_in_flight=max_in_flight) as pool:
+        consumed = 0
+        for _ in range(5):
+            next(pool)
+            consumed += 1
+            time.sleep(0.3)  # ample time for the actors to run ahead if anything let them
+            assert pool.in_flight <= max_in_flight
+            produced = sum(ray.get([actor.produced.remote() for actor in pool.actors]))
+            assert consumed < produced <= consumed + max_in_flight
+
+
+def test_a_killed_sampler_is_replaced_and_the_sequence_is_unchanged(ray_cluster):
+    with SamplerPool(SPEC, actors=2, max_in_flight=4) as pool:
+        batches = [next(pool) for _ in range(3)]
+        victim = pool.actors[0]
+        ray.kill(victim, no_restart=True)
+        batches += [next(pool) for _ in range(9)]
+        assert pool.replacements == 1
+        assert victim not in pool.actors
+    assert_same_sequence(batches, reference_batches(12))
+
+
+def test_training_survives_a_killed_sampler_with_identical_results(ray_cluster):
+    config = TrainConfig(steps=10, progress_every=1)
+
+    def fit(batches, on_progress=None):
+        torch.manual_seed(0)
+        model = torch.nn.Sequential(torch.nn.Linear(3, 16), torch.nn.Tanh(), torch.nn.Linear(16, 3))
+        losses = []
+
+        def record(event: Progress) -> None:
+            losses.append(event.loss)
+            if on_progress:
+                on_progress(event)
+
+        train(
+            model,
+            lambda m, b: torch.nn.functional.mse_loss(m(b["inputs"]), b["targets"]),
+            batches,
+            config,
+            on_progress=record,
+        )
+        return model, losses
+
+    reference_model, reference_losses = fit(InProcessBatches(SPEC))
+    with open_batches(SPEC, samplers=2) as pool:
+
+        def kill_a_sampler(event: Progress) -> None:
+            if event.step == 4:
+                ray.kill(pool.actors[1], no_restart=True)
+
+        model, losses = fit(pool, kill_a_sampler)
+        assert pool.replacements == 1
+    assert losses == reference_losses
+    for a, b in zip(model.parameters(), reference_model.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_gpu_request_falls_back_on_a_cluster_without_gpus(ray_cluster):
+    assert ray.cluster_resources().get("GPU", 0) == 0
+    assert actor_options(ResourceRequest(cpus=1, gpus=1)) == {"num_cpus": 1}
+
+
+@pytest.mark.parametrize("actors", [0, -1])
+def test_a_pool_needs_an_actor(ray_cluster, actors):
+    with pytest.raises(ValueError, match="at least one actor"):
+        SamplerPool(SPEC, actors=actors)
