@@ -36,10 +36,8 @@ def test_actors_produce_the_in_process_batches_in_order(ray_cluster):
 def test_a_slow_consumer_bounds_what_samplers_make(ray_cluster):
     max_in_flight = 3
     with SamplerPool(SPEC, actors=2, max_in_flight=max_in_flight) as pool:
-        consumed = 0
-        for _ in range(5):
+        for consumed in range(1, 6):
             next(pool)
-            consumed += 1
             time.sleep(0.3)  # ample time for the actors to run ahead if anything let them
             assert pool.in_flight <= max_in_flight
             produced = sum(ray.get([actor.produced.remote() for actor in pool.actors]))
