@@ -1,0 +1,239 @@
+"""Wavefront unidirectional path tracing: every bounce is a handful of NumPy operations over all
+live paths, with Embree answering closest-hit and shadow queries in bulk.
+
+Next-event estimation and BSDF sampling are combined with the power heuristic; Russian roulette
+starts at `rr_depth`. `max_depth` counts path segments as Mitsuba does: 1 shows emitters only,
+2 is direct lighting. This is the API the training samplers call: `trace` for radiance along
+given rays, `first_hits` for surface records, `occluded` for visibility.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from workers.render.bsdf import Kind, eval_bsdf, sample_bsdf
+from workers.render.embree import Hits, RayScene
+from workers.render.lights import LightSampler
+from workers.render.materials import MaterialTable
+from workers.render.sampling import coordinate_frame, dot, power_heuristic, to_local, to_world
+from workers.scene.compile import CompiledScene
+
+RAY_OFFSET = 2e-5  # relative to the magnitude of the hit point's coordinates
+
+
+@dataclass
+class TraceResult:
+    radiance: np.ndarray  # (N, 3) float64, finite, >= 0
+    bounces: np.ndarray  # (N,) int: segments traced before the path ended
+    rays_traced: int  # closest-hit plus shadow rays, for throughput figures
+
+
+@dataclass
+class SurfaceRecords:
+    """First hits of a batch of rays; arrays are full-length, meaningful where `hit`."""
+
+    hit: np.ndarray  # (N,) bool
+    t: np.ndarray  # (N,) distance (inf on a miss)
+    position: np.ndarray  # (N, 3)
+    geometric_normal: np.ndarray  # (N, 3), follows the triangle's winding
+    shading_normal: np.ndarray  # (N, 3)
+    uv: np.ndarray  # (N, 2)
+    prim: np.ndarray  # (N,) triangle index, -1 on a miss
+    material_id: np.ndarray  # (N,)
+    object_id: np.ndarray  # (N,)
+    instance_id: np.ndarray  # (N,)
+    albedo: np.ndarray  # (N, 3)
+    roughness: np.ndarray  # (N,)
+    emission: np.ndarray  # (N, 3) radiance emitted towards the ray origin
+
+
+@dataclass
+class _Interaction:
+    position: np.ndarray
+    ng: np.ndarray
+    ns: np.ndarray
+    uv: np.ndarray
+
+
+class PathTracer:
+    """Everything needed to trace paths in one compiled scene; safe to share between threads."""
+
+    def __init__(self, scene: CompiledScene, robust: bool = True):
+        self.scene = scene
+        self.rays = RayScene(scene.positions, robust=robust)
+        self.lights = LightSampler(scene)
+        self.materials = MaterialTable(scene)
+        self._positions = scene.positions.astype(np.float64)
+        self._ng = scene.geometric_normals.astype(np.float64)
+        self._ns = scene.shading_normals.astype(np.float64)
+        self._uv = scene.uvs.astype(np.float64)
+        self._emission = scene.emission.astype(np.float64)
+        self._has_emitters = bool((scene.emission > 0).any())
+
+    # ------------------------------------------------------------------ geometry helpers
+
+    def _interaction(self, hits: Hits) -> _Interaction:
+        prim = hits.prim
+        b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
+        b0 = 1.0 - b1 - b2
+        corners = self._positions[prim]
+        position = b0 * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
+        normals = self._ns[prim]
+        ns = b0 * normals[:, 0] + b1 * normals[:, 1] + b2 * normals[:, 2]
+        ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
+        uvs = self._uv[prim]
+        uv = b0 * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
+        return _Interaction(position, self._ng[prim], ns, uv)
+
+    @staticmethod
+    def offset(position: np.ndarray, ng: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """Move a ray origin off the surface, to the side `direction` leaves by (no self-hits)."""
+        eps = RAY_OFFSET * np.maximum(np.abs(position).max(axis=1), 1e-30)
+        side = np.where(dot(direction, ng) >= 0, 1.0, -1.0)
+        return position + ng * (side * eps)[:, None]
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        return self.rays.occluded(origins, directions, t_max)
+
+    # ------------------------------------------------------------------ first hits
+
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> SurfaceRecords:
+        n = len(origins)
+        hits = self.rays.intersect(origins, directions)
+        found = hits.found
+        rec = SurfaceRecords(
+            hit=found, t=np.full(n, np.inf), position=np.zeros((n, 3)), geometric_normal=np.zeros((n, 3)),
+            shading_normal=np.zeros((n, 3)), uv=np.zeros((n, 2)), prim=np.full(n, -1, np.int64),
+            material_id=np.full(n, -1, np.int64), object_id=np.full(n, -1, np.int64),
+            instance_id=np.full(n, -1, np.int64), albedo=np.zeros((n, 3)), roughness=np.zeros(n),
+            emission=np.zeros((n, 3)),
+        )
+        sel = np.flatnonzero(found)
+        if len(sel) == 0:
+            return rec
+        sub = Hits(hits.prim[sel], hits.t[sel], hits.u[sel], hits.v[sel])
+        it = self._interaction(sub)
+        prim = sub.prim
+        mat = self.scene.material_ids[prim]
+        rec.t[sel], rec.position[sel], rec.uv[sel] = sub.t, it.position, it.uv
+        rec.geometric_normal[sel], rec.shading_normal[sel], rec.prim[sel] = it.ng, it.ns, prim
+        rec.material_id[sel] = mat
+        rec.object_id[sel] = self.scene.object_ids[prim]
+        rec.instance_id[sel] = self.scene.instance_ids[prim]
+        rec.albedo[sel] = self.materials.surfaces(mat, it.uv).base
+        rec.roughness[sel] = self.materials.roughness(mat)
+        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
+        return rec
+
+    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
+        front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
+        return self._emission[prim] * front[:, None]
+
+    # ------------------------------------------------------------------ path tracing
+
+    def trace(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        rng: np.random.Generator,
+        max_depth: int = 8,
+        rr_depth: int = 5,
+    ) -> TraceResult:
+        """Radiance arriving at each origin from its direction (unit directions)."""
+        n = len(origins)
+        radiance = np.zeros((n, 3))
+        bounces = np.zeros(n, np.int64)
+        rays_traced = 0
+        idx = np.arange(n)
+        o = np.asarray(origins, dtype=np.float64)
+        d = np.asarray(directions, dtype=np.float64)
+        beta = np.ones((n, 3))
+        prev_pdf = np.zeros(n)
+        prev_delta = np.ones(n, bool)  # the camera ray: emitters it sees count fully
+        env = self.lights.environment
+        for segment in range(1, max_depth + 1):
+            if len(idx) == 0:
+                break
+            hits = self.rays.intersect(o, d)
+            rays_traced += len(idx)
+            bounces[idx] = segment
+            found = hits.found
+
+            miss = np.flatnonzero(~found)
+            if env is not None and len(miss):
+                dm = d[miss]
+                weight = np.where(
+                    prev_delta[miss], 1.0, power_heuristic(prev_pdf[miss], self.lights.pdf_environment(dm))
+                )
+                radiance[idx[miss]] += beta[miss] * env.radiance(dm) * weight[:, None]
+
+            keep = np.flatnonzero(found)
+            idx, d, beta = idx[keep], d[keep], beta[keep]
+            prev_pdf, prev_delta = prev_pdf[keep], prev_delta[keep]
+            hits = Hits(hits.prim[keep], hits.t[keep], hits.u[keep], hits.v[keep])
+            if len(idx) == 0:
+                break
+            it = self._interaction(hits)
+            prim = hits.prim
+            wo = -d
+
+            if self._has_emitters:
+                emitted = self._emitted(prim, wo, it.ng)
+                lit = np.flatnonzero(emitted.max(axis=1) > 0)
+                if len(lit):
+                    pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
+                    weight = np.where(prev_delta[lit], 1.0, power_heuristic(prev_pdf[lit], pdf_light))
+                    radiance[idx[lit]] += beta[lit] * emitted[lit] * weight[:, None]
+
+            if segment == max_depth:
+                break
+
+            surf = self.materials.surfaces(self.scene.material_ids[prim], it.uv)
+            ns = it.ns
+            flip = (dot(wo, ns) < 0) & (surf.kind != Kind.DIELECTRIC)
+            ns = np.where(flip[:, None], -ns, ns)
+            fs, ft = coordinate_frame(ns)
+            wo_local = to_local(wo, fs, ft, ns)
+            u = rng.random((len(idx), 6))
+
+            rays_traced += self._next_event(idx, it, surf, fs, ft, ns, wo_local, beta, u, radiance)
+
+            wi_local, weight, pdf, delta = sample_bsdf(surf, wo_local, u[:, 3:5], u[:, 5])
+            wi = to_world(wi_local, fs, ft, ns)
+            beta = beta * weight
+            if segment >= rr_depth:
+                q = np.minimum(beta.max(axis=1), 0.95)
+                survive = rng.random(len(idx)) < q
+                beta = beta / np.maximum(q, 1e-300)[:, None] * survive[:, None]
+            alive = np.flatnonzero(beta.max(axis=1) > 0)
+            idx, beta, prev_pdf, prev_delta = idx[alive], beta[alive], pdf[alive], delta[alive]
+            d = wi[alive]
+            o = self.offset(it.position[alive], it.ng[alive], d)
+        np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+        return TraceResult(radiance, bounces, rays_traced)
+
+    def _next_event(self, idx, it, surf, fs, ft, ns, wo_local, beta, u, radiance) -> int:
+        """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
+        if self.lights.count == 0:
+            return 0
+        sel = np.flatnonzero(~surf.is_delta)
+        if len(sel) == 0:
+            return 0
+        ls = self.lights.sample(it.position[sel], u[sel, 0], u[sel, 1:3])
+        wi_local = to_local(ls.direction, fs[sel], ft[sel], ns[sel])
+        f_cos, bsdf_pdf = eval_bsdf(surf.take(sel), wo_local[sel], wi_local)
+        mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, bsdf_pdf))
+        scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
+        contribution = beta[sel] * f_cos * ls.radiance * scale[:, None]
+        live = np.flatnonzero(contribution.max(axis=1) > 0)
+        if len(live) == 0:
+            return 0
+        position, ng, direction = it.position[sel[live]], it.ng[sel[live]], ls.direction[live]
+        origin = self.offset(position, ng, direction)
+        distance = ls.distance[live]
+        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * np.abs(position).max(1), np.inf)
+        blocked = self.rays.occluded(origin, direction, t_max)
+        radiance[idx[sel[live]]] += contribution[live] * ~blocked[:, None]
+        return len(live)

@@ -1,0 +1,138 @@
+"""Next-event estimation: one discrete distribution over every light, proportional to its power.
+
+Entries are emissive triangles (power pi A L, twice for two-sided), point lights (4 pi I),
+directional lights (E pi R^2) and the environment (4 pi^2 R^2 L_mean), with R the scene's
+bounding-sphere radius: power-proportional selection keeps shadow rays where the light is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from workers.render.environment import ConstantEnvironment, EnvironmentMapLight
+from workers.render.sampling import luminance, normalize, square_to_uniform_triangle
+from workers.scene import spec
+from workers.scene.compile import CompiledScene
+
+TRIANGLE, POINT, DIRECTIONAL, ENVIRONMENT = 0, 1, 2, 3
+
+
+@dataclass
+class LightSample:
+    direction: np.ndarray  # (N, 3) unit, from the shading point to the light
+    distance: np.ndarray  # (N,) inf for the environment and directional lights
+    radiance: np.ndarray  # (N, 3) radiance arriving (irradiance for delta lights)
+    pdf: np.ndarray  # (N,) solid-angle pdf incl. selection; for delta lights the selection probability
+    delta: np.ndarray  # (N,) bool: point or directional light (no MIS)
+
+
+class LightSampler:
+    def __init__(self, scene: CompiledScene):
+        self.scene = scene
+        bounds = scene.bounds
+        self.center = 0.5 * (bounds[0] + bounds[1])
+        self.radius = max(0.5 * scene.extent, 1e-12)
+        env = scene.spec.environment
+        self.environment: EnvironmentMapLight | ConstantEnvironment | None = None
+        if scene.environment_image is not None:
+            self.environment = EnvironmentMapLight(scene.environment_image, scene.environment_rotation)
+        elif isinstance(env, spec.ConstantBackground):
+            self.environment = ConstantEnvironment(env.radiance)
+
+        emissive = np.flatnonzero(luminance(scene.emission.astype(np.float64)) > 0)
+        sides = np.where(scene.two_sided_emission[emissive], 2.0, 1.0)
+        tri_power = np.pi * scene.areas[emissive] * luminance(scene.emission[emissive].astype(np.float64)) * sides
+        self.points = [l for l in scene.spec.lights if isinstance(l, spec.PointLight)]
+        self.directionals = [l for l in scene.spec.lights if isinstance(l, spec.DirectionalLight)]
+        point_power = [4 * np.pi * luminance(np.asarray(l.intensity)) for l in self.points]
+        dir_power = [luminance(np.asarray(l.irradiance)) * np.pi * self.radius**2 for l in self.directionals]
+        env_power = []
+        if self.environment is not None:
+            env_power = [4 * np.pi**2 * self.radius**2 * self.environment.mean_radiance]
+        kinds = np.concatenate([
+            np.full(len(emissive), TRIANGLE), np.full(len(self.points), POINT),
+            np.full(len(self.directionals), DIRECTIONAL), np.full(len(env_power), ENVIRONMENT),
+        ]).astype(np.int8)
+        index = np.concatenate([
+            emissive, np.arange(len(self.points)), np.arange(len(self.directionals)), np.zeros(len(env_power), int)
+        ]).astype(np.int64)
+        power = np.concatenate([tri_power, point_power, dir_power, env_power]).astype(np.float64)
+        keep = power > 0
+        self.kinds, self.index, power = kinds[keep], index[keep], power[keep]
+        self.total_power = float(power.sum())
+        self.count = len(power)
+        self.prob = power / self.total_power if self.count else power
+        self.cdf = np.cumsum(self.prob)
+        if self.count:
+            self.cdf[-1] = 1.0
+        # Probability density per unit area of picking a point on an emissive triangle (for MIS).
+        self.area_pdf = np.zeros(scene.num_triangles)
+        tri = self.kinds == TRIANGLE
+        self.area_pdf[self.index[tri]] = self.prob[tri] / scene.areas[self.index[tri]]
+        env_entries = np.flatnonzero(self.kinds == ENVIRONMENT)
+        self.env_prob = float(self.prob[env_entries[0]]) if len(env_entries) else 0.0
+        self.point_position = np.array([l.position for l in self.points], dtype=np.float64).reshape(-1, 3)
+        self.point_intensity = np.array([l.intensity for l in self.points], dtype=np.float64).reshape(-1, 3)
+        self.dir_to_light = -normalize(np.array([l.direction for l in self.directionals], float).reshape(-1, 3))
+        self.dir_irradiance = np.array([l.irradiance for l in self.directionals], dtype=np.float64).reshape(-1, 3)
+
+    def sample(self, p: np.ndarray, u_select: np.ndarray, u: np.ndarray) -> LightSample:
+        """Pick a light for each shading point p (N, 3) and a point or direction on it."""
+        n = len(p)
+        direction, distance = np.zeros((n, 3)), np.full(n, np.inf)
+        radiance, pdf, delta = np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
+        if self.count == 0 or n == 0:
+            return LightSample(direction, distance, radiance, pdf, delta)
+        entry = np.minimum(np.searchsorted(self.cdf, u_select, side="right"), self.count - 1)
+        kind, which, select = self.kinds[entry], self.index[entry], self.prob[entry]
+
+        sel = np.flatnonzero(kind == TRIANGLE)
+        if len(sel):
+            tri = which[sel]
+            b = square_to_uniform_triangle(u[sel])
+            corners = self.scene.positions[tri].astype(np.float64)
+            y = corners[:, 0] + b[:, :1] * (corners[:, 1] - corners[:, 0]) + b[:, 1:] * (corners[:, 2] - corners[:, 0])
+            d = y - p[sel]
+            dist = np.linalg.norm(d, axis=1)
+            d = d / np.maximum(dist, 1e-300)[:, None]
+            cos_l = -np.einsum("ij,ij->i", d, self.scene.geometric_normals[tri].astype(np.float64))
+            facing = (cos_l > 0) | self.scene.two_sided_emission[tri]
+            cos_abs = np.abs(cos_l)
+            ok = facing & (cos_abs > 1e-12) & (dist > 0)
+            direction[sel], distance[sel] = d, dist
+            radiance[sel] = self.scene.emission[tri] * ok[:, None]
+            pdf[sel] = np.where(ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0)
+
+        sel = np.flatnonzero(kind == POINT)
+        if len(sel):
+            d = self.point_position[which[sel]] - p[sel]
+            dist = np.linalg.norm(d, axis=1)
+            direction[sel] = d / np.maximum(dist, 1e-300)[:, None]
+            distance[sel] = dist
+            radiance[sel] = self.point_intensity[which[sel]] / np.maximum(dist**2, 1e-300)[:, None]
+            pdf[sel], delta[sel] = select[sel], True
+
+        sel = np.flatnonzero(kind == DIRECTIONAL)
+        if len(sel):
+            direction[sel] = self.dir_to_light[which[sel]]
+            radiance[sel] = self.dir_irradiance[which[sel]]
+            pdf[sel], delta[sel] = select[sel], True
+
+        sel = np.flatnonzero(kind == ENVIRONMENT)
+        if len(sel):
+            d, env_pdf = self.environment.sample(u[sel])
+            direction[sel] = d
+            radiance[sel] = self.environment.radiance(d) * (env_pdf > 0)[:, None]
+            pdf[sel] = select[sel] * env_pdf
+        return LightSample(direction, distance, radiance, pdf, delta)
+
+    def pdf_hit_emitter(self, prim: np.ndarray, distance: np.ndarray, cos_light: np.ndarray) -> np.ndarray:
+        """Solid-angle pdf with which `sample` would have produced a BSDF-sampled hit on an emitter."""
+        return self.area_pdf[prim] * distance**2 / np.maximum(np.abs(cos_light), 1e-300)
+
+    def pdf_environment(self, directions: np.ndarray) -> np.ndarray:
+        if self.environment is None or self.env_prob == 0:
+            return np.zeros(len(directions))
+        return self.env_prob * self.environment.pdf(directions)
