@@ -1,0 +1,122 @@
+"""Load a SceneSpec from a built-in name, a YAML/JSON file or a dict; write one back.
+
+Every failure is a SceneError naming the field (a dotted path such as
+`objects[2].shape.radius`) or, for unparsable files, the file itself.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from workers.scene.builtin import BUILTIN_SCENES, get_builtin
+from workers.scene.errors import SceneError
+from workers.scene.spec import SceneSpec
+
+SCENE_FILE_SUFFIXES = (".yaml", ".yml", ".json")
+_FIELD_PREFIX = re.compile(r"^(?P<field>[A-Za-z_][\w\[\]\.]*): (?P<problem>.+)$", re.DOTALL)
+
+
+def load_scene(source: str | Path | dict | SceneSpec) -> tuple[SceneSpec, Path | None]:
+    """The validated scene and the folder its relative paths resolve against (None if it has no file)."""
+    if isinstance(source, SceneSpec):
+        return source, None
+    if isinstance(source, dict):
+        return scene_from_dict(source), None
+    if isinstance(source, str) and source in BUILTIN_SCENES:
+        return get_builtin(source), None
+    path = Path(source)
+    if path.suffix.lower() not in SCENE_FILE_SUFFIXES:
+        if path.exists():
+            raise SceneError(str(path), f"a scene file must end in {', '.join(SCENE_FILE_SUFFIXES)}")
+        return get_builtin(str(source)), None  # raises, listing the built-in scenes
+    if not path.is_file():
+        raise SceneError(str(path), "scene file not found")
+    return scene_from_dict(_parse_file(path)), path.resolve().parent
+
+
+def scene_from_dict(data: dict[str, Any]) -> SceneSpec:
+    """Validate `data`; the first problem becomes a SceneError on its dotted field path."""
+    try:
+        return SceneSpec.model_validate(data)
+    except ValidationError as error:
+        field, problem = _first_problem(error, data)
+        prefixed = _FIELD_PREFIX.match(problem) if not field else None
+        if prefixed and prefixed["field"].split(".")[0].split("[")[0] in SceneSpec.model_fields:
+            field, problem = prefixed["field"], prefixed["problem"]  # a scene-level check named the field
+        raise SceneError(field or "scene", problem) from None
+
+
+def _first_problem(error: ValidationError, data: dict[str, Any]) -> tuple[str, str]:
+    """The first error's field and message; within a union, the deepest alternative (the one that matched)."""
+    located = [(dotted_path(e["loc"], data), e["msg"]) for e in error.errors()]
+    first_field = located[0][0]
+    same_field = [
+        (f, m) for f, m in located if f == first_field or f.startswith((f"{first_field}.", f"{first_field}["))
+    ]
+    field, problem = max(same_field, key=lambda item: len(item[0]))
+    return field, problem.removeprefix("Value error, ")
+
+
+def dotted_path(loc: tuple[str | int, ...], data: Any) -> str:
+    """`('objects', 2, 'shape', 'sphere', 'radius')` -> `objects[2].shape.radius`.
+
+    Pydantic inserts union labels (a discriminator tag like `sphere`, or a type name like
+    `tuple[...]`) into locations; walking the input alongside the location drops them.
+    """
+    path, node = "", data
+    for part in loc:
+        if isinstance(part, int):
+            path += f"[{part}]"
+            node = node[part] if isinstance(node, list | tuple) and -len(node) <= part < len(node) else None
+        elif isinstance(node, dict) and part in node:
+            path += f".{part}" if path else part
+            node = node[part]
+        elif (
+            (isinstance(node, dict) and node.get("type") == part) or "[" in part or not isinstance(node, dict)
+        ):
+            continue  # a union label, not a field
+        else:
+            path += f".{part}" if path else part  # a missing field
+            node = None
+    return path
+
+
+def _parse_file(path: Path) -> dict[str, Any]:
+    """YAML or JSON text -> a mapping; syntax errors name the file and line."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise SceneError(str(path), f"cannot read scene file: {error}") from error
+    try:
+        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except json.JSONDecodeError as error:
+        raise SceneError(
+            str(path), f"malformed JSON at line {error.lineno}, column {error.colno}: {error.msg}"
+        ) from None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(error, "problem", None) or str(error)
+        raise SceneError(str(path), f"malformed YAML{where}: {problem}") from None
+    if not isinstance(data, dict):
+        raise SceneError(str(path), f"a scene file must hold a mapping, not {type(data).__name__}")
+    return data
+
+
+def dump_scene(scene: SceneSpec, path: str | Path) -> Path:
+    """Write `scene` as YAML or JSON (by suffix) so that `load_scene` reads back an equal spec."""
+    path = Path(path)
+    data = scene.model_dump(mode="json", exclude_none=True)
+    if path.suffix.lower() == ".json":
+        path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    elif path.suffix.lower() in (".yaml", ".yml"):
+        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    else:
+        raise SceneError(str(path), f"a scene file must end in {', '.join(SCENE_FILE_SUFFIXES)}")
+    return path
