@@ -4,13 +4,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from workers.scene.envmaps import sun_direction
 from workers.scene.spec import (
     BoxShape,
     Camera,
+    Conductor,
+    Dielectric,
     Diffuse,
+    DirectionalLight,
+    EnvironmentMap,
+    Plastic,
+    PointLight,
+    ProceduralShape,
     RectangleShape,
     SceneObject,
     SceneSpec,
+    SphereShape,
     Transform,
 )
 
@@ -26,7 +35,9 @@ def get_builtin(name: str) -> SceneSpec:
     from workers.scene.errors import SceneError
 
     if name not in BUILTIN_SCENES:
-        raise SceneError("scene", f"unknown built-in scene {name!r}; known: {', '.join(sorted(BUILTIN_SCENES))}")
+        raise SceneError(
+            "scene", f"unknown built-in scene {name!r}; known: {', '.join(sorted(BUILTIN_SCENES))}"
+        )
     return BUILTIN_SCENES[name]()
 
 
@@ -39,18 +50,40 @@ CORNELL_LIGHT = (18.387, 13.9873, 6.75357)
 def cornell_walls() -> list[SceneObject]:
     """The room of Mitsuba 3's `cornell_box()`: same rectangles, transforms and light."""
     return [
-        SceneObject(name="floor", shape=RectangleShape(), material="white",
-                    transform=Transform(translate=(0, -1, 0), rotate=(-90, 0, 0))),
-        SceneObject(name="ceiling", shape=RectangleShape(), material="white",
-                    transform=Transform(translate=(0, 1, 0), rotate=(90, 0, 0))),
-        SceneObject(name="back", shape=RectangleShape(), material="white",
-                    transform=Transform(translate=(0, 0, -1))),
-        SceneObject(name="green_wall", shape=RectangleShape(), material="green",
-                    transform=Transform(translate=(1, 0, 0), rotate=(0, -90, 0))),
-        SceneObject(name="red_wall", shape=RectangleShape(), material="red",
-                    transform=Transform(translate=(-1, 0, 0), rotate=(0, 90, 0))),
-        SceneObject(name="light", shape=RectangleShape(), material="white", emission=CORNELL_LIGHT,
-                    transform=Transform(translate=(0, 0.99, 0.01), rotate=(90, 0, 0), scale=(0.23, 0.19, 0.19))),
+        SceneObject(
+            name="floor",
+            shape=RectangleShape(),
+            material="white",
+            transform=Transform(translate=(0, -1, 0), rotate=(-90, 0, 0)),
+        ),
+        SceneObject(
+            name="ceiling",
+            shape=RectangleShape(),
+            material="white",
+            transform=Transform(translate=(0, 1, 0), rotate=(90, 0, 0)),
+        ),
+        SceneObject(
+            name="back", shape=RectangleShape(), material="white", transform=Transform(translate=(0, 0, -1))
+        ),
+        SceneObject(
+            name="green_wall",
+            shape=RectangleShape(),
+            material="green",
+            transform=Transform(translate=(1, 0, 0), rotate=(0, -90, 0)),
+        ),
+        SceneObject(
+            name="red_wall",
+            shape=RectangleShape(),
+            material="red",
+            transform=Transform(translate=(-1, 0, 0), rotate=(0, 90, 0)),
+        ),
+        SceneObject(
+            name="light",
+            shape=RectangleShape(),
+            material="white",
+            emission=CORNELL_LIGHT,
+            transform=Transform(translate=(0, 0.99, 0.01), rotate=(90, 0, 0), scale=(0.23, 0.19, 0.19)),
+        ),
     ]
 
 
@@ -62,17 +95,191 @@ def cornell_materials() -> dict:
     }
 
 
-CORNELL_CAMERA = Camera(position=(0, 0, 3.9), target=(0, 0, 0), up=(0, 1, 0), fov=39.3077, width=256, height=256)
+CORNELL_CAMERA = Camera(
+    position=(0, 0, 3.9), target=(0, 0, 0), up=(0, 1, 0), fov=39.3077, width=256, height=256
+)
 
 
 @builtin
 def cornell_box() -> SceneSpec:
     """Identical to `mitsuba.cornell_box()` (geometry, reflectances, light, camera)."""
     boxes = [
-        SceneObject(name="small_box", shape=BoxShape(), material="white",
-                    transform=Transform(translate=(0.335, -0.7, 0.38), rotate=(0, -17, 0), scale=0.3)),
-        SceneObject(name="large_box", shape=BoxShape(), material="white",
-                    transform=Transform(translate=(-0.33, -0.4, -0.28), rotate=(0, 18.25, 0), scale=(0.3, 0.61, 0.3))),
+        SceneObject(
+            name="small_box",
+            shape=BoxShape(),
+            material="white",
+            transform=Transform(translate=(0.335, -0.7, 0.38), rotate=(0, -17, 0), scale=0.3),
+        ),
+        SceneObject(
+            name="large_box",
+            shape=BoxShape(),
+            material="white",
+            transform=Transform(translate=(-0.33, -0.4, -0.28), rotate=(0, 18.25, 0), scale=(0.3, 0.61, 0.3)),
+        ),
     ]
-    return SceneSpec(name="cornell_box", materials=cornell_materials(), objects=cornell_walls() + boxes,
-                     camera=CORNELL_CAMERA)
+    return SceneSpec(
+        name="cornell_box",
+        materials=cornell_materials(),
+        objects=cornell_walls() + boxes,
+        camera=CORNELL_CAMERA,
+    )
+
+
+@builtin
+def cornell_glossy() -> SceneSpec:
+    """The Cornell room with a rough gold-like sphere and a smooth glass sphere: glossy light and caustics."""
+    spheres = [
+        SceneObject(
+            name="metal_sphere",
+            shape=SphereShape(radius=0.3, subdivisions=6),
+            material="metal",
+            transform=Transform(translate=(-0.38, -0.7, -0.3)),
+        ),
+        SceneObject(
+            name="glass_sphere",
+            shape=SphereShape(radius=0.3, subdivisions=6),
+            material="glass",
+            transform=Transform(translate=(0.38, -0.7, 0.25)),
+        ),
+    ]
+    materials = cornell_materials() | {
+        "metal": Conductor(roughness=0.15, specular=(0.95, 0.78, 0.45)),
+        "glass": Dielectric(ior=1.5, roughness=0.0),
+    }
+    return SceneSpec(
+        name="cornell_glossy", materials=materials, objects=cornell_walls() + spheres, camera=CORNELL_CAMERA
+    )
+
+
+def ground(size: float, material: str = "ground") -> SceneObject:
+    """A square floor of side `size` in the y = 0 plane facing up."""
+    return SceneObject(
+        name="ground",
+        shape=ProceduralShape(generator="ground_plane", params={"size": size}),
+        material=material,
+    )
+
+
+@builtin
+def dense_foliage() -> SceneSpec:
+    """A fractal tree with ~26k thin leaves on a ground plane, lit by a directional sun and a sky.
+
+    The sky's own sun disc is switched off (`sun_irradiance: 0`) so that the directional
+    light, placed where the sky draws its sun glow, carries the sun's energy exactly once.
+    """
+    tree = {"seed": 7}
+    sun_elevation, sun_azimuth = 40.0, 30.0
+    toward_sun = sun_direction(sun_elevation, sun_azimuth)
+    return SceneSpec(
+        name="dense_foliage",
+        materials={
+            "ground": Diffuse(reflectance=(0.3, 0.26, 0.18)),
+            "bark": Diffuse(reflectance=(0.25, 0.17, 0.1)),
+            "leaves": Diffuse(reflectance=(0.18, 0.42, 0.08)),
+        },
+        objects=[
+            ground(60.0),
+            SceneObject(
+                name="branches",
+                shape=ProceduralShape(generator="fractal_tree", params=tree | {"parts": "branches"}),
+                material="bark",
+            ),
+            SceneObject(
+                name="leaves",
+                shape=ProceduralShape(generator="fractal_tree", params=tree | {"parts": "leaves"}),
+                material="leaves",
+            ),
+        ],
+        lights=[DirectionalLight(direction=tuple(-toward_sun), irradiance=(3.0, 2.8, 2.5))],
+        environment=EnvironmentMap(
+            procedural="sky",
+            params={"sun_elevation": sun_elevation, "sun_azimuth": sun_azimuth, "sun_irradiance": 0.0},
+        ),
+        camera=Camera(position=(0.0, 1.7, 6.2), target=(0.0, 1.55, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def high_poly() -> SceneSpec:
+    """A ~1M-triangle noise-displaced sphere in glossy plastic under a seeded studio environment."""
+    return SceneSpec(
+        name="high_poly",
+        materials={"clay": Plastic(diffuse=(0.55, 0.3, 0.2), roughness=0.15)},
+        objects=[
+            SceneObject(
+                name="displaced_sphere",
+                shape=ProceduralShape(generator="displaced_sphere", params={"seed": 1}),
+                material="clay",
+            )
+        ],
+        environment=EnvironmentMap(procedural="studio", params={"seed": 1}),
+        camera=Camera(position=(0.0, 1.2, 4.0), target=(0.0, 0.0, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def fur_patch() -> SceneSpec:
+    """4000 curved thin strands (~96k triangles) on a square base, lit by a point and a small area light."""
+    return SceneSpec(
+        name="fur_patch",
+        materials={
+            "fur": Diffuse(reflectance=(0.62, 0.45, 0.3)),
+            "white": Diffuse(reflectance=(0.8, 0.8, 0.8)),
+        },
+        objects=[
+            SceneObject(
+                name="fur", shape=ProceduralShape(generator="fur", params={"seed": 3}), material="fur"
+            ),
+            SceneObject(
+                name="area_light",
+                shape=RectangleShape(),
+                material="white",
+                emission=(16.0, 15.0, 13.0),
+                transform=Transform(translate=(-0.6, 1.2, 0.2), rotate=(90, 0, 0), scale=0.25),
+            ),
+        ],
+        lights=[PointLight(position=(0.7, 1.0, 0.8), intensity=(2.5, 2.6, 3.0))],
+        camera=Camera(position=(0.0, 0.5, 0.95), target=(0.0, 0.0, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def env_lit_objects() -> SceneSpec:
+    """Glossy, plastic and diffuse spheres and boxes on a ground plane under the `courtyard` HDRI."""
+
+    def sphere(name: str, material: str, x: float, z: float, r: float) -> SceneObject:
+        return SceneObject(
+            name=name,
+            shape=SphereShape(radius=r, subdivisions=5),
+            material=material,
+            transform=Transform(translate=(x, r, z)),
+        )
+
+    def cube(name: str, material: str, x: float, z: float, half: float, turn: float) -> SceneObject:
+        return SceneObject(
+            name=name,
+            shape=BoxShape(),
+            material=material,
+            transform=Transform(translate=(x, half, z), rotate=(0, turn, 0), scale=half),
+        )
+
+    return SceneSpec(
+        name="env_lit_objects",
+        materials={
+            "ground": Diffuse(reflectance=(0.45, 0.45, 0.45)),
+            "chrome": Conductor(roughness=0.03, specular=(0.95, 0.95, 0.95)),
+            "red_plastic": Plastic(diffuse=(0.7, 0.08, 0.06), roughness=0.2),
+            "blue_diffuse": Diffuse(reflectance=(0.15, 0.3, 0.7)),
+            "rough_copper": Conductor(roughness=0.3, specular=(0.95, 0.64, 0.54)),
+        },
+        objects=[
+            ground(30.0),
+            sphere("chrome_sphere", "chrome", -1.2, 0.0, 0.5),
+            sphere("plastic_sphere", "red_plastic", 0.0, 0.5, 0.5),
+            sphere("small_copper_sphere", "rough_copper", 0.6, 1.3, 0.25),
+            cube("diffuse_box", "blue_diffuse", 1.25, -0.2, 0.4, 25.0),
+            cube("copper_box", "rough_copper", -0.2, -0.9, 0.3, -15.0),
+        ],
+        environment=EnvironmentMap(builtin="courtyard"),
+        camera=Camera(position=(0.0, 1.7, 5.8), target=(0.0, 0.4, 0.0), fov=40.0, width=256, height=256),
+    )
