@@ -83,7 +83,8 @@ def _concatenate(parts: list[tuple[trimesh.Trimesh, np.ndarray]]) -> MeshData:
         f = np.asarray(mesh.faces, dtype=np.int64)
         if np.linalg.det(linear) < 0:  # a mirroring node keeps its faces outward by reversing the winding
             f = f[:, ::-1]
-        vertices.append(v @ linear.T + translation)
+        with np.errstate(invalid="ignore", over="ignore"):  # NaN/Inf vertices are reported by check_mesh
+            vertices.append(v @ linear.T + translation)
         faces.append(f + offset)
         n = _file_normals(mesh)
         if n is not None and abs(np.linalg.det(linear)) > 1e-300:
