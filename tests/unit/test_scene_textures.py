@@ -1,0 +1,66 @@
+"""Textures: sRGB-decoded 8-bit images, linear EXR, bilinear repeat lookups, procedural checkers."""
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from workers.render.image_io import srgb_to_linear, write_exr
+from workers.scene import spec
+from workers.scene.errors import SceneError
+from workers.scene.textures import evaluate_texture, load_image_texture
+
+
+def test_png_is_decoded_from_srgb_to_linear(tmp_path):
+    pixels = np.array([[[0, 128, 255], [188, 10, 50]]], dtype=np.uint8)
+    Image.fromarray(pixels).save(tmp_path / "t.png")
+    image = load_image_texture(spec.ImageTexture(path="t.png"), "materials.m.reflectance", tmp_path)
+    assert image.dtype == np.float32 and image.shape == (1, 2, 3)
+    np.testing.assert_allclose(image, srgb_to_linear(pixels / 255.0), rtol=1e-6)
+    assert image[0, 1, 0] == pytest.approx(0.5, abs=3e-3)
+
+
+def test_exr_texture_is_linear(tmp_path):
+    data = np.random.default_rng(0).random((3, 5, 3)).astype(np.float32)
+    write_exr(tmp_path / "t.exr", data)
+    np.testing.assert_array_equal(load_image_texture(spec.ImageTexture(path="t.exr"), "f", tmp_path), data)
+
+
+def test_missing_or_unreadable_texture_names_the_path_field(tmp_path):
+    with pytest.raises(SceneError, match="not found") as caught:
+        load_image_texture(spec.ImageTexture(path="no.png"), "materials.wood.reflectance", tmp_path)
+    assert caught.value.field == "materials.wood.reflectance.path"
+    (tmp_path / "bad.png").write_bytes(b"not a png")
+    with pytest.raises(SceneError, match="cannot read texture"):
+        load_image_texture(spec.ImageTexture(path="bad.png"), "m", tmp_path)
+
+
+def test_bilinear_lookup_hits_texel_centres_and_interpolates_between_them():
+    image = np.arange(2 * 4 * 3, dtype=np.float32).reshape(2, 4, 3)
+    tex = spec.ImageTexture(path="unused.png")
+    centres = np.array([[(0 + 0.5) / 4, (0 + 0.5) / 2], [(3 + 0.5) / 4, (1 + 0.5) / 2]])
+    np.testing.assert_allclose(evaluate_texture(tex, image, centres), [image[0, 0], image[1, 3]])
+    between = evaluate_texture(tex, image, np.array([[1.0 / 4, 0.25]]))  # halfway between columns 0 and 1
+    np.testing.assert_allclose(between[0], (image[0, 0] + image[0, 1]) / 2)
+
+
+def test_lookup_repeats_and_survives_non_finite_uvs():
+    image = np.random.default_rng(1).random((5, 7, 3)).astype(np.float32)
+    tex = spec.ImageTexture(path="unused.png")
+    uv = np.random.default_rng(2).random((100, 2))
+    base = evaluate_texture(tex, image, uv)
+    np.testing.assert_allclose(evaluate_texture(tex, image, uv + np.array([3.0, -2.0])), base, atol=1e-5)
+    # across the wrap, u = 0 blends the first and last columns
+    edge = evaluate_texture(tex, image, np.array([[0.0, 0.5 / 5]]))
+    np.testing.assert_allclose(edge[0], (image[0, 0] + image[0, -1]) / 2, rtol=1e-6)
+    weird = evaluate_texture(tex, image, np.array([[np.nan, 0.5], [np.inf, 1e300]]))
+    assert np.isfinite(weird).all()
+
+
+def test_checker_and_constant_colours():
+    checker = spec.CheckerTexture(color0=(1, 0, 0), color1=(0, 0, 1), scale=2.0)
+    uv = np.array([[0.1, 0.1], [0.6, 0.1], [0.6, 0.6], [-0.1, 0.1], [1e20, 0.1]])
+    got = evaluate_texture(checker, None, uv)
+    np.testing.assert_array_equal(got[:4], [[1, 0, 0], [0, 0, 1], [1, 0, 0], [0, 0, 1]])
+    assert np.isin(got[4], [0.0, 1.0]).all()
+    constant = evaluate_texture((0.2, 0.3, 0.4), None, uv)
+    assert constant.shape == (5, 3) and np.allclose(constant, [0.2, 0.3, 0.4])
