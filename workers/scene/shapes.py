@@ -51,7 +51,9 @@ def box() -> MeshData:
         normals.append(face.normals @ r.T)
         faces.append(face.faces + 4 * k)
         uvs.append(face.uvs)
-    return MeshData(np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), np.concatenate(uvs))
+    return MeshData(
+        np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), np.concatenate(uvs)
+    )
 
 
 def sphere(center, radius: float, subdivisions: int) -> MeshData:
@@ -99,7 +101,7 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
-    """Reject (or, with `repair`, drop) what would break the renderer: non-finite data, bad indices, slivers."""
+    """Reject (or with `repair` drop) what would break the renderer: non-finite data, bad indices, slivers."""
     v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
         raise SceneError(field, f"expected (V, 3) vertices and (F, 3) faces, got {v.shape} and {f.shape}")

@@ -86,7 +86,14 @@ class Transform(Model):
 def euler_xyz(degrees: Vec3) -> np.ndarray:
     """Rotation about X, then Y, then Z (R = Rz @ Ry @ Rx), angles in degrees."""
     ax, ay, az = (math.radians(a) for a in degrees)
-    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    cx, sx, cy, sy, cz, sz = (
+        math.cos(ax),
+        math.sin(ax),
+        math.cos(ay),
+        math.sin(ay),
+        math.cos(az),
+        math.sin(az),
+    )
     rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
@@ -156,13 +163,11 @@ Material = Annotated[Diffuse | Conductor | Plastic | Dielectric, Field(discrimin
 
 
 class MeshShape(Model):
-    """A mesh file (OBJ, PLY, glTF/GLB, STL) read with trimesh; relative paths resolve against the scene file."""
+    """A mesh file (OBJ, PLY, glTF/GLB, STL) read with trimesh; relative paths resolve from the scene file."""
 
     type: Literal["mesh"] = "mesh"
     path: str
-    repair: bool = Field(
-        default=False, description="drop degenerate triangles instead of rejecting the mesh"
-    )
+    repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
 
 
 class SphereShape(Model):
@@ -319,9 +324,7 @@ class SceneSpec(Model):
         for i, obj in enumerate(self.objects):
             if obj.material not in self.materials:
                 known = ", ".join(sorted(self.materials)) or "none"
-                raise ValueError(
-                    f"objects[{i}].material: unknown material {obj.material!r} (known: {known})"
-                )
+                raise ValueError(f"objects[{i}].material: unknown material {obj.material!r} (known: {known})")
             if obj.name in names:
                 raise ValueError(f"objects[{i}].name: duplicate object name {obj.name!r}")
             names.add(obj.name)
