@@ -20,7 +20,7 @@ from workers.render.materials import MaterialTable
 from workers.render.sampling import coordinate_frame, dot, power_heuristic, to_local, to_world
 from workers.scene.compile import CompiledScene
 
-RAY_OFFSET = 2e-5  # relative to the magnitude of the hit point's coordinates
+RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
 
 
 @dataclass
@@ -55,6 +55,7 @@ class _Interaction:
     ng: np.ndarray
     ns: np.ndarray
     uv: np.ndarray
+    scale: np.ndarray  # coordinate magnitude that float32 rounding errors are relative to
 
 
 class PathTracer:
@@ -70,6 +71,7 @@ class PathTracer:
         self._ns = scene.shading_normals.astype(np.float64)
         self._uv = scene.uvs.astype(np.float64)
         self._emission = scene.emission.astype(np.float64)
+        self._coordinate_scale = np.abs(self._positions).max(axis=(1, 2))
         self._has_emitters = bool((scene.emission > 0).any())
 
     # ------------------------------------------------------------------ geometry helpers
@@ -85,12 +87,19 @@ class PathTracer:
         ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
         uvs = self._uv[prim]
         uv = b0 * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
-        return _Interaction(position, self._ng[prim], ns, uv)
+        scale = np.maximum(np.abs(position).max(axis=1), self._coordinate_scale[prim])
+        return _Interaction(position, self._ng[prim], ns, uv, scale)
 
     @staticmethod
-    def offset(position: np.ndarray, ng: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        """Move a ray origin off the surface, to the side `direction` leaves by (no self-hits)."""
-        eps = RAY_OFFSET * np.maximum(np.abs(position).max(axis=1), 1e-30)
+    def offset(position: np.ndarray, ng: np.ndarray, direction: np.ndarray, scale: np.ndarray | None = None):
+        """Move a ray origin off the surface, to the side `direction` leaves by (no self-hits).
+
+        The distance is relative to `scale` (by default the point's own coordinates): Embree works
+        in float32, so its errors grow with the magnitude of the triangle's vertices.
+        """
+        if scale is None:
+            scale = np.abs(position).max(axis=1)
+        eps = RAY_OFFSET * np.maximum(scale, 1e-30)
         side = np.where(dot(direction, ng) >= 0, 1.0, -1.0)
         return position + ng * (side * eps)[:, None]
 
@@ -210,7 +219,7 @@ class PathTracer:
             alive = np.flatnonzero(beta.max(axis=1) > 0)
             idx, beta, prev_pdf, prev_delta = idx[alive], beta[alive], pdf[alive], delta[alive]
             d = wi[alive]
-            o = self.offset(it.position[alive], it.ng[alive], d)
+            o = self.offset(it.position[alive], it.ng[alive], d, it.scale[alive])
         np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return TraceResult(radiance, bounces, rays_traced)
 
@@ -230,10 +239,11 @@ class PathTracer:
         live = np.flatnonzero(contribution.max(axis=1) > 0)
         if len(live) == 0:
             return 0
-        position, ng, direction = it.position[sel[live]], it.ng[sel[live]], ls.direction[live]
-        origin = self.offset(position, ng, direction)
+        at = sel[live]
+        direction = ls.direction[live]
+        origin = self.offset(it.position[at], it.ng[at], direction, it.scale[at])
         distance = ls.distance[live]
-        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * np.abs(position).max(1), np.inf)
+        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * it.scale[at], np.inf)
         blocked = self.rays.occluded(origin, direction, t_max)
         radiance[idx[sel[live]]] += contribution[live] * ~blocked[:, None]
         return len(live)

@@ -58,8 +58,9 @@ class Transform(Model):
             raise ValueError("matrix must have 3 or 4 rows of 4 numbers")
         if len(m) == 4 and tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
             raise ValueError("the last row of an affine matrix must be (0, 0, 0, 1)")
-        if abs(np.linalg.det(np.asarray(m, dtype=np.float64)[:3, :3])) < 1e-12:
-            raise ValueError("matrix is singular (zero volume)")
+        singular_values = np.linalg.svd(np.asarray(m, dtype=np.float64)[:3, :3], compute_uv=False)
+        if singular_values[-1] <= 1e-12 * singular_values[0]:  # scale-free: tiny scenes are fine
+            raise ValueError("matrix is singular (it flattens space)")
         return m
 
     @field_validator("scale")
