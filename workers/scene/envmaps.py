@@ -12,11 +12,12 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
 
 from workers.render.image_io import read_exr
 from workers.scene import spec
 from workers.scene.errors import SceneError
+from workers.scene.procedural import parse_params
 
 HDRI_DIR = Path(__file__).resolve().parents[2] / "assets" / "hdri"
 NEGATIVE_RINGING = 0.05  # negatives within 5% of the mean are lossy-compression ringing, clamped to 0
@@ -180,13 +181,7 @@ def _procedural(name: str, params: dict[str, Any], field: str) -> np.ndarray:
         known = ", ".join(sorted(PROCEDURAL_MAPS))
         raise SceneError(f"{field}.procedural", f"unknown procedural map {name!r}; known: {known}")
     params_model, build = PROCEDURAL_MAPS[name]
-    try:
-        parsed = params_model.model_validate(params)
-    except ValidationError as error:
-        first = error.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
-        raise SceneError(f"{field}.params.{where}" if where else f"{field}.params", first["msg"]) from error
-    return build(parsed)
+    return build(parse_params(params_model, params, f"{field}.params"))
 
 
 def check_environment(image: np.ndarray, field: str) -> np.ndarray:

@@ -48,13 +48,17 @@ def generate(name: str, params: dict[str, Any], field: str) -> MeshData:
             f"unknown procedural generator {name!r}; known: {', '.join(sorted(GENERATORS))}",
         )
     params_model, fn = GENERATORS[name]
+    return fn(parse_params(params_model, params, f"{field}.params"))
+
+
+def parse_params(model: type[BaseModel], params: dict[str, Any], field: str):
+    """`params` validated by `model`; the first problem becomes a SceneError on `field.<key>`."""
     try:
-        parsed = params_model.model_validate(params)
+        return model.model_validate(params)
     except ValidationError as error:
         first = error.errors()[0]
         where = ".".join(str(part) for part in first["loc"])
-        raise SceneError(f"{field}.params.{where}" if where else f"{field}.params", first["msg"]) from error
-    return fn(parsed)
+        raise SceneError(f"{field}.{where}" if where else field, first["msg"]) from None
 
 
 # --------------------------------------------------------------------------- shared building blocks
