@@ -17,7 +17,9 @@ def small_grid(n_dims: int, dtype=torch.float64) -> HashGrid:
     """Resolutions 2, 4, 8, 16 with a table that makes levels 0-1 dense and 2-3 hashed."""
     torch.manual_seed(n_dims)
     log2_size = {2: 6, 3: 8, 4: 11}[n_dims]
-    grid = HashGrid(n_dims, n_levels=4, n_features_per_level=2, log2_hashmap_size=log2_size, base_resolution=2)
+    grid = HashGrid(
+        n_dims, n_levels=4, n_features_per_level=2, log2_hashmap_size=log2_size, base_resolution=2
+    )
     grid.table.data.uniform_(-1, 1)  # larger than the 1e-4 init so differences are visible
     return grid.to(dtype)
 
@@ -38,7 +40,9 @@ def python_rows(grid: HashGrid, level: int, point: list[float]) -> list[tuple[in
             for v, prime in zip(vertex, HASH_PRIMES, strict=False):
                 h ^= v * prime
             row = h % grid.hashmap_size
-        weight = math.prod(p - c if o else 1 - (p - c) for p, c, o in zip(position, cell, offset, strict=True))
+        weight = math.prod(
+            p - c if o else 1 - (p - c) for p, c, o in zip(position, cell, offset, strict=True)
+        )
         out.append((row + grid.level_blocks[level][0], weight))
     return out
 
@@ -107,7 +111,9 @@ def test_fast_backward_equals_reference_backward(n_dims):
     points = torch.rand(300, n_dims, dtype=torch.float64, requires_grad=True)
     upstream = torch.randn(300, grid.n_output_dims, dtype=torch.float64)
     fast = torch.autograd.grad((grid(points) * upstream).sum(), (grid.table, points))
-    slow = torch.autograd.grad((reference_hashgrid_encode(grid, points) * upstream).sum(), (grid.table, points))
+    slow = torch.autograd.grad(
+        (reference_hashgrid_encode(grid, points) * upstream).sum(), (grid.table, points)
+    )
     for a, b in zip(fast, slow, strict=True):
         assert torch.allclose(a, b, atol=1e-10)
 

@@ -20,7 +20,7 @@ class _SinusoidalEncoding(nn.Module):
         if not frequencies:
             raise ValueError("need at least one frequency")
         self.n_input_dims = n_input_dims
-        self.register_buffer("frequencies", torch.tensor(list(frequencies), dtype=torch.float32))
+        self.register_buffer("frequencies", torch.tensor(list(frequencies), dtype=torch.float64))
 
     def _phases(self, x: Tensor) -> Tensor:
         """x [..., d] -> omega_k x_i [..., d * K], dimension-major."""
