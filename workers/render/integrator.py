@@ -17,7 +17,7 @@ from workers.render.bsdf import Kind, eval_bsdf, sample_bsdf
 from workers.render.embree import Hits, RayScene
 from workers.render.lights import LightSampler
 from workers.render.materials import MaterialTable
-from workers.render.sampling import coordinate_frame, dot, power_heuristic, to_local, to_world
+from workers.render.sampling import coordinate_frame, dot, max3, power_heuristic, to_local, to_world
 from workers.scene.compile import CompiledScene
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
@@ -87,7 +87,7 @@ class PathTracer:
         ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
         uvs = self._uv[prim]
         uv = b0 * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
-        scale = np.maximum(np.abs(position).max(axis=1), self._coordinate_scale[prim])
+        scale = np.maximum(max3(np.abs(position)), self._coordinate_scale[prim])
         return _Interaction(position, self._ng[prim], ns, uv, scale)
 
     @staticmethod
@@ -190,7 +190,7 @@ class PathTracer:
 
             if self._has_emitters:
                 emitted = self._emitted(prim, wo, it.ng)
-                lit = np.flatnonzero(emitted.max(axis=1) > 0)
+                lit = np.flatnonzero(max3(emitted) > 0)
                 if len(lit):
                     pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
                     weight = np.where(prev_delta[lit], 1.0, power_heuristic(prev_pdf[lit], pdf_light))
@@ -213,10 +213,10 @@ class PathTracer:
             wi = to_world(wi_local, fs, ft, ns)
             beta = beta * weight
             if segment >= rr_depth:
-                q = np.minimum(beta.max(axis=1), 0.95)
+                q = np.minimum(max3(beta), 0.95)
                 survive = rng.random(len(idx)) < q
                 beta = beta / np.maximum(q, 1e-300)[:, None] * survive[:, None]
-            alive = np.flatnonzero(beta.max(axis=1) > 0)
+            alive = np.flatnonzero(max3(beta) > 0)
             idx, beta, prev_pdf, prev_delta = idx[alive], beta[alive], pdf[alive], delta[alive]
             d = wi[alive]
             o = self.offset(it.position[alive], it.ng[alive], d, it.scale[alive])
@@ -236,7 +236,7 @@ class PathTracer:
         mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, bsdf_pdf))
         scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
         contribution = beta[sel] * f_cos * ls.radiance * scale[:, None]
-        live = np.flatnonzero(contribution.max(axis=1) > 0)
+        live = np.flatnonzero(max3(contribution) > 0)
         if len(live) == 0:
             return 0
         at = sel[live]

@@ -31,6 +31,8 @@ class LightSample:
 class LightSampler:
     def __init__(self, scene: CompiledScene):
         self.scene = scene
+        self._positions = scene.positions.astype(np.float64)
+        self._normals = scene.geometric_normals.astype(np.float64)
         bounds = scene.bounds
         self.center = 0.5 * (bounds[0] + bounds[1])
         self.radius = max(0.5 * scene.extent, 1e-12)
@@ -92,12 +94,12 @@ class LightSampler:
         if len(sel):
             tri = which[sel]
             b = square_to_uniform_triangle(u[sel])
-            corners = self.scene.positions[tri].astype(np.float64)
+            corners = self._positions[tri]
             y = corners[:, 0] + b[:, :1] * (corners[:, 1] - corners[:, 0]) + b[:, 1:] * (corners[:, 2] - corners[:, 0])
             d = y - p[sel]
             dist = np.linalg.norm(d, axis=1)
             d = d / np.maximum(dist, 1e-300)[:, None]
-            cos_l = -np.einsum("ij,ij->i", d, self.scene.geometric_normals[tri].astype(np.float64))
+            cos_l = -np.einsum("ij,ij->i", d, self._normals[tri])
             facing = (cos_l > 0) | self.scene.two_sided_emission[tri]
             cos_abs = np.abs(cos_l)
             ok = facing & (cos_abs > 1e-12) & (dist > 0)

@@ -81,5 +81,10 @@ def power_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
     return np.where(denom > 0, a2 / np.where(denom > 0, denom, 1.0), 0.0)
 
 
+def max3(rgb: np.ndarray) -> np.ndarray:
+    """Largest of the three channels; much faster than `.max(axis=1)` on (N, 3) arrays."""
+    return np.maximum(np.maximum(rgb[:, 0], rgb[:, 1]), rgb[:, 2])
+
+
 def luminance(rgb: np.ndarray) -> np.ndarray:
     return rgb @ np.array([0.212671, 0.715160, 0.072169])
