@@ -1,4 +1,4 @@
-"""`python -m tests.bench [name ...]`: run the benchmark modules, print tables, write out/bench-report.json."""
+"""`python -m tests.bench [name ...]`: run benchmark modules, print tables, write out/bench-report.json."""
 
 from __future__ import annotations
 

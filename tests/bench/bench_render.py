@@ -26,7 +26,9 @@ from workers.scene.compile import compile_scene
 THREADS = 2
 
 
-def raw_embree_rays_per_second(positions: np.ndarray, threads: int, batch: int = 1 << 16, batches: int = 16) -> float:
+def raw_embree_rays_per_second(
+    positions: np.ndarray, threads: int, batch: int = 1 << 16, batches: int = 16
+) -> float:
     rays = RayScene(positions)
     rng = np.random.default_rng(0)
     origins = rng.uniform(-0.95, 0.95, (batches, batch, 3))
@@ -63,7 +65,8 @@ def run() -> list[BenchSection]:
     size = 128
     t0 = time.perf_counter()
     reference = np.mean(
-        [render_mitsuba(compiled, workdir, 512, 8, seed=100 + s, width=size, height=size) for s in range(4)], axis=0
+        [render_mitsuba(compiled, workdir, 512, 8, seed=100 + s, width=size, height=size) for s in range(4)],
+        axis=0,
     )
     peer.notes.append(f"reference: Mitsuba 2048 spp in {time.perf_counter() - t0:.1f} s")
     for spp in (16, 64):
@@ -81,8 +84,15 @@ def run() -> list[BenchSection]:
             err_mi.append(relative_mse(image, reference))
         to, tm = float(np.median(t_ours)), float(np.median(t_mi))
         eo, em = float(np.median(err_ours)), float(np.median(err_mi))
-        peer.add(spp=spp, ours_s=to, mitsuba_s=tm, time_ratio=to / tm, ours_relmse=eo, mitsuba_relmse=em,
-                 time_ratio_at_equal_error=(to * eo) / (tm * em))
+        peer.add(
+            spp=spp,
+            ours_s=to,
+            mitsuba_s=tm,
+            time_ratio=to / tm,
+            ours_relmse=eo,
+            mitsuba_relmse=em,
+            time_ratio_at_equal_error=(to * eo) / (tm * em),
+        )
     peer.notes.append("ratios > 1 mean we are slower; equal-error ratio = (MSE x time) ours / Mitsuba")
     peer.notes.append("Mitsuba time includes scene loading (PLY export excluded), as a user would pay it")
     return [throughput, peer]

@@ -44,15 +44,24 @@ def block_means(image: np.ndarray) -> np.ndarray:
 
 def compare(scene: spec.SceneSpec, spp: int, max_depth: int, tmp_path):
     compiled = compile_scene(scene)
-    ours = np.stack([
-        block_means(render(compiled, RenderSettings(spp=spp, width=SIZE, height=SIZE, max_depth=max_depth,
-                                                    seed=s)).image.astype(np.float64))
-        for s in range(SEEDS)
-    ])
-    theirs = np.stack([
-        block_means(render_mitsuba(compiled, tmp_path / "mi", spp, max_depth, seed=s, width=SIZE, height=SIZE))
-        for s in range(SEEDS)
-    ])
+    ours = np.stack(
+        [
+            block_means(
+                render(
+                    compiled, RenderSettings(spp=spp, width=SIZE, height=SIZE, max_depth=max_depth, seed=s)
+                ).image.astype(np.float64)
+            )
+            for s in range(SEEDS)
+        ]
+    )
+    theirs = np.stack(
+        [
+            block_means(
+                render_mitsuba(compiled, tmp_path / "mi", spp, max_depth, seed=s, width=SIZE, height=SIZE)
+            )
+            for s in range(SEEDS)
+        ]
+    )
     mean_o, mean_m = ours.mean(0), theirs.mean(0)
     se = np.sqrt(ours.var(0, ddof=1) / SEEDS + theirs.var(0, ddof=1) / SEEDS)
     lit = mean_m > 1e-3 * mean_m.max()
@@ -83,9 +92,13 @@ def test_cornell_glossy_agrees_with_mitsuba(tmp_path):
 
 def env_lit_comparison_scene() -> spec.SceneSpec:
     """Diffuse, rough-metal and rough-glass spheres on a ground plane under a rotated real HDRI."""
+
     def ball(name, material, x):
-        return spec.SceneObject(name=name, shape=spec.SphereShape(center=(x, 0.5, 0), radius=0.5, subdivisions=4),
-                                material=material)
+        return spec.SceneObject(
+            name=name,
+            shape=spec.SphereShape(center=(x, 0.5, 0), radius=0.5, subdivisions=4),
+            material=material,
+        )
 
     return spec.SceneSpec(
         name="env_lit_comparison",
@@ -95,7 +108,12 @@ def env_lit_comparison_scene() -> spec.SceneSpec:
             "metal": spec.Conductor(roughness=0.2, specular=(0.9, 0.9, 0.9)),
             "frosted": spec.Dielectric(ior=1.5, roughness=0.3),
         },
-        objects=[ground(6.0), ball("clay", "clay", -1.2), ball("metal", "metal", 0.0), ball("frosted", "frosted", 1.2)],
+        objects=[
+            ground(6.0),
+            ball("clay", "clay", -1.2),
+            ball("metal", "metal", 0.0),
+            ball("frosted", "frosted", 1.2),
+        ],
         environment=spec.EnvironmentMap(builtin="courtyard", rotate=(0, 60, 0)),
         camera=spec.Camera(position=(0, 1.6, 4.5), target=(0, 0.4, 0), fov=35),
     )

@@ -29,27 +29,38 @@ def mitsuba_bsdf(material: spec.Material) -> dict:
             inner = {"type": "conductor", "material": "none", "specular_reflectance": _rgb(material.specular)}
         case spec.Conductor():
             inner = {
-                "type": "roughconductor", "material": "none", "distribution": "ggx",
-                "alpha": float(material.roughness), "specular_reflectance": _rgb(material.specular),
+                "type": "roughconductor",
+                "material": "none",
+                "distribution": "ggx",
+                "alpha": float(material.roughness),
+                "specular_reflectance": _rgb(material.specular),
             }
         case spec.Plastic():
             inner = {
-                "type": "roughplastic", "distribution": "ggx", "alpha": float(max(material.roughness, 1e-4)),
-                "int_ior": float(material.ior), "diffuse_reflectance": _rgb(material.diffuse),
+                "type": "roughplastic",
+                "distribution": "ggx",
+                "alpha": float(max(material.roughness, 1e-4)),
+                "int_ior": float(material.ior),
+                "diffuse_reflectance": _rgb(material.diffuse),
             }
         case spec.Dielectric() if material.roughness == 0:
             return {"type": "dielectric", "int_ior": float(material.ior), "ext_ior": 1.0}
         case spec.Dielectric():
             return {
-                "type": "roughdielectric", "distribution": "ggx", "alpha": float(material.roughness),
-                "int_ior": float(material.ior), "ext_ior": 1.0,
+                "type": "roughdielectric",
+                "distribution": "ggx",
+                "alpha": float(material.roughness),
+                "int_ior": float(material.ior),
+                "ext_ior": 1.0,
             }
         case _:
             raise TypeError(f"no Mitsuba export for {type(material).__name__}")
     return {"type": "twosided", "bsdf": inner}
 
 
-def mitsuba_scene_dict(scene: CompiledScene, workdir: Path, spp: int, max_depth: int, width=None, height=None):
+def mitsuba_scene_dict(
+    scene: CompiledScene, workdir: Path, spp: int, max_depth: int, width=None, height=None
+):
     """A dict for `mitsuba.load_dict`; writes one PLY per object instance into `workdir`."""
     import mitsuba as mi
 
@@ -66,8 +77,12 @@ def mitsuba_scene_dict(scene: CompiledScene, workdir: Path, spp: int, max_depth:
                 origin=list(cam.position), target=list(cam.target), up=list(cam.up)
             ),
             "film": {
-                "type": "hdrfilm", "width": width or cam.width, "height": height or cam.height,
-                "rfilter": {"type": "box"}, "pixel_format": "rgb", "component_format": "float32",
+                "type": "hdrfilm",
+                "width": width or cam.width,
+                "height": height or cam.height,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
             },
             "sampler": {"type": "independent", "sample_count": spp},
         },
@@ -80,7 +95,11 @@ def mitsuba_scene_dict(scene: CompiledScene, workdir: Path, spp: int, max_depth:
             faces = np.arange(len(tris)).reshape(-1, 3)
             path = workdir / f"{obj.name}_{k}.ply"
             trimesh.Trimesh(tris, faces, vertex_normals=normals, process=False).export(path)
-            entry = {"type": "ply", "filename": str(path), "bsdf": mitsuba_bsdf(scene.spec.materials[obj.material])}
+            entry = {
+                "type": "ply",
+                "filename": str(path),
+                "bsdf": mitsuba_bsdf(scene.spec.materials[obj.material]),
+            }
             if source.emission is not None:
                 if source.two_sided_emission:
                     raise ValueError("Mitsuba area emitters are one-sided")
@@ -88,10 +107,16 @@ def mitsuba_scene_dict(scene: CompiledScene, workdir: Path, spp: int, max_depth:
             out[f"{obj.name}_{k}"] = entry
     for i, light in enumerate(scene.spec.lights):
         if isinstance(light, spec.PointLight):
-            out[f"light_{i}"] = {"type": "point", "position": list(light.position), "intensity": _rgb(light.intensity)}
+            out[f"light_{i}"] = {
+                "type": "point",
+                "position": list(light.position),
+                "intensity": _rgb(light.intensity),
+            }
         else:
             out[f"light_{i}"] = {
-                "type": "directional", "direction": list(light.direction), "irradiance": _rgb(light.irradiance)
+                "type": "directional",
+                "direction": list(light.direction),
+                "irradiance": _rgb(light.irradiance),
             }
     env = scene.spec.environment
     if isinstance(env, spec.ConstantBackground):
@@ -107,7 +132,9 @@ def mitsuba_scene_dict(scene: CompiledScene, workdir: Path, spp: int, max_depth:
     return out
 
 
-def render_mitsuba(scene: CompiledScene, workdir: Path, spp: int, max_depth: int, seed: int, width=None, height=None):
+def render_mitsuba(
+    scene: CompiledScene, workdir: Path, spp: int, max_depth: int, seed: int, width=None, height=None
+):
     """A Mitsuba `scalar_rgb` render as an (H, W, 3) float64 array."""
     import mitsuba as mi
 

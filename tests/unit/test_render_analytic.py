@@ -14,18 +14,25 @@ from workers.scene.compile import compile_scene
 
 def scene_with(objects, materials, environment=None, lights=(), camera=None) -> spec.SceneSpec:
     return spec.SceneSpec(
-        materials=materials, objects=objects, environment=environment, lights=list(lights),
+        materials=materials,
+        objects=objects,
+        environment=environment,
+        lights=list(lights),
         camera=camera or spec.Camera(position=(0, 0, 4), target=(0, 0, 0), width=32, height=32),
     )
 
 
 def ball(material="m", radius=1.0):
-    return spec.SceneObject(name="ball", shape=spec.SphereShape(radius=radius, subdivisions=4), material=material)
+    return spec.SceneObject(
+        name="ball", shape=spec.SphereShape(radius=radius, subdivisions=4), material=material
+    )
 
 
 def floor(material="m", size=50.0):
     return spec.SceneObject(
-        name="floor", shape=spec.RectangleShape(), material=material,
+        name="floor",
+        shape=spec.RectangleShape(),
+        material=material,
         transform=spec.Transform(rotate=(-90, 0, 0), scale=size),
     )
 
@@ -71,8 +78,14 @@ def test_white_furnace_convex_object(material, expected_albedo):
 
 def test_diffuse_plane_under_constant_environment_is_albedo_times_radiance():
     albedo, radiance = np.array([0.6, 0.3, 0.1]), np.array([1.5, 1.0, 0.5])
-    scene = scene_with([floor()], {"m": spec.Diffuse(reflectance=tuple(albedo))}, spec.ConstantBackground(radiance=tuple(radiance)),
-                       camera=spec.Camera(position=(0, 3, 0.01), target=(0, 0, 0), up=(0, 0, -1), fov=30, width=16, height=16))
+    scene = scene_with(
+        [floor()],
+        {"m": spec.Diffuse(reflectance=tuple(albedo))},
+        spec.ConstantBackground(radiance=tuple(radiance)),
+        camera=spec.Camera(
+            position=(0, 3, 0.01), target=(0, 0, 0), up=(0, 0, -1), fov=30, width=16, height=16
+        ),
+    )
     image = render(compile_scene(scene), RenderSettings(spp=256, max_depth=2)).image.reshape(-1, 3)
     per_pixel_se = image.std(0) / np.sqrt(len(image))
     np.testing.assert_allclose(image.mean(0), albedo * radiance, atol=4 * per_pixel_se.max() + 1e-6)
@@ -80,8 +93,11 @@ def test_diffuse_plane_under_constant_environment_is_albedo_times_radiance():
 
 def test_point_light_over_diffuse_plane_matches_inverse_square_law():
     intensity, height, albedo = 5.0, 2.0, 0.7
-    scene = scene_with([floor()], {"m": spec.Diffuse(reflectance=(albedo,) * 3)},
-                       lights=[spec.PointLight(position=(0, height, 0), intensity=(intensity,) * 3)])
+    scene = scene_with(
+        [floor()],
+        {"m": spec.Diffuse(reflectance=(albedo,) * 3)},
+        lights=[spec.PointLight(position=(0, height, 0), intensity=(intensity,) * 3)],
+    )
     tracer = PathTracer(compile_scene(scene))
     xs = np.linspace(-3, 3, 25)
     origins = np.stack([xs, np.full_like(xs, 1.0), np.zeros_like(xs)], 1)
@@ -97,8 +113,9 @@ def test_environment_map_direct_lighting_is_unbiased_against_quadrature():
     h, w = 32, 64
     image = np.full((h, w, 3), 0.05, np.float32)
     image[6:8, 20:22] = 5.0e4  # a sun: hard for the sampler, easy for the quadrature
-    scene_spec = scene_with([floor()], {"m": spec.Diffuse(reflectance=(0.5, 0.5, 0.5))},
-                            spec.EnvironmentMap(procedural="sky"))
+    scene_spec = scene_with(
+        [floor()], {"m": spec.Diffuse(reflectance=(0.5, 0.5, 0.5))}, spec.EnvironmentMap(procedural="sky")
+    )
     compiled = compile_scene(scene_spec)
     compiled.environment_image = image
     tracer = PathTracer(compiled)
@@ -122,7 +139,9 @@ def test_rays_starting_on_a_surface_do_not_hit_it():
     tracer = PathTracer(compile_scene(cornell_box()))
     rng = np.random.default_rng(2)
     n = 10_000
-    on_floor = np.stack([rng.uniform(-0.95, -0.75, n), np.full(n, -1.0), rng.uniform(0.3, 0.9, n)], 1)  # clear of boxes
+    on_floor = np.stack(
+        [rng.uniform(-0.95, -0.75, n), np.full(n, -1.0), rng.uniform(0.3, 0.9, n)], 1
+    )  # clear of boxes
     up = np.tile([0.0, 1.0, 0.0], (n, 1))
     normal = np.tile([0.0, 1.0, 0.0], (n, 1))
     hits = tracer.first_hits(tracer.offset(on_floor, normal, up), up)
@@ -134,12 +153,17 @@ def scaled(scene: spec.SceneSpec, k: float) -> spec.SceneSpec:
     """The same scene with world coordinates multiplied by k (radiance is scale-invariant)."""
     s = np.diag([k, k, k, 1.0])
     objects = [
-        o.model_copy(update={"transform": spec.Transform(matrix=tuple(map(tuple, (s @ o.transform.to_matrix())[:3])))})
+        o.model_copy(
+            update={"transform": spec.Transform(matrix=tuple(map(tuple, (s @ o.transform.to_matrix())[:3])))}
+        )
         for o in scene.objects
     ]
-    cam = scene.camera.model_copy(update={
-        "position": tuple(np.multiply(scene.camera.position, k)), "target": tuple(np.multiply(scene.camera.target, k)),
-    })
+    cam = scene.camera.model_copy(
+        update={
+            "position": tuple(np.multiply(scene.camera.position, k)),
+            "target": tuple(np.multiply(scene.camera.target, k)),
+        }
+    )
     return scene.model_copy(update={"objects": objects, "camera": cam})
 
 
@@ -165,15 +189,25 @@ def test_same_seed_same_image_whatever_the_thread_count():
 @pytest.mark.parametrize("roughness", [1e-4, 1.0])
 def test_no_nan_or_inf_with_extreme_roughness_grazing_views_and_a_blinding_sun(roughness):
     materials = {
-        "metal": spec.Conductor(roughness=roughness), "glass": spec.Dielectric(roughness=roughness),
-        "plastic": spec.Plastic(roughness=roughness), "m": spec.Diffuse(),
+        "metal": spec.Conductor(roughness=roughness),
+        "glass": spec.Dielectric(roughness=roughness),
+        "plastic": spec.Plastic(roughness=roughness),
+        "m": spec.Diffuse(),
     }
     objects = [
         floor("metal"),
-        spec.SceneObject(name="g", shape=spec.SphereShape(center=(0, 0.5, 0), radius=0.5, subdivisions=3), material="glass"),
-        spec.SceneObject(name="p", shape=spec.SphereShape(center=(1.2, 0.5, 0), radius=0.5, subdivisions=3), material="plastic"),
+        spec.SceneObject(
+            name="g", shape=spec.SphereShape(center=(0, 0.5, 0), radius=0.5, subdivisions=3), material="glass"
+        ),
+        spec.SceneObject(
+            name="p",
+            shape=spec.SphereShape(center=(1.2, 0.5, 0), radius=0.5, subdivisions=3),
+            material="plastic",
+        ),
     ]
-    camera = spec.Camera(position=(0, 0.02, 6), target=(0, 0.0, 0), width=32, height=24, fov=50)  # grazing the floor
+    camera = spec.Camera(
+        position=(0, 0.02, 6), target=(0, 0.0, 0), width=32, height=24, fov=50
+    )  # grazing the floor
     scene = scene_with(objects, materials, spec.EnvironmentMap(procedural="sky"), camera=camera)
     compiled = compile_scene(scene)
     compiled.environment_image = compiled.environment_image.copy()

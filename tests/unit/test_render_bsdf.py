@@ -11,7 +11,10 @@ N = 400_000
 
 def surface(kind, alpha, base=(1.0, 1.0, 1.0), ior=1.5, n=N):
     return SurfaceBatch(
-        np.full(n, kind, np.int8), np.tile(np.asarray(base, float), (n, 1)), np.full(n, alpha), np.full(n, ior)
+        np.full(n, kind, np.int8),
+        np.tile(np.asarray(base, float), (n, 1)),
+        np.full(n, alpha),
+        np.full(n, ior),
     )
 
 
@@ -57,7 +60,9 @@ def test_sampling_matches_evaluation(kind, alpha, theta):
     assert pdf_mass <= 1.0 + 0.02
 
 
-@pytest.mark.parametrize(("kind", "alpha"), [(Kind.CONDUCTOR, 0.0), (Kind.CONDUCTOR, 0.05), (Kind.DIELECTRIC, 0.0)])
+@pytest.mark.parametrize(
+    ("kind", "alpha"), [(Kind.CONDUCTOR, 0.0), (Kind.CONDUCTOR, 0.05), (Kind.DIELECTRIC, 0.0)]
+)
 def test_lossless_cases_reflect_everything(kind, alpha):
     """A white smooth or slightly rough metal keeps almost all energy; glass keeps all of it (x eta^2)."""
     rng = np.random.default_rng(2)

@@ -208,7 +208,12 @@ def _dielectric_sample(s: SurfaceBatch, wo, u, uc):
     weight = g1 * np.where(choose_r, 1.0, eta_ti * eta_ti)
     _, pdf = _dielectric_eval(s, wo, wi_f * side[:, None])
     pdf = np.where(smooth, 0.0, pdf)
-    return wi_f * side[:, None], (weight * valid)[:, None] * np.ones((1, 3)), np.where(valid, pdf, 0.0), smooth
+    return (
+        wi_f * side[:, None],
+        (weight * valid)[:, None] * np.ones((1, 3)),
+        np.where(valid, pdf, 0.0),
+        smooth,
+    )
 
 
 _EVAL = {

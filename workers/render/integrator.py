@@ -113,10 +113,18 @@ class PathTracer:
         hits = self.rays.intersect(origins, directions)
         found = hits.found
         rec = SurfaceRecords(
-            hit=found, t=np.full(n, np.inf), position=np.zeros((n, 3)), geometric_normal=np.zeros((n, 3)),
-            shading_normal=np.zeros((n, 3)), uv=np.zeros((n, 2)), prim=np.full(n, -1, np.int64),
-            material_id=np.full(n, -1, np.int64), object_id=np.full(n, -1, np.int64),
-            instance_id=np.full(n, -1, np.int64), albedo=np.zeros((n, 3)), roughness=np.zeros(n),
+            hit=found,
+            t=np.full(n, np.inf),
+            position=np.zeros((n, 3)),
+            geometric_normal=np.zeros((n, 3)),
+            shading_normal=np.zeros((n, 3)),
+            uv=np.zeros((n, 2)),
+            prim=np.full(n, -1, np.int64),
+            material_id=np.full(n, -1, np.int64),
+            object_id=np.full(n, -1, np.int64),
+            instance_id=np.full(n, -1, np.int64),
+            albedo=np.zeros((n, 3)),
+            roughness=np.zeros(n),
             emission=np.zeros((n, 3)),
         )
         sel = np.flatnonzero(found)

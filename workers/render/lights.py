@@ -45,7 +45,9 @@ class LightSampler:
 
         emissive = np.flatnonzero(luminance(scene.emission.astype(np.float64)) > 0)
         sides = np.where(scene.two_sided_emission[emissive], 2.0, 1.0)
-        tri_power = np.pi * scene.areas[emissive] * luminance(scene.emission[emissive].astype(np.float64)) * sides
+        tri_power = (
+            np.pi * scene.areas[emissive] * luminance(scene.emission[emissive].astype(np.float64)) * sides
+        )
         self.points = [l for l in scene.spec.lights if isinstance(l, spec.PointLight)]
         self.directionals = [l for l in scene.spec.lights if isinstance(l, spec.DirectionalLight)]
         point_power = [4 * np.pi * luminance(np.asarray(l.intensity)) for l in self.points]
@@ -53,13 +55,22 @@ class LightSampler:
         env_power = []
         if self.environment is not None:
             env_power = [4 * np.pi**2 * self.radius**2 * self.environment.mean_radiance]
-        kinds = np.concatenate([
-            np.full(len(emissive), TRIANGLE), np.full(len(self.points), POINT),
-            np.full(len(self.directionals), DIRECTIONAL), np.full(len(env_power), ENVIRONMENT),
-        ]).astype(np.int8)
-        index = np.concatenate([
-            emissive, np.arange(len(self.points)), np.arange(len(self.directionals)), np.zeros(len(env_power), int)
-        ]).astype(np.int64)
+        kinds = np.concatenate(
+            [
+                np.full(len(emissive), TRIANGLE),
+                np.full(len(self.points), POINT),
+                np.full(len(self.directionals), DIRECTIONAL),
+                np.full(len(env_power), ENVIRONMENT),
+            ]
+        ).astype(np.int8)
+        index = np.concatenate(
+            [
+                emissive,
+                np.arange(len(self.points)),
+                np.arange(len(self.directionals)),
+                np.zeros(len(env_power), int),
+            ]
+        ).astype(np.int64)
         power = np.concatenate([tri_power, point_power, dir_power, env_power]).astype(np.float64)
         keep = power > 0
         self.kinds, self.index, power = kinds[keep], index[keep], power[keep]
@@ -77,8 +88,12 @@ class LightSampler:
         self.env_prob = float(self.prob[env_entries[0]]) if len(env_entries) else 0.0
         self.point_position = np.array([l.position for l in self.points], dtype=np.float64).reshape(-1, 3)
         self.point_intensity = np.array([l.intensity for l in self.points], dtype=np.float64).reshape(-1, 3)
-        self.dir_to_light = -normalize(np.array([l.direction for l in self.directionals], float).reshape(-1, 3))
-        self.dir_irradiance = np.array([l.irradiance for l in self.directionals], dtype=np.float64).reshape(-1, 3)
+        self.dir_to_light = -normalize(
+            np.array([l.direction for l in self.directionals], float).reshape(-1, 3)
+        )
+        self.dir_irradiance = np.array([l.irradiance for l in self.directionals], dtype=np.float64).reshape(
+            -1, 3
+        )
 
     def sample(self, p: np.ndarray, u_select: np.ndarray, u: np.ndarray) -> LightSample:
         """Pick a light for each shading point p (N, 3) and a point or direction on it."""
@@ -95,7 +110,11 @@ class LightSampler:
             tri = which[sel]
             b = square_to_uniform_triangle(u[sel])
             corners = self._positions[tri]
-            y = corners[:, 0] + b[:, :1] * (corners[:, 1] - corners[:, 0]) + b[:, 1:] * (corners[:, 2] - corners[:, 0])
+            y = (
+                corners[:, 0]
+                + b[:, :1] * (corners[:, 1] - corners[:, 0])
+                + b[:, 1:] * (corners[:, 2] - corners[:, 0])
+            )
             d = y - p[sel]
             dist = np.linalg.norm(d, axis=1)
             d = d / np.maximum(dist, 1e-300)[:, None]
@@ -105,7 +124,9 @@ class LightSampler:
             ok = facing & (cos_abs > 1e-12) & (dist > 0)
             direction[sel], distance[sel] = d, dist
             radiance[sel] = self.scene.emission[tri] * ok[:, None]
-            pdf[sel] = np.where(ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0)
+            pdf[sel] = np.where(
+                ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0
+            )
 
         sel = np.flatnonzero(kind == POINT)
         if len(sel):

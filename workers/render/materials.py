@@ -9,8 +9,12 @@ from workers.scene import spec
 from workers.scene.compile import CompiledScene
 from workers.scene.textures import evaluate_texture, load_image_texture
 
-_KIND = {spec.Diffuse: Kind.DIFFUSE, spec.Conductor: Kind.CONDUCTOR, spec.Plastic: Kind.PLASTIC,
-         spec.Dielectric: Kind.DIELECTRIC}
+_KIND = {
+    spec.Diffuse: Kind.DIFFUSE,
+    spec.Conductor: Kind.CONDUCTOR,
+    spec.Plastic: Kind.PLASTIC,
+    spec.Dielectric: Kind.DIELECTRIC,
+}
 
 
 def _base_colour(material: spec.Material):

@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -63,7 +64,7 @@ class RenderResult:
 
 
 @dataclass(frozen=True)
-class _Tile:
+class Tile:
     index: int
     x0: int
     y0: int
@@ -71,12 +72,54 @@ class _Tile:
     y1: int
 
 
-def _tiles(width: int, height: int, size: int) -> list[_Tile]:
+@dataclass(frozen=True)
+class RenderPlan:
+    """The work of one image: every pass renders every tile; items are independent and seeded."""
+
+    width: int
+    height: int
+    tiles: list[Tile]
+    passes: list[int]  # samples per pixel of each pass
+
+    @property
+    def items(self) -> list[tuple[int, Tile]]:
+        return [(p, t) for p in range(len(self.passes)) for t in self.tiles]
+
+
+@dataclass
+class TileResult:
+    """Sums (not means) over the pass's samples, so passes add up."""
+
+    radiance: np.ndarray  # (h, w, 3) float64
+    aovs: dict[str, np.ndarray]
+    rays_traced: int
+
+
+def plan_render(camera: PinholeCamera, settings: RenderSettings) -> RenderPlan:
+    width, height, size = camera.width, camera.height, settings.tile_size
     tiles = []
     for y0 in range(0, height, size):
         for x0 in range(0, width, size):
-            tiles.append(_Tile(len(tiles), x0, y0, min(x0 + size, width), min(y0 + size, height)))
-    return tiles
+            tiles.append(Tile(len(tiles), x0, y0, min(x0 + size, width), min(y0 + size, height)))
+    spp_per_pass = int(np.clip(MAX_PATHS_PER_ITEM // size**2, 1, settings.spp))
+    passes, done = [], 0
+    while done < settings.spp:
+        passes.append(min(spp_per_pass, settings.spp - done))
+        done += passes[-1]
+    return RenderPlan(width, height, tiles, passes)
+
+
+def render_item(
+    tracer: PathTracer,
+    camera: PinholeCamera,
+    settings: RenderSettings,
+    plan: RenderPlan,
+    pass_index: int,
+    tile: Tile,
+) -> TileResult:
+    """One (pass, tile) work item with its own random stream: the same result wherever it runs."""
+    rng = np.random.default_rng([settings.seed, pass_index, tile.index])
+    return _render_tile(tracer, camera, tile, plan.passes[pass_index], settings, rng)
 
 
 def render(
@@ -86,46 +129,49 @@ def render(
 ) -> RenderResult:
     settings = settings or RenderSettings()
     tracer = scene if isinstance(scene, PathTracer) else PathTracer(scene)
-    cam_spec = tracer.scene.spec.camera
-    camera = PinholeCamera(cam_spec, settings.width, settings.height)
-    width, height = camera.width, camera.height
-    tiles = _tiles(width, height, settings.tile_size)
-    tile_pixels = settings.tile_size**2
-    spp_per_pass = int(np.clip(MAX_PATHS_PER_ITEM // tile_pixels, 1, settings.spp))
-    passes = []
-    done = 0
-    while done < settings.spp:
-        passes.append(min(spp_per_pass, settings.spp - done))
-        done += passes[-1]
-
-    accum = np.zeros((height, width, 3))
-    aov_accum = {name: np.zeros((height, width, 3)) for name in AOV_NAMES} if settings.aovs else {}
-    rays = 0
+    camera = PinholeCamera(tracer.scene.spec.camera, settings.width, settings.height)
+    plan = plan_render(camera, settings)
+    accum = ImageAccumulator(plan, settings.aovs)
     start = time.perf_counter()
-
-    def work(pass_index: int, spp: int, tile: _Tile):
-        rng = np.random.default_rng([settings.seed, pass_index, tile.index])
-        return _render_tile(tracer, camera, tile, spp, settings, rng)
-
     samples_done = 0
     with ThreadPoolExecutor(max_workers=settings.threads) as pool:
-        for pass_index, spp in enumerate(passes):
-            results = pool.map(lambda t, p=pass_index, s=spp: work(p, s, t), tiles)
-            for tile, (radiance, aovs, tile_rays) in zip(tiles, results, strict=True):
-                accum[tile.y0 : tile.y1, tile.x0 : tile.x1] += radiance
-                for name, value in aovs.items():
-                    aov_accum[name][tile.y0 : tile.y1, tile.x0 : tile.x1] += value
-                rays += tile_rays
+        for pass_index, spp in enumerate(plan.passes):
+            work = partial(render_item, tracer, camera, settings, plan, pass_index)
+            for tile, result in zip(plan.tiles, pool.map(work, plan.tiles), strict=True):
+                accum.add(tile, result)
             samples_done += spp
             if progress is not None:
-                progress(RenderProgress(samples_done, settings.spp, time.perf_counter() - start, rays))
-    seconds = time.perf_counter() - start
-    image = (accum / settings.spp).astype(np.float32)
-    aov_images = {name: (value / settings.spp).astype(np.float32) for name, value in aov_accum.items()}
-    return RenderResult(image, settings.spp, seconds, rays, aov_images)
+                progress(
+                    RenderProgress(samples_done, settings.spp, time.perf_counter() - start, accum.rays_traced)
+                )
+    return accum.result(settings.spp, time.perf_counter() - start)
 
 
-def _render_tile(tracer: PathTracer, camera: PinholeCamera, tile: _Tile, spp: int, settings, rng):
+class ImageAccumulator:
+    """Sums tile results into full images; adding in a fixed order keeps the result bit-exact."""
+
+    def __init__(self, plan: RenderPlan, aovs: bool):
+        shape = (plan.height, plan.width, 3)
+        self.radiance = np.zeros(shape)
+        self.aovs = {name: np.zeros(shape) for name in AOV_NAMES} if aovs else {}
+        self.rays_traced = 0
+
+    def add(self, tile: Tile, result: TileResult) -> None:
+        window = (slice(tile.y0, tile.y1), slice(tile.x0, tile.x1))
+        self.radiance[window] += result.radiance
+        for name, value in result.aovs.items():
+            self.aovs[name][window] += value
+        self.rays_traced += result.rays_traced
+
+    def result(self, spp: int, seconds: float) -> RenderResult:
+        image = (self.radiance / spp).astype(np.float32)
+        aovs = {name: (value / spp).astype(np.float32) for name, value in self.aovs.items()}
+        return RenderResult(image, spp, seconds, self.rays_traced, aovs)
+
+
+def _render_tile(
+    tracer: PathTracer, camera: PinholeCamera, tile: Tile, spp: int, settings, rng
+) -> TileResult:
     w, h = tile.x1 - tile.x0, tile.y1 - tile.y0
     ys, xs = np.mgrid[tile.y0 : tile.y1, tile.x0 : tile.x1]
     xs = np.repeat(xs.ravel(), spp)
@@ -149,4 +195,4 @@ def _render_tile(tracer: PathTracer, camera: PinholeCamera, tile: _Tile, spp: in
             "emission": rec.emission,
         }
         aovs = {k: v.reshape(h, w, spp, 3).sum(axis=2) for k, v in per_sample.items()}
-    return radiance, aovs, rays
+    return TileResult(radiance, aovs, rays)
