@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from workers.nn.encodings.grid import GridGeometry, interpolate_grid, outer_combine
+from workers.nn.encodings.grid import GridGeometry, interpolate_grid, outer_combine, vertex_pairs
 
 HASH_PRIMES = (1, 2654435761, 805459861, 3674653429)
 """The spatial-hash primes of instant-ngp, one per input dimension."""
@@ -63,15 +63,14 @@ class HashGrid(nn.Module):
 
     def corner_rows(self, level: int, cell: Tensor) -> tuple[Tensor, None]:
         """Rows [N, 2^d], within the level's block, of the corners of cells with origins `cell` [N, d]."""
-        pairs = [torch.stack((c, c + 1), dim=-1) for c in cell.unbind(-1)]
+        n_dims = self.geometry.n_dims
         if self.is_hashed(level):
-            products = [pair * prime for pair, prime in zip(pairs, HASH_PRIMES, strict=False)]
-            index = outer_combine(products, torch.bitwise_xor) & (self.hashmap_size - 1)
-        else:
-            side = self.geometry.vertices_per_side(level)
-            strided = [pair * side**dim for dim, pair in enumerate(pairs)]
-            index = outer_combine(strided, torch.add)
-        return index, None
+            primes = torch.tensor(HASH_PRIMES[:n_dims], device=cell.device)
+            hashes = outer_combine(vertex_pairs(cell, primes), torch.bitwise_xor)
+            return hashes.bitwise_and_(self.hashmap_size - 1), None
+        side = self.geometry.vertices_per_side(level)
+        strides = side ** torch.arange(n_dims, device=cell.device)
+        return outer_combine(vertex_pairs(cell, strides), torch.add), None
 
     def forward(self, x: Tensor) -> Tensor:
         """Encode x [..., d] in [0, 1]^d (clamped) into [..., n_levels * n_features_per_level]."""

@@ -19,11 +19,13 @@ from workers.nn.encodings.grid import (
     corner_offsets,
     interpolate_grid,
     outer_combine,
+    vertex_pairs,
 )
 from workers.nn.encodings.hashgrid import INIT_RANGE
 
 
 def _linear_keys(vertices: Tensor, side: int) -> Tensor:
+    """x-fastest linear index of vertices [M, d], the same layout as a dense `HashGrid` level."""
     strides = side ** torch.arange(vertices.shape[-1], device=vertices.device)
     return (vertices * strides).sum(-1)
 
@@ -92,8 +94,8 @@ class SparseHashGrid(nn.Module):
     def corner_rows(self, level: int, cell: Tensor) -> tuple[Tensor, Tensor]:
         """Rows [N, 2^d] within the level block and whether each corner is stored [N, 2^d]."""
         side = self.geometry.vertices_per_side(level)
-        pairs = [torch.stack((c, c + 1), dim=-1) * side**dim for dim, c in enumerate(cell.unbind(-1))]
-        query = outer_combine(pairs, torch.add)
+        strides = side ** torch.arange(self.geometry.n_dims, device=cell.device)
+        query = outer_combine(vertex_pairs(cell, strides), torch.add)
         keys = self.level_keys(level)
         rows = torch.searchsorted(keys, query.reshape(-1)).clamp_(max=keys.numel() - 1).view_as(query)
         return rows, keys[rows] == query

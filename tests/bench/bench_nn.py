@@ -1,0 +1,89 @@
+"""Neural toolkit throughput: hash grid against its straightforward reference, MLP against matmul peak."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from tests.bench.common import BenchSection, median_seconds
+from workers.nn.encodings.hashgrid import HashGrid
+from workers.nn.encodings.hashgrid_reference import reference_hashgrid_encode
+from workers.nn.mlp import MLP
+
+HASHGRID_POINT_COUNTS = (2**16, 2**18)
+MLP_BATCH = 2**16
+MATMUL_SIZE = 2048
+
+
+def _instant_ngp_grid() -> HashGrid:
+    """instant-ngp's default 3D configuration: 16 levels of 2 features, 2^19 rows, resolutions 16..2048."""
+    return HashGrid(3, 16, 2, 19, base_resolution=16, per_level_scale=math.exp(math.log(2048 / 16) / 15))
+
+
+def _forward_backward(encode, grid: HashGrid, x: torch.Tensor):
+    def run() -> None:
+        grid.table.grad = None
+        encode(x).sum().backward()
+
+    return run
+
+
+def bench_hashgrid() -> BenchSection:
+    section = BenchSection("hash grid 3D (16 levels x 2 features, table 2^19): points/s")
+    grid = _instant_ngp_grid()
+    torch.manual_seed(0)
+    for n in HASHGRID_POINT_COUNTS:
+        x = torch.rand(n, 3)
+        reference = lambda p: reference_hashgrid_encode(grid, p)  # noqa: E731
+        with torch.no_grad():
+            fast_fwd = median_seconds(lambda x=x: grid(x), repeats=3)
+            ref_fwd = median_seconds(lambda x=x: reference(x), repeats=3)
+        fast_fb = median_seconds(_forward_backward(grid, grid, x), repeats=3)
+        ref_fb = median_seconds(_forward_backward(reference, grid, x), repeats=3)
+        for mode, fast, ref in (("forward", fast_fwd, ref_fwd), ("forward+backward", fast_fb, ref_fb)):
+            section.add(
+                points=n, mode=mode, fast_pts_s=n / fast, reference_pts_s=n / ref, speedup=ref / fast
+            )
+    section.notes.append("reference = loops over corners, plain indexing, autograd backward (same formula)")
+    section.notes.append(f"torch threads: {torch.get_num_threads()}")
+    return section
+
+
+def _matmul_gflops() -> float:
+    a, b = torch.randn(MATMUL_SIZE, MATMUL_SIZE), torch.randn(MATMUL_SIZE, MATMUL_SIZE)
+    seconds = median_seconds(lambda: a @ b, repeats=5)
+    return 2 * MATMUL_SIZE**3 / seconds / 1e9
+
+
+def bench_mlp() -> BenchSection:
+    section = BenchSection(f"MLP 4x128 (32 in, 3 out), batch {MLP_BATCH}: against {MATMUL_SIZE}^2 matmul")
+    torch.manual_seed(0)
+    net = MLP(32, 3, width=128, depth=4)
+    x = torch.randn(MLP_BATCH, 32)
+    weights = sum(m.weight.numel() for m in net.modules() if isinstance(m, torch.nn.Linear))
+    forward_flops = 2 * weights * MLP_BATCH
+    peak = _matmul_gflops()
+
+    def forward_backward() -> None:
+        net.zero_grad(set_to_none=True)
+        net(x).sum().backward()
+
+    with torch.no_grad():
+        fwd = median_seconds(lambda: net(x), repeats=5)
+    fb = median_seconds(forward_backward, repeats=5)
+    # Backward costs two matmuls per layer (input and weight gradients): 3x the forward FLOPs.
+    for mode, seconds, flops in (("forward", fwd, forward_flops), ("forward+backward", fb, 3 * forward_flops)):
+        achieved = flops / seconds / 1e9
+        section.add(
+            mode=mode,
+            samples_s=MLP_BATCH / seconds,
+            gflop_s=achieved,
+            matmul_gflop_s=peak,
+            fraction_of_matmul=achieved / peak,
+        )
+    return section
+
+
+def run() -> list[BenchSection]:
+    return [bench_hashgrid(), bench_mlp()]
