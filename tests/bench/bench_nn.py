@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import torch
 
@@ -32,19 +33,17 @@ def _forward_backward(encode, grid: HashGrid, x: torch.Tensor):
 def bench_hashgrid() -> BenchSection:
     section = BenchSection("hash grid 3D (16 levels x 2 features, table 2^19): points/s")
     grid = _instant_ngp_grid()
+    reference = partial(reference_hashgrid_encode, grid)
     torch.manual_seed(0)
     for n in HASHGRID_POINT_COUNTS:
         x = torch.rand(n, 3)
-        reference = lambda p: reference_hashgrid_encode(grid, p)  # noqa: E731
         with torch.no_grad():
-            fast_fwd = median_seconds(lambda x=x: grid(x), repeats=3)
-            ref_fwd = median_seconds(lambda x=x: reference(x), repeats=3)
+            fast_fwd = median_seconds(partial(grid, x), repeats=3)
+            ref_fwd = median_seconds(partial(reference, x), repeats=3)
         fast_fb = median_seconds(_forward_backward(grid, grid, x), repeats=3)
         ref_fb = median_seconds(_forward_backward(reference, grid, x), repeats=3)
         for mode, fast, ref in (("forward", fast_fwd, ref_fwd), ("forward+backward", fast_fb, ref_fb)):
-            section.add(
-                points=n, mode=mode, fast_pts_s=n / fast, reference_pts_s=n / ref, speedup=ref / fast
-            )
+            section.add(points=n, mode=mode, fast_pts_s=n / fast, reference_pts_s=n / ref, speedup=ref / fast)
     section.notes.append("reference = loops over corners, plain indexing, autograd backward (same formula)")
     section.notes.append(f"torch threads: {torch.get_num_threads()}")
     return section
@@ -73,7 +72,10 @@ def bench_mlp() -> BenchSection:
         fwd = median_seconds(lambda: net(x), repeats=5)
     fb = median_seconds(forward_backward, repeats=5)
     # Backward costs two matmuls per layer (input and weight gradients): 3x the forward FLOPs.
-    for mode, seconds, flops in (("forward", fwd, forward_flops), ("forward+backward", fb, 3 * forward_flops)):
+    for mode, seconds, flops in (
+        ("forward", fwd, forward_flops),
+        ("forward+backward", fb, 3 * forward_flops),
+    ):
         achieved = flops / seconds / 1e9
         section.add(
             mode=mode,

@@ -30,6 +30,8 @@ def test_shared_inputs_encoding_concatenates_and_shares_gradients():
     assert torch.allclose(out, torch.cat((grid(p0), grid(p1)), dim=-1))
     out.sum().backward()
     combined = grid.table.grad.clone()
+    packed = torch.tensor([[0.31, 0.47, 0.83, 0.62, 0.12, 0.27]], dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(composite, (packed,))
     grid.table.grad = None
     (grid(p0).sum() + grid(p1).sum()).backward()
     assert torch.allclose(combined, grid.table.grad)
@@ -98,6 +100,7 @@ def test_fourier_features_layout_and_values():
     assert out[0, 2 + 2].item() == pytest.approx(math.sin(4 * math.pi * 0.25))  # dim 0, frequency 4 pi
     assert out[0, 2 + 6 + 3].item() == pytest.approx(math.cos(math.pi * -0.5))  # cos, dim 1, frequency pi
     assert FourierFeatures(3, [1.0, 2.0], include_input=False)(torch.rand(5, 3)).shape == (5, 12)
+    assert torch.autograd.gradcheck(encoding, (torch.rand(3, 2, dtype=torch.float64, requires_grad=True),))
 
 
 def test_integrated_encoding_limits_and_gradcheck():

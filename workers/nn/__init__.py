@@ -42,7 +42,7 @@ from workers.nn.losses import (
     mu_law_l2,
     relative_l2,
 )
-from workers.nn.metrics import flip, mape, psnr, relative_mse
+from workers.nn.metrics import flip, mape, psnr, relative_mse, ssim
 from workers.nn.mlp import MLP, SkipGenerator
 from workers.nn.tonemap import mu_law, reinhard, srgb_encode
 
@@ -89,5 +89,6 @@ __all__ = [
     "select_top_k",
     "spherical_harmonics",
     "srgb_encode",
+    "ssim",
     "vertices_touched",
 ]
