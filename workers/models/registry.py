@@ -1,0 +1,166 @@
+"""The one place that knows every model kind: the job server, the driver and the inference service look
+kinds up here by name, so adding a kind is one line in `KIND_MODULES` and no `if kind == ...` elsewhere.
+
+Kinds are imported on first lookup, not when this module is imported: the server validates configs
+without loading the path tracer or torch until a kind is actually asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+from pydantic import BaseModel
+
+from workers.runtime.checkpoints import CheckpointStore
+from workers.scene.spec import SceneSpec
+
+# One line per kind: a module exposing `KIND`, an object satisfying `ModelKind`.
+KIND_MODULES = ("workers.models.render",)
+PRESET_NAMES = ("quick", "default", "paper")
+
+
+class PlanItem(BaseModel):
+    name: str
+    choice: str
+    reason: str
+
+
+class Plan(BaseModel):
+    """What this scene needs and why, with the estimated cost."""
+
+    items: list[PlanItem]
+    estimated_seconds: float
+    summary: str
+
+
+class Resources(BaseModel):
+    """What a job of this config asks the cluster for (its sampler actors and the driver together)."""
+
+    num_cpus: float = 1
+    num_gpus: float = 0
+
+
+class UnknownKind(KeyError):
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.name = name
+
+    def __str__(self) -> str:
+        return f"unknown model kind {self.name!r}; known kinds: {', '.join(kind_names())}"
+
+
+class JobCancelled(Exception):
+    """Raised inside a kind's `run` once the job is cancelled; the driver reports a cancelled outcome."""
+
+
+class InfrastructureFailure(RuntimeError):
+    """Raised by a kind when the cluster, not the job, failed (workers keep dying): a retry may succeed."""
+
+
+@dataclass
+class JobContext:
+    """Everything a kind's `run` gets from the driver: inputs, where to write, and how to talk back.
+
+    A render reports samples per pixel as steps; a training kind reports optimizer steps and its loss.
+    `checkpoints` is the job's own store: a kind resumes from `checkpoints.latest()` when there is one.
+    """
+
+    job_id: str
+    scene: SceneSpec
+    scene_dir: Path | None
+    config: BaseModel
+    seed: int
+    output_dir: Path
+    checkpoints: CheckpointStore
+    sampler_options: dict[str, Any]  # Ray `.options(...)` for sampler actors
+    on_progress: Callable[..., None] = field(repr=False)
+    on_log: Callable[[str], None] = field(repr=False)
+    cancel_requested: threading.Event = field(default_factory=threading.Event, repr=False)
+
+    def progress(
+        self,
+        step: int,
+        total: int,
+        *,
+        loss: float | None = None,
+        samples_per_s: float | None = None,
+        eta_s: float | None = None,
+    ) -> None:
+        self.on_progress(step=step, total=total, loss=loss, samples_per_s=samples_per_s, eta_s=eta_s)
+
+    def log(self, message: str) -> None:
+        self.on_log(message)
+
+    def raise_if_cancelled(self) -> None:
+        """Kinds call this between work items, so a cancel takes effect within one item's time."""
+        if self.cancel_requested.is_set():
+            raise JobCancelled(self.job_id)
+
+
+@dataclass
+class RunOutput:
+    """What a finished `run` leaves: artifact files (name -> (local path, media type)) and metrics."""
+
+    files: dict[str, tuple[str, str]]
+    metrics: dict[str, float]
+
+
+@runtime_checkable
+class ModelKind(Protocol):
+    name: str
+    config_model: type[BaseModel]  # extra="forbid"
+    presets: dict[str, dict]  # "quick", "default", "paper"
+
+    def resolve_config(self, preset: str, overrides: dict) -> BaseModel: ...
+
+    def plan(self, scene: SceneSpec, config: BaseModel) -> Plan: ...
+
+    def resources(self, config: BaseModel) -> Resources: ...
+
+    def run(self, ctx: JobContext) -> RunOutput: ...
+
+
+def resolve_preset(
+    config_model: type[BaseModel], presets: Mapping[str, dict], preset: str, overrides: dict
+) -> BaseModel:
+    """The preset's values with `overrides` merged in (nested dicts merge key by key), validated.
+
+    Raises ValueError for an unknown preset and pydantic's ValidationError (naming the field) for bad values.
+    """
+    if preset not in presets:
+        raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(presets)}")
+    return config_model.model_validate(_merge(presets[preset], overrides or {}))
+
+
+def _merge(base: dict, overrides: dict) -> dict:
+    merged = dict(base)
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+@cache
+def _kinds() -> dict[str, ModelKind]:
+    kinds = [importlib.import_module(module).KIND for module in KIND_MODULES]
+    return {kind.name: kind for kind in kinds}
+
+
+def kind_names() -> list[str]:
+    return sorted(_kinds())
+
+
+def get_kind(name: str) -> ModelKind:
+    """The kind registered under `name`; UnknownKind (a KeyError) lists the known ones."""
+    try:
+        return _kinds()[name]
+    except KeyError:
+        raise UnknownKind(name) from None

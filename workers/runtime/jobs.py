@@ -1,0 +1,244 @@
+"""The job driver: one named Ray actor per job that runs its kind and answers the service while it works.
+
+The kind runs on a background thread inside the actor, so `poll`, `outcome` and `cancel` are answered at
+once. The actor is not detached: it lives while the handle `start_job` returned is held and dies with the
+cluster of the service that started it; the service restarts such jobs with `start_job`, and the kind
+resumes from its checkpoints.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+import ray
+from pydantic import BaseModel, ValidationError
+from ray.exceptions import (
+    GetTimeoutError,
+    NodeDiedError,
+    ObjectLostError,
+    OutOfMemoryError,
+    RayActorError,
+    RaySystemError,
+    RayTaskError,
+    WorkerCrashedError,
+)
+
+from workers.models.registry import InfrastructureFailure, JobCancelled, JobContext, get_kind
+from workers.runtime.checkpoints import CheckpointStore
+from workers.runtime.resources import ResourceRequest, actor_options
+from workers.scene.errors import SceneError
+from workers.scene.io import scene_from_dict
+
+NAMESPACE = "neuralbake"
+MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory
+CALL_TIMEOUT_S = 1.0
+INFRASTRUCTURE_ERRORS = (
+    InfrastructureFailure,
+    RayActorError,
+    ObjectLostError,
+    WorkerCrashedError,
+    NodeDiedError,
+    OutOfMemoryError,
+    RaySystemError,
+)
+SAMPLER_CPUS = 1.0
+
+
+class JobSpec(BaseModel):
+    """Everything a driver needs; JSON-serialisable."""
+
+    job_id: str
+    kind: str
+    scene: dict  # SceneSpec.model_dump(mode="json")
+    scene_dir: str | None = None  # local directory with the scene's files (meshes, textures)
+    config: dict  # resolved config
+    seed: int
+    num_gpus: float = 0
+    checkpoint_dir: str  # the driver resumes from it if non-empty
+    output_dir: str  # the driver writes the artifact's files here
+
+
+class JobEvent(BaseModel):
+    type: Literal["progress", "log"]
+    time: float
+    step: int | None = None
+    total: int | None = None
+    loss: float | None = None
+    samples_per_s: float | None = None
+    eta_s: float | None = None
+    message: str | None = None
+
+
+class JobOutcome(BaseModel):
+    state: Literal["succeeded", "failed", "cancelled"]
+    error: str | None = None
+    files: dict[str, str] = {}  # artifact file name -> absolute path of the file, inside output_dir
+    media_types: dict[str, str] = {}  # artifact file name -> media type
+    metrics: dict[str, float] = {}
+    infrastructure_failure: bool = False  # True: retrying may help (a worker died); False: the job failed
+
+
+def one_line(error: BaseException) -> str:
+    """A failure as one line a person can act on; Ray task errors are unwrapped to their cause."""
+    if isinstance(error, RayTaskError) and error.cause is not None:
+        error = error.cause
+    if isinstance(error, ValidationError) and error.errors():
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        return f"invalid {error.title}: {where}: {first['msg']}"
+    if isinstance(error, SceneError):
+        return f"invalid scene: {error}"
+    lines = str(error).strip().splitlines()
+    text = lines[0] if lines else ""
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.Event) -> JobOutcome:
+    """Run the spec's kind to its outcome; every failure becomes an outcome, none escapes."""
+    try:
+        kind = get_kind(spec.kind)
+        ctx = JobContext(
+            job_id=spec.job_id,
+            scene=scene_from_dict(spec.scene),
+            scene_dir=Path(spec.scene_dir) if spec.scene_dir else None,
+            config=kind.config_model.model_validate(spec.config),
+            seed=spec.seed,
+            output_dir=Path(spec.output_dir),
+            checkpoints=CheckpointStore(spec.checkpoint_dir, keep=2),
+            sampler_options=actor_options(ResourceRequest(cpus=SAMPLER_CPUS)),
+            on_progress=lambda **fields: emit(JobEvent(type="progress", time=time.time(), **fields)),
+            on_log=lambda message: emit(JobEvent(type="log", time=time.time(), message=message)),
+            cancel_requested=cancel,
+        )
+        output = kind.run(ctx)
+    except JobCancelled:
+        return JobOutcome(state="cancelled")
+    except INFRASTRUCTURE_ERRORS as error:
+        return JobOutcome(state="failed", error=one_line(error), infrastructure_failure=True)
+    except Exception as error:
+        emit(JobEvent(type="log", time=time.time(), message=traceback.format_exc(limit=8)))
+        return JobOutcome(state="failed", error=one_line(error))
+    return JobOutcome(
+        state="succeeded",
+        files={name: path for name, (path, _) in output.files.items()},
+        media_types={name: media_type for name, (_, media_type) in output.files.items()},
+        metrics=output.metrics,
+    )
+
+
+@ray.remote
+class JobDriver:
+    """Runs one job on a background thread; buffers its events until the service polls them."""
+
+    def __init__(self, spec: dict) -> None:
+        self.spec = JobSpec.model_validate(spec)
+        self.events: collections.deque[JobEvent] = collections.deque(maxlen=MAX_BUFFERED_EVENTS)
+        self.lock = threading.Lock()
+        self.cancel_requested = threading.Event()
+        self.result: JobOutcome | None = None
+        self.thread = threading.Thread(target=self._run, name=f"job-{self.spec.job_id}", daemon=True)
+        self.thread.start()
+
+    def _emit(self, event: JobEvent) -> None:
+        with self.lock:
+            self.events.append(event)
+
+    def _run(self) -> None:
+        self.result = run_job(self.spec, self._emit, self.cancel_requested)
+
+    def poll(self, max_events: int) -> list[dict]:
+        with self.lock:
+            count = min(max_events, len(self.events))
+            return [self.events.popleft().model_dump(mode="json") for _ in range(count)]
+
+    def outcome(self) -> dict | None:
+        return None if self.result is None else self.result.model_dump(mode="json")
+
+    def cancel(self) -> None:
+        self.cancel_requested.set()
+
+    def ping(self) -> bool:
+        return True
+
+
+def actor_name(job_id: str) -> str:
+    return f"nbake-job-{job_id}"
+
+
+class JobHandle:
+    """The service's view of one driver. Keep the handle `start_job` returned: dropping it ends the driver."""
+
+    def __init__(self, job_id: str, actor: ray.actor.ActorHandle) -> None:
+        self.job_id = job_id
+        self.actor = actor
+
+    def _call(self, method, *args, default):
+        """A driver call answered within about a second; `default` when it is slow (e.g. still starting)."""
+        try:
+            return ray.get(method.remote(*args), timeout=CALL_TIMEOUT_S)
+        except GetTimeoutError:
+            return default
+
+    def poll(self, max_events: int = 1000) -> list[JobEvent]:
+        """Drain the buffered events (none if the driver is gone: `outcome` says why)."""
+        try:
+            events = self._call(self.actor.poll, max_events, default=[])
+        except RayActorError:
+            return []
+        return [JobEvent.model_validate(event) for event in events]
+
+    def outcome(self) -> JobOutcome | None:
+        """None while the job runs; a failed, retryable outcome when the driver itself died."""
+        try:
+            result = self._call(self.actor.outcome, default=None)
+        except RayActorError as error:
+            return JobOutcome(
+                state="failed",
+                error=f"the job driver died: {one_line(error)}",
+                infrastructure_failure=True,
+            )
+        return None if result is None else JobOutcome.model_validate(result)
+
+    def cancel(self) -> None:
+        """Ask the driver to stop; its kind stops within one work item and closes its sampler actors."""
+        with contextlib.suppress(RayActorError):  # a dead driver is already stopped
+            self._call(self.actor.cancel, default=None)
+
+    def alive(self) -> bool:
+        try:
+            return self._call(self.actor.ping, default=True)  # a slow answer is a busy or starting driver
+        except RayActorError:
+            return False
+
+    def release(self) -> None:
+        """End the driver process (after its outcome was read, or to abandon the job at once)."""
+        ray.kill(self.actor, no_restart=True)
+
+
+def start_job(spec: JobSpec) -> JobHandle:
+    """Start the job's driver and return at once; a driver already running for this job id is reused."""
+    options = actor_options(ResourceRequest(cpus=0, gpus=spec.num_gpus))
+    actor = JobDriver.options(
+        name=actor_name(spec.job_id),
+        namespace=NAMESPACE,
+        get_if_exists=True,
+        max_restarts=0,
+        **options,
+    ).remote(spec.model_dump(mode="json"))
+    return JobHandle(spec.job_id, actor)
+
+
+def attach_job(job_id: str) -> JobHandle | None:
+    """The live driver of `job_id`, or None (e.g. after a server restart, when its cluster is gone)."""
+    try:
+        actor = ray.get_actor(actor_name(job_id), namespace=NAMESPACE)
+    except ValueError:
+        return None
+    return JobHandle(job_id, actor)
