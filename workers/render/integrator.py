@@ -17,7 +17,16 @@ from workers.render.bsdf import Kind, eval_bsdf, sample_bsdf
 from workers.render.embree import Hits, RayScene
 from workers.render.lights import LightSampler
 from workers.render.materials import MaterialTable
-from workers.render.sampling import coordinate_frame, dot, max3, power_heuristic, to_local, to_world
+from workers.render.sampling import (
+    coordinate_frame,
+    dot,
+    max3,
+    power_heuristic,
+    select_where,
+    selection_size,
+    to_local,
+    to_world,
+)
 from workers.scene.compile import CompiledScene
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
@@ -72,23 +81,40 @@ class PathTracer:
         self._uv = scene.uvs.astype(np.float64)
         self._emission = scene.emission.astype(np.float64)
         self._coordinate_scale = np.abs(self._positions).max(axis=(1, 2))
+        # Triangles whose shading normals differ from the geometric one need interpolation.
+        deviation = np.abs(self._ns - self._ng[:, None, :]).max(axis=(1, 2))
+        self._smooth = deviation > 1e-6
+        self._any_smooth = bool(self._smooth.any())
+        self._needs_uv = bool(self.materials.textures)
         self._has_emitters = bool((scene.emission > 0).any())
 
     # ------------------------------------------------------------------ geometry helpers
 
-    def _interaction(self, hits: Hits) -> _Interaction:
+    def _interaction(
+        self, hits: Hits, origins: np.ndarray, directions: np.ndarray, need_uv: bool
+    ) -> _Interaction:
+        """Surface data at hits. The position is o + t d (float32 t: error far below the ray offset);
+        normals are interpolated only on smooth triangles and UVs only when something reads them."""
         prim = hits.prim
-        b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
-        b0 = 1.0 - b1 - b2
-        corners = self._positions[prim]
-        position = b0 * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
-        normals = self._ns[prim]
-        ns = b0 * normals[:, 0] + b1 * normals[:, 1] + b2 * normals[:, 2]
-        ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
-        uvs = self._uv[prim]
-        uv = b0 * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
+        position = origins + hits.t[:, None] * directions
+        ng = self._ng[prim]
+        ns = ng
+        smooth = np.flatnonzero(self._smooth[prim]) if self._any_smooth else ()
+        if len(smooth):
+            ns = ng.copy()
+            b1, b2 = hits.u[smooth].astype(np.float64)[:, None], hits.v[smooth].astype(np.float64)[:, None]
+            normals = self._ns[prim[smooth]]
+            interpolated = (1.0 - b1 - b2) * normals[:, 0] + b1 * normals[:, 1] + b2 * normals[:, 2]
+            ns[smooth] = interpolated / np.maximum(
+                np.linalg.norm(interpolated, axis=1, keepdims=True), 1e-300
+            )
+        uv = np.zeros((len(prim), 2))
+        if need_uv:
+            b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
+            uvs = self._uv[prim]
+            uv = (1.0 - b1 - b2) * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
         scale = np.maximum(max3(np.abs(position)), self._coordinate_scale[prim])
-        return _Interaction(position, self._ng[prim], ns, uv, scale)
+        return _Interaction(position, ng, ns, uv, scale)
 
     @staticmethod
     def offset(position: np.ndarray, ng: np.ndarray, direction: np.ndarray, scale: np.ndarray | None = None):
@@ -131,7 +157,7 @@ class PathTracer:
         if len(sel) == 0:
             return rec
         sub = Hits(hits.prim[sel], hits.t[sel], hits.u[sel], hits.v[sel])
-        it = self._interaction(sub)
+        it = self._interaction(sub, origins[sel], directions[sel], need_uv=True)
         prim = sub.prim
         mat = self.scene.material_ids[prim]
         rec.t[sel], rec.position[sel], rec.uv[sel] = sub.t, it.position, it.uv
@@ -186,13 +212,14 @@ class PathTracer:
                 )
                 radiance[idx[miss]] += beta[miss] * env.radiance(dm) * weight[:, None]
 
-            keep = np.flatnonzero(found)
-            idx, d, beta = idx[keep], d[keep], beta[keep]
-            prev_pdf, prev_delta = prev_pdf[keep], prev_delta[keep]
-            hits = Hits(hits.prim[keep], hits.t[keep], hits.u[keep], hits.v[keep])
+            if len(miss):
+                keep = np.flatnonzero(found)
+                idx, o, d, beta = idx[keep], o[keep], d[keep], beta[keep]
+                prev_pdf, prev_delta = prev_pdf[keep], prev_delta[keep]
+                hits = Hits(hits.prim[keep], hits.t[keep], hits.u[keep], hits.v[keep])
             if len(idx) == 0:
                 break
-            it = self._interaction(hits)
+            it = self._interaction(hits, o, d, self._needs_uv)
             prim = hits.prim
             wo = -d
 
@@ -235,23 +262,26 @@ class PathTracer:
         """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
         if self.lights.count == 0:
             return 0
-        sel = np.flatnonzero(~surf.is_delta)
-        if len(sel) == 0:
+        n = len(idx)
+        sel = select_where(~surf.is_delta)
+        if selection_size(sel, n) == 0:
             return 0
         ls = self.lights.sample(it.position[sel], u[sel, 0], u[sel, 1:3])
         wi_local = to_local(ls.direction, fs[sel], ft[sel], ns[sel])
-        f_cos, bsdf_pdf = eval_bsdf(surf.take(sel), wo_local[sel], wi_local)
+        f_cos, bsdf_pdf = eval_bsdf(
+            surf if isinstance(sel, slice) else surf.take(sel), wo_local[sel], wi_local
+        )
         mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, bsdf_pdf))
         scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
         contribution = beta[sel] * f_cos * ls.radiance * scale[:, None]
         live = np.flatnonzero(max3(contribution) > 0)
         if len(live) == 0:
             return 0
-        at = sel[live]
+        at = live if isinstance(sel, slice) else sel[live]
         direction = ls.direction[live]
         origin = self.offset(it.position[at], it.ng[at], direction, it.scale[at])
         distance = ls.distance[live]
         t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * it.scale[at], np.inf)
         blocked = self.rays.occluded(origin, direction, t_max)
-        radiance[idx[sel[live]]] += contribution[live] * ~blocked[:, None]
+        radiance[idx[at]] += contribution[live] * ~blocked[:, None]
         return len(live)

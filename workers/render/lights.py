@@ -12,7 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from workers.render.environment import ConstantEnvironment, EnvironmentMapLight
-from workers.render.sampling import luminance, normalize, square_to_uniform_triangle
+from workers.render.sampling import (
+    luminance,
+    normalize,
+    select_where,
+    selection_size,
+    square_to_uniform_triangle,
+)
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
 
@@ -31,8 +37,14 @@ class LightSample:
 class LightSampler:
     def __init__(self, scene: CompiledScene):
         self.scene = scene
-        self._positions = scene.positions.astype(np.float64)
+        corners = scene.positions.astype(np.float64)
+        self._origin, self._edge1, self._edge2 = (
+            corners[:, 0],
+            corners[:, 1] - corners[:, 0],
+            corners[:, 2] - corners[:, 0],
+        )
         self._normals = scene.geometric_normals.astype(np.float64)
+        self._emission = scene.emission.astype(np.float64)
         bounds = scene.bounds
         self.center = 0.5 * (bounds[0] + bounds[1])
         self.radius = max(0.5 * scene.extent, 1e-12)
@@ -105,31 +117,25 @@ class LightSampler:
         entry = np.minimum(np.searchsorted(self.cdf, u_select, side="right"), self.count - 1)
         kind, which, select = self.kinds[entry], self.index[entry], self.prob[entry]
 
-        sel = np.flatnonzero(kind == TRIANGLE)
-        if len(sel):
+        sel = select_where(kind == TRIANGLE)
+        if selection_size(sel, n):
             tri = which[sel]
             b = square_to_uniform_triangle(u[sel])
-            corners = self._positions[tri]
-            y = (
-                corners[:, 0]
-                + b[:, :1] * (corners[:, 1] - corners[:, 0])
-                + b[:, 1:] * (corners[:, 2] - corners[:, 0])
-            )
-            d = y - p[sel]
-            dist = np.linalg.norm(d, axis=1)
-            d = d / np.maximum(dist, 1e-300)[:, None]
+            d = self._origin[tri] + b[:, :1] * self._edge1[tri] + b[:, 1:] * self._edge2[tri] - p[sel]
+            dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+            d /= np.maximum(dist, 1e-300)[:, None]
             cos_l = -np.einsum("ij,ij->i", d, self._normals[tri])
             facing = (cos_l > 0) | self.scene.two_sided_emission[tri]
             cos_abs = np.abs(cos_l)
             ok = facing & (cos_abs > 1e-12) & (dist > 0)
             direction[sel], distance[sel] = d, dist
-            radiance[sel] = self.scene.emission[tri] * ok[:, None]
+            radiance[sel] = self._emission[tri] * ok[:, None]
             pdf[sel] = np.where(
                 ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0
             )
 
-        sel = np.flatnonzero(kind == POINT)
-        if len(sel):
+        sel = select_where(kind == POINT)
+        if selection_size(sel, n):
             d = self.point_position[which[sel]] - p[sel]
             dist = np.linalg.norm(d, axis=1)
             direction[sel] = d / np.maximum(dist, 1e-300)[:, None]
@@ -137,14 +143,14 @@ class LightSampler:
             radiance[sel] = self.point_intensity[which[sel]] / np.maximum(dist**2, 1e-300)[:, None]
             pdf[sel], delta[sel] = select[sel], True
 
-        sel = np.flatnonzero(kind == DIRECTIONAL)
-        if len(sel):
+        sel = select_where(kind == DIRECTIONAL)
+        if selection_size(sel, n):
             direction[sel] = self.dir_to_light[which[sel]]
             radiance[sel] = self.dir_irradiance[which[sel]]
             pdf[sel], delta[sel] = select[sel], True
 
-        sel = np.flatnonzero(kind == ENVIRONMENT)
-        if len(sel):
+        sel = select_where(kind == ENVIRONMENT)
+        if selection_size(sel, n):
             d, env_pdf = self.environment.sample(u[sel])
             direction[sel] = d
             radiance[sel] = self.environment.radiance(d) * (env_pdf > 0)[:, None]

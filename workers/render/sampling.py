@@ -38,23 +38,11 @@ def to_world(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.n
     return v[:, 0:1] * s + v[:, 1:2] * t + v[:, 2:3] * n
 
 
-def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
-    """Shirley-Chiu concentric map: area preserving, low distortion."""
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    first = np.abs(a) > np.abs(b)
-    r = np.where(first, a, b)
-    safe_a = np.where(a == 0, 1.0, a)
-    safe_b = np.where(b == 0, 1.0, b)
-    phi = np.where(first, (np.pi / 4) * (b / safe_a), (np.pi / 2) - (np.pi / 4) * (a / safe_b))
-    phi = np.where((a == 0) & (b == 0), 0.0, phi)
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
-
-
 def square_to_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
-    p = square_to_concentric_disk(u)
-    z = safe_sqrt(1.0 - p[:, 0] ** 2 - p[:, 1] ** 2)
-    return np.stack([p[:, 0], p[:, 1], z], axis=1)
+    """Malley's method on the polar disk map (cheaper than the concentric map for i.i.d. samples)."""
+    r = np.sqrt(u[:, 0])
+    phi = 2.0 * np.pi * u[:, 1]
+    return np.stack([r * np.cos(phi), r * np.sin(phi), safe_sqrt(1.0 - u[:, 0])], axis=1)
 
 
 def square_to_uniform_sphere(u: np.ndarray) -> np.ndarray:
@@ -79,6 +67,15 @@ def power_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
     b2 = np.square(np.minimum(pdf_b, 1e150))
     denom = a2 + b2
     return np.where(denom > 0, a2 / np.where(denom > 0, denom, 1.0), 0.0)
+
+
+def select_where(mask: np.ndarray) -> np.ndarray | slice:
+    """Indices where `mask` holds, or a full slice when it holds everywhere (a view, not a copy)."""
+    return slice(None) if mask.all() else np.flatnonzero(mask)
+
+
+def selection_size(sel: np.ndarray | slice, n: int) -> int:
+    return n if isinstance(sel, slice) else len(sel)
 
 
 def max3(rgb: np.ndarray) -> np.ndarray:
