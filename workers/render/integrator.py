@@ -17,6 +17,7 @@ from workers.render.bsdf import Kind, eval_bsdf, sample_bsdf
 from workers.render.embree import Hits, RayScene
 from workers.render.lights import LightSampler
 from workers.render.materials import MaterialTable
+from workers.render.region_rays import rays_entering_box
 from workers.render.sampling import (
     coordinate_frame,
     dot,
@@ -37,6 +38,17 @@ class TraceResult:
     radiance: np.ndarray  # (N, 3) float64, finite, >= 0
     bounces: np.ndarray  # (N,) int: segments traced before the path ended
     rays_traced: int  # closest-hit plus shadow rays, for throughput figures
+
+
+@dataclass
+class RegionSamples:
+    """Rays entering a region, their first hits and the radiance arriving back along them."""
+
+    origins: np.ndarray  # (N, 3)
+    directions: np.ndarray  # (N, 3)
+    records: SurfaceRecords
+    inside: np.ndarray  # (N,) bool: the first hit lies inside the region
+    radiance: np.ndarray  # (N, 3) radiance leaving the first hit towards the origin (incl. emission)
 
 
 @dataclass
@@ -169,6 +181,20 @@ class PathTracer:
         rec.roughness[sel] = self.materials.roughness(mat)
         rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
         return rec
+
+    def sample_region(
+        self, bounds: np.ndarray, n: int, rng: np.random.Generator, max_depth: int = 8
+    ) -> RegionSamples:
+        """Paths whose first segment enters the box `bounds` (2, 3) from its faces, traced to the end."""
+        origins, directions = rays_entering_box(bounds, n, rng)
+        records = self.first_hits(origins, directions)
+        lo, hi = np.asarray(bounds[0]), np.asarray(bounds[1])
+        slack = RAY_OFFSET * np.maximum(np.abs(lo), np.abs(hi)).max()
+        inside = records.hit & np.all(
+            (records.position >= lo - slack) & (records.position <= hi + slack), axis=1
+        )
+        radiance = self.trace(origins, directions, rng, max_depth).radiance
+        return RegionSamples(origins, directions, records, inside, radiance)
 
     def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
         front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
