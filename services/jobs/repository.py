@@ -1,0 +1,251 @@
+"""Persistence of jobs and their events. Every state change and its `state` event commit together,
+so a change is stored before anyone (an SSE stream, a poll) can see it announced.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+from collections.abc import Iterable, Sequence
+from datetime import timedelta
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from services.jobs.db import Database
+from services.jobs.errors import Conflict, InvalidInput, JobNotFound
+from services.jobs.states import JobState, check_transition
+from services.jobs.tables import Event, IdempotencyKey, Job, utcnow
+
+INSERT_ATTEMPTS = 3  # concurrent identical submissions on PostgreSQL: the loser retries and finds the winner
+REUSABLE = (JobState.QUEUED, JobState.RUNNING, JobState.SUCCEEDED)
+
+
+def encode_cursor(seq: int) -> str:
+    return base64.urlsafe_b64encode(str(seq).encode()).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str) -> int:
+    try:
+        return int(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode())
+    except (ValueError, binascii.Error, UnicodeDecodeError):
+        raise InvalidInput("not a cursor returned by this API", "cursor") from None
+
+
+class JobRepository:
+    def __init__(self, db: Database):
+        self.db = db
+
+    # ------------------------------------------------------------------ submission
+
+    def create(self, job: Job, content_key: str | None, header_key: str | None) -> tuple[Job, bool]:
+        """Insert `job`, or return the job an idempotency key already names: (job, created).
+
+        `content_key` (None with `force`) reuses a queued, running or succeeded job with the same work;
+        `header_key` reuses whatever job that key created and refuses a different request under it.
+        """
+        for attempt in range(INSERT_ATTEMPTS):
+            try:
+                with self.db.writing() as session:
+                    existing = self._existing(session, job.idempotency_key, content_key, header_key)
+                    if existing is not None:
+                        return existing, False
+                    session.add(job)
+                    session.flush()
+                    self._append(session, job, "state", {"state": job.state, "message": "submitted"})
+                    key = job.idempotency_key
+                    keys = [(content_key, key), (header_key, key)] if content_key else [(header_key, key)]
+                    for name, request_hash in keys:
+                        if name is not None:
+                            session.merge(IdempotencyKey(key=name, job_id=job.id, request_hash=request_hash))
+                    return job, True
+            except IntegrityError:
+                if attempt == INSERT_ATTEMPTS - 1:
+                    raise
+                job = _fresh_copy(job)
+        raise AssertionError("unreachable")
+
+    def _existing(
+        self, session: Session, request_hash: str, content_key: str | None, header_key: str | None
+    ) -> Job | None:
+        if header_key is not None and (row := session.get(IdempotencyKey, header_key)) is not None:
+            if row.request_hash != request_hash:
+                raise Conflict(
+                    "this Idempotency-Key was used for a different request; use a new key", "Idempotency-Key"
+                )
+            return self._job(session, row.job_id)
+        if content_key is not None and (row := session.get(IdempotencyKey, content_key)) is not None:
+            job = self._job(session, row.job_id)
+            if job.state in REUSABLE:
+                return job
+        return None
+
+    # ------------------------------------------------------------------ reading
+
+    def get(self, job_id: str) -> Job:
+        with self.db.reading() as session:
+            return self._job(session, job_id)
+
+    def list(
+        self, states: Sequence[str], kind: str | None, cursor: str | None, limit: int
+    ) -> tuple[list[Job], str | None]:
+        """Newest first; `next_cursor` is None on the last page."""
+        query = select(Job).order_by(Job.seq.desc()).limit(limit + 1)
+        if states:
+            query = query.where(Job.state.in_(list(states)))
+        if kind:
+            query = query.where(Job.kind == kind)
+        if cursor:
+            query = query.where(Job.seq < decode_cursor(cursor))
+        with self.db.reading() as session:
+            jobs = list(session.scalars(query))
+        more = len(jobs) > limit
+        return jobs[:limit], encode_cursor(jobs[limit - 1].seq) if more else None
+
+    def events_after(self, job_id: str, after: int, limit: int = 500) -> list[Event]:
+        query = (
+            select(Event).where(Event.job_id == job_id, Event.seq > after).order_by(Event.seq).limit(limit)
+        )
+        with self.db.reading() as session:
+            return list(session.scalars(query))
+
+    def count_by_state(self) -> dict[str, int]:
+        with self.db.reading() as session:
+            rows = session.execute(select(Job.state, func.count()).group_by(Job.state)).all()
+        return {state: count for state, count in rows}
+
+    def queued(self, limit: int) -> list[Job]:
+        """The next jobs to start: highest priority first, then oldest."""
+        query = (
+            select(Job)
+            .where(Job.state == JobState.QUEUED)
+            .order_by(Job.priority.desc(), Job.seq)
+            .limit(limit)
+        )
+        with self.db.reading() as session:
+            return list(session.scalars(query))
+
+    def orphans(self, owner: str) -> list[Job]:
+        """RUNNING jobs this scheduler owns (e.g. before a restart) or whose owner stopped renewing."""
+        query = select(Job).where(
+            Job.state == JobState.RUNNING,
+            (Job.lease_owner == owner) | (Job.lease_expires < utcnow()) | Job.lease_owner.is_(None),
+        )
+        with self.db.reading() as session:
+            return list(session.scalars(query))
+
+    # ------------------------------------------------------------------ changing
+
+    def transition(self, job_id: str, target: JobState, *, message: str | None = None, **fields: Any) -> Job:
+        """Check, persist and announce (as a `state` event) one state change, in one transaction."""
+        with self.db.writing() as session:
+            return self._transition(session, self._job(session, job_id, lock=True), target, message, fields)
+
+    def claim(self, job_id: str, owner: str, lease_s: float) -> Job | None:
+        """QUEUED -> RUNNING for this scheduler, unless another one (or a cancel) got there first."""
+        with self.db.writing() as session:
+            job = self._job(session, job_id, lock=True)
+            if job.state != JobState.QUEUED:
+                return None
+            fields = {
+                "attempts": job.attempts + 1,
+                "started_at": job.started_at or utcnow(),
+                "lease_owner": owner,
+                "lease_expires": utcnow() + timedelta(seconds=lease_s),
+            }
+            return self._transition(session, job, JobState.RUNNING, "started", fields)
+
+    def take_over(self, job_id: str, owner: str, lease_s: float) -> bool:
+        """Adopt an orphaned RUNNING job (atomically: two schedulers cannot both adopt it)."""
+        with self.db.writing() as session:
+            job = self._job(session, job_id, lock=True)
+            if job.state != JobState.RUNNING:
+                return False
+            expired = job.lease_expires is None or job.lease_expires < utcnow()
+            if job.lease_owner not in (owner, None) and not expired:
+                return False
+            job.lease_owner, job.lease_expires = owner, utcnow() + timedelta(seconds=lease_s)
+            return True
+
+    def renew_leases(self, owner: str, job_ids: Iterable[str], lease_s: float) -> None:
+        ids = list(job_ids)
+        if not ids:
+            return
+        with self.db.writing() as session:
+            session.execute(
+                update(Job)
+                .where(Job.id.in_(ids), Job.lease_owner == owner)
+                .values(lease_expires=utcnow() + timedelta(seconds=lease_s))
+            )
+
+    def request_cancel(self, job_id: str) -> Job:
+        """A queued job is cancelled now; a running one is flagged for the scheduler to stop."""
+        with self.db.writing() as session:
+            job = self._job(session, job_id, lock=True)
+            state = JobState(job.state)
+            if state.terminal:
+                raise Conflict(
+                    f"job {job_id} is already {state}; only queued or running jobs can be cancelled"
+                )
+            if state == JobState.RUNNING:
+                if not job.cancel_requested:
+                    job.cancel_requested = True
+                    self._append(session, job, "log", {"message": "cancellation requested"})
+                return job
+            return self._transition(session, job, JobState.CANCELLED, "cancelled while queued", {})
+
+    def cancel_requested(self, job_ids: Iterable[str]) -> set[str]:
+        ids = list(job_ids)
+        if not ids:
+            return set()
+        with self.db.reading() as session:
+            query = select(Job.id).where(Job.id.in_(ids), Job.cancel_requested.is_(True))
+            return set(session.scalars(query))
+
+    def append_events(self, job_id: str, events: Sequence[tuple[str, dict[str, Any]]]) -> None:
+        """Persist driver events (type, data) in order; the latest progress is also kept on the job."""
+        if not events:
+            return
+        with self.db.writing() as session:
+            job = self._job(session, job_id, lock=True)
+            for kind, data in events:
+                self._append(session, job, kind, data)
+                if kind == "progress":
+                    job.progress = data
+
+    # ------------------------------------------------------------------ helpers
+
+    def _transition(
+        self, session: Session, job: Job, target: JobState, message: str | None, fields: dict[str, Any]
+    ) -> Job:
+        check_transition(job.id, job.state, target)
+        previous, job.state = job.state, target
+        for name, value in fields.items():
+            setattr(job, name, value)
+        if target.terminal:
+            job.finished_at, job.lease_owner, job.lease_expires = utcnow(), None, None
+        data = {"state": target, "previous": previous, "attempt": job.attempts, "message": message}
+        data |= {k: v for k, v in (("error", job.error), ("artifact_id", job.artifact_id)) if v}
+        self._append(session, job, "state", data)
+        return job
+
+    @staticmethod
+    def _job(session: Session, job_id: str, lock: bool = False) -> Job:
+        query = select(Job).where(Job.id == job_id)
+        job = session.scalars(query.with_for_update() if lock else query).one_or_none()
+        if job is None:
+            raise JobNotFound(f"no job {job_id!r}", "job_id")
+        return job
+
+    @staticmethod
+    def _append(session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
+        job.last_event_seq += 1
+        session.add(Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow()))
+
+
+def _fresh_copy(job: Job) -> Job:
+    """A new, unsaved Job with the same column values (the old instance belongs to a rolled-back session)."""
+    columns = {c.key: getattr(job, c.key) for c in Job.__table__.columns if c.key not in ("seq",)}
+    return Job(**columns)

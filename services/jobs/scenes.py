@@ -1,0 +1,95 @@
+"""The three ways a job names its scene (an uploaded asset id, a built-in name, an inline SceneSpec),
+resolved to one validated SceneSpec, a content hash, and (for assets) a folder holding its files.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from services.artifacts.assets import AssetNotFound, load_asset, materialize
+from services.artifacts.store import BlobStore
+from services.jobs.errors import InvalidInput
+from services.jobs.identity import scene_hash
+from workers.scene.builtin import BUILTIN_SCENES, get_builtin
+from workers.scene.errors import SceneError
+from workers.scene.io import load_scene, scene_from_dict
+from workers.scene.spec import SceneSpec
+
+ASSET_PREFIX = "sha256:"
+
+
+@dataclass(frozen=True)
+class ResolvedScene:
+    spec: SceneSpec
+    ref: dict[str, str]  # {"source": "builtin" | "asset" | "inline", "name": ..., "asset_id": ...}
+    content_hash: str
+
+
+def scene_field(error: SceneError) -> str:
+    """A SceneError's dotted field, as a path inside the job body."""
+    return "scene" if error.field in ("scene", "") else f"scene.{error.field}"
+
+
+class SceneResolver:
+    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused."""
+
+    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path):
+        self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
+
+    def resolve(self, scene: str | dict[str, Any]) -> ResolvedScene:
+        """InvalidInput naming the field for an unknown name or asset and for any problem in the scene."""
+        try:
+            if isinstance(scene, dict):
+                spec = scene_from_dict(scene)
+                return ResolvedScene(spec, {"source": "inline", "name": spec.name}, self._hash(spec, {}))
+            if scene.startswith(ASSET_PREFIX):
+                return self._asset(scene)
+            if scene not in BUILTIN_SCENES:
+                known = ", ".join(sorted(BUILTIN_SCENES))
+                raise InvalidInput(
+                    f"{scene!r} is neither an asset id (sha256:...) nor a built-in scene ({known})", "scene"
+                )
+            spec = get_builtin(scene)
+            return ResolvedScene(spec, {"source": "builtin", "name": scene}, self._hash(spec, {}))
+        except SceneError as error:
+            raise InvalidInput(error.problem, scene_field(error)) from None
+
+    def scene_dir(self, ref: dict[str, str]) -> Path | None:
+        """The folder a driver resolves the scene's relative paths against (None without files)."""
+        return self._materialized(ref["asset_id"])[0] if ref["source"] == "asset" else None
+
+    def _asset(self, asset_id: str) -> ResolvedScene:
+        try:
+            asset = load_asset(asset_id, self.assets_root)
+        except (AssetNotFound, ValueError):
+            raise InvalidInput(
+                f"no asset {asset_id!r}; upload it with POST /v1/assets first", "scene"
+            ) from None
+        _, scene_file = self._materialized(asset_id, asset)
+        spec, _ = load_scene(scene_file)
+        files = {entry.name: entry.digest for entry in asset.files}
+        ref = {"source": "asset", "name": asset.scene_name, "asset_id": asset_id}
+        return ResolvedScene(spec, ref, self._hash(spec, files))
+
+    def _materialized(self, asset_id: str, asset=None) -> tuple[Path, Path]:
+        """(folder, scene file); unpacked into a temporary folder and renamed, so readers never see half."""
+        asset = asset or load_asset(asset_id, self.assets_root)
+        folder = self.cache_dir / asset_id.removeprefix(ASSET_PREFIX)
+        if not folder.is_dir():
+            self.cache_dir.mkdir(parents=True, exist_ok=True)
+            staging = Path(tempfile.mkdtemp(prefix=".unpack-", dir=self.cache_dir))
+            materialize(asset, self.blobs, staging)
+            try:
+                os.rename(staging, folder)
+            except OSError:  # another request unpacked the same asset first
+                shutil.rmtree(staging, ignore_errors=True)
+        return folder, folder / asset.scene_file
+
+    @staticmethod
+    def _hash(spec: SceneSpec, files: dict[str, str]) -> str:
+        return scene_hash(spec.model_dump(mode="json"), files)

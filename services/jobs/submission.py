@@ -1,0 +1,104 @@
+"""Turning a job request into a stored QUEUED job: kind, preset, config and scene validated (each error
+naming its field), the work's idempotency key computed, and an existing job reused when it matches.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import uuid
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from services.jobs.errors import InvalidInput
+from services.jobs.identity import code_version, idempotency_key
+from services.jobs.repository import JobRepository
+from services.jobs.scenes import SceneResolver, scene_field
+from services.jobs.states import JobState
+from services.jobs.tables import Job, utcnow
+from workers.models.registry import UnknownKind, get_kind
+from workers.scene.errors import SceneError
+from workers.scene.io import dotted_path
+
+MAX_IDEMPOTENCY_HEADER = 255
+
+
+class JobRequest(BaseModel):
+    """The body of `POST /v1/jobs`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    kind: str = Field(max_length=64, description="The model kind, e.g. `render`.", examples=["render"])
+    scene: str | dict[str, Any] = Field(
+        description="An uploaded asset id (`sha256:...`), a built-in scene name, or an inline SceneSpec.",
+        examples=["cornell_box"],
+    )
+    preset: str = Field("default", max_length=64, description="`quick`, `default` or `paper`.")
+    config: dict[str, Any] = Field(default_factory=dict, description="Overrides of the preset's values.")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Seed of every sampler; part of the job's identity.")
+    priority: int = Field(0, ge=-1000, le=1000, description="Higher starts first.")
+    force: bool = Field(False, description="Run even if identical work already exists.")
+
+
+class Submitter:
+    def __init__(self, jobs: JobRepository, scenes: SceneResolver, max_attempts: int):
+        self.jobs, self.scenes, self.max_attempts = jobs, scenes, max_attempts
+
+    def submit(self, request: JobRequest, header_key: str | None = None) -> tuple[Job, bool]:
+        """(job, created): created is False when an idempotency key named an existing job."""
+        try:
+            kind = get_kind(request.kind)
+        except UnknownKind as error:
+            raise InvalidInput(str(error), "kind") from None
+        if request.preset not in kind.presets:
+            known = ", ".join(kind.presets)
+            raise InvalidInput(f"unknown preset {request.preset!r}; known presets: {known}", "preset")
+        try:
+            config = kind.resolve_config(request.preset, request.config)
+        except ValidationError as error:
+            first = error.errors()[0]
+            field = dotted_path(first["loc"], request.config)
+            raise InvalidInput(first["msg"], f"config.{field}" if field else "config") from None
+        except ValueError as error:
+            raise InvalidInput(str(error), "config") from None
+        scene = self.scenes.resolve(request.scene)
+        try:
+            plan = kind.plan(scene.spec, config)
+        except SceneError as error:
+            raise InvalidInput(error.problem, scene_field(error)) from None
+        except ValueError as error:
+            raise InvalidInput(str(error), "config") from None
+        resolved = config.model_dump(mode="json")
+        code = code_version()
+        key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
+        job = Job(
+            id=f"job-{uuid.uuid4().hex}",
+            kind=kind.name,
+            state=JobState.QUEUED,
+            scene_ref=scene.ref,
+            scene=scene.spec.model_dump(mode="json"),
+            scene_hash=scene.content_hash,
+            preset=request.preset,
+            config=resolved,
+            seed=request.seed,
+            priority=request.priority,
+            code_version=code,
+            idempotency_key=key,
+            plan=plan.model_dump(mode="json"),
+            attempts=0,
+            max_attempts=self.max_attempts,
+            cancel_requested=False,
+            last_event_seq=0,
+            created_at=utcnow(),
+        )
+        content_key = None if request.force else f"content:{key}"
+        return self.jobs.create(job, content_key, _header_key(header_key))
+
+
+def _header_key(value: str | None) -> str | None:
+    """Stored hashed, so any length and character set fits the column."""
+    if value is None:
+        return None
+    if not 0 < len(value) <= MAX_IDEMPOTENCY_HEADER:
+        raise InvalidInput(f"must be 1 to {MAX_IDEMPOTENCY_HEADER} characters", "Idempotency-Key")
+    return "header:sha256:" + hashlib.sha256(value.encode()).hexdigest()
