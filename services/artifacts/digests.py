@@ -33,7 +33,7 @@ def digest_bytes(data: bytes) -> str:
 
 def canonical_json(data: Any) -> bytes:
     """The one byte string hashed for an id: sorted keys, no whitespace, no NaN."""
-    text = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return text.encode()
 
 
