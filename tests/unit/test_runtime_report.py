@@ -1,0 +1,73 @@
+import numpy as np
+import pytest
+import torch
+
+from workers.runtime.report import PLOT_FILE, REPORT_FILE, Report, TimedImage, build_report, parameter_bytes
+from workers.runtime.training import TrainResult
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def noisy(reference: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (reference + rng.normal(0.0, sigma, reference.shape)).clip(0).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def report() -> Report:
+    rng = np.random.default_rng(0)
+    reference = rng.uniform(0.0, 2.0, (32, 32, 3)).astype(np.float32)
+    path_tracing = [
+        TimedImage(f"{spp} spp", noisy(reference, 1.0 / np.sqrt(spp), spp), seconds=0.01 * spp)
+        for spp in (1, 4, 16)
+    ]
+    model = torch.nn.Linear(8, 4)
+    return build_report(
+        kind="lod",
+        training=TrainResult(steps=100, final_loss=0.1, best_loss=0.09, seconds=4.0, samples=8000),
+        model=model,
+        model_frame=TimedImage("256x256 frame", noisy(reference, 0.05, 99), seconds=0.02),
+        path_tracing_equal_time=path_tracing[0],
+        path_tracing=path_tracing,
+        reference=reference,
+        seconds_per_query=1e-6,
+        method_metrics={"visibility_accuracy": 0.97},
+    )
+
+
+def test_report_measures_error_against_the_reference(report):
+    assert report.training_samples_per_s == 2000.0
+    assert report.parameter_bytes == (8 * 4 + 4) * 4
+    assert report.peak_rss_bytes > 10 * 2**20
+    errors = [point.error for point in report.path_tracing]
+    assert [e.relative_mse for e in errors] == sorted((e.relative_mse for e in errors), reverse=True)
+    assert [e.psnr for e in errors] == sorted(e.psnr for e in errors)
+    assert report.model.error.flip < report.path_tracing_equal_time.error.flip
+    assert report.path_tracing_equal_time == report.path_tracing[0]
+
+
+def test_json_round_trip_and_plot(report, tmp_path):
+    report.write(str(tmp_path / "report"))
+    assert Report.read(str(tmp_path / "report")) == report
+    png = (tmp_path / "report" / PLOT_FILE).read_bytes()
+    assert png.startswith(PNG_SIGNATURE)
+    assert (tmp_path / "report" / REPORT_FILE).read_text().startswith("{")
+
+
+def test_parameter_bytes_count_buffers_and_dtypes():
+    model = torch.nn.BatchNorm1d(10).to(torch.float64)
+    # weight, bias, running mean and var in float64, plus an int64 batch counter
+    assert parameter_bytes(model) == 4 * 10 * 8 + 8
+
+
+def test_a_report_needs_a_path_tracing_curve(report):
+    with pytest.raises(ValueError, match="path-traced frames"):
+        build_report(
+            kind="lod",
+            training=TrainResult(steps=1, final_loss=0.0, best_loss=0.0, seconds=1.0, samples=1),
+            model=torch.nn.Linear(1, 1),
+            model_frame=TimedImage("frame", np.zeros((4, 4, 3), np.float32), 0.1),
+            path_tracing_equal_time=TimedImage("1 spp", np.zeros((4, 4, 3), np.float32), 0.1),
+            path_tracing=[],
+            reference=np.zeros((4, 4, 3), np.float32),
+        )
