@@ -39,6 +39,7 @@ from workers.scene.io import scene_from_dict
 NAMESPACE = "neuralbake"
 MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory
 CALL_TIMEOUT_S = 1.0
+NAME_RELEASE_TIMEOUT_S = 30.0
 INFRASTRUCTURE_ERRORS = (
     InfrastructureFailure,
     RayActorError,
@@ -223,16 +224,31 @@ class JobHandle:
 
 
 def start_job(spec: JobSpec) -> JobHandle:
-    """Start the job's driver and return at once; a driver already running for this job id is reused."""
+    """Start the job's driver and return at once.
+
+    A driver still running this job id is returned as it is; one that already finished (a retry after a
+    failure, say) is ended first, so the new start runs the job again from its checkpoints.
+    """
+    existing = attach_job(spec.job_id)
+    if existing is not None:
+        if existing.outcome() is None:
+            return existing
+        existing.release()
+        _wait_until_gone(spec.job_id)
     options = actor_options(ResourceRequest(cpus=0, gpus=spec.num_gpus))
     actor = JobDriver.options(
-        name=actor_name(spec.job_id),
-        namespace=NAMESPACE,
-        get_if_exists=True,
-        max_restarts=0,
-        **options,
+        name=actor_name(spec.job_id), namespace=NAMESPACE, max_restarts=0, **options
     ).remote(spec.model_dump(mode="json"))
     return JobHandle(spec.job_id, actor)
+
+
+def _wait_until_gone(job_id: str) -> None:
+    """Ray frees a killed actor's name asynchronously; a new driver can only take it once it is free."""
+    deadline = time.monotonic() + NAME_RELEASE_TIMEOUT_S
+    while attach_job(job_id) is not None:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the finished driver of job {job_id} did not exit; retry the start later")
+        time.sleep(0.05)
 
 
 def attach_job(job_id: str) -> JobHandle | None:
