@@ -98,7 +98,7 @@ def _extract_zip(path: Path, staging: Staging, guard: _InflationGuard) -> None:
         if declared_total > limits.max_total_bytes:
             raise UploadError(
                 guard.archive_name,
-                f"declares {declared_total} bytes, over the limit of {limits.max_total_bytes}",
+                f"declares {declared_total} bytes, over the limit of {limits.max_total_bytes} bytes in total",
                 PAYLOAD_TOO_LARGE,
             )
         for member in members:

@@ -85,7 +85,7 @@ def _spool(name: str, stream: BinaryIO, dest: Path, limits: UploadLimits) -> Pat
         for chunk in read_chunks(stream):
             size += len(chunk)
             if size > limits.max_total_bytes:
-                problem = f"the archive exceeds the limit of {limits.max_total_bytes} bytes"
+                problem = f"the archive exceeds the limit of {limits.max_total_bytes} bytes in total"
                 raise UploadError(name, problem, PAYLOAD_TOO_LARGE)
             out.write(chunk)
     return dest
