@@ -1,0 +1,256 @@
+"""Binary surface voxels of a triangle mesh and the ray walk through them (3D DDA).
+
+Used by neural geometry models (LSNIF's encoder input, neural LODs): a mesh in its own local space is
+voxelised at any resolution inside a padded box, and a batch of rays is walked through the voxels with
+Amanatides-Woo, vectorised over rays.
+
+Voxels are closed boxes: a triangle that only touches a voxel (a vertex on its corner, a face lying on its
+face) occupies it. The overlap test is exact (Akenine-Möller's separating axis test in float64), so
+geometry exactly on voxel faces marks the voxels on both sides and degenerate triangles (segments and
+points) still mark the voxels they touch.
+
+The walk records *boundary points*: the ray's segment inside the box is cut by every voxel plane it
+crosses; a cut (or the segment's start or end) is recorded when the voxel just before or just after it is
+occupied. Cuts at equal t (a ray through a voxel edge or corner) are one cut, and voxels the ray only
+touches in a line or a point are not entered; a ray lying in a voxel plane walks the voxels on the
+plane's upper side. Every plane coordinate is computed once by the same
+expression (`plane`), so the walk and a brute-force reference agree bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TRIANGLE_CHUNK = 1 << 16
+OVERLAP_SLACK = 1e-9  # relative to the voxel size: closed boxes survive float64 rounding
+
+
+@dataclass(frozen=True)
+class VoxelGrid:
+    """Occupancy [R, R, R] (index order x, y, z) of cubical-cell boxes over [lo, lo + R * size]."""
+
+    lo: np.ndarray  # (3,) float64
+    size: np.ndarray  # (3,) float64 voxel edge lengths (> 0)
+    occupied: np.ndarray  # (R, R, R) bool
+
+    @property
+    def resolution(self) -> int:
+        return self.occupied.shape[0]
+
+    @property
+    def hi(self) -> np.ndarray:
+        return self.plane(np.full(3, self.resolution))
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return np.stack([self.lo, self.hi])
+
+    def plane(self, index: np.ndarray) -> np.ndarray:
+        """Coordinates of voxel planes `index` (..., 3): the one expression every user of a plane shares."""
+        return self.lo + index * self.size
+
+    def normalize(self, points: np.ndarray) -> np.ndarray:
+        """Points in box coordinates [0, 1]^3."""
+        return (points - self.lo) / (self.size * self.resolution)
+
+
+def padded_bounds(vertices: np.ndarray, resolution: int, pad_voxels: float = 0.5) -> np.ndarray:
+    """The mesh's AABB grown by `pad_voxels` voxels of its longest side on every axis.
+
+    The padding keeps surfaces off the outer faces (rays entering the box meet empty voxels first) and
+    gives flat meshes a thickness, so a plane becomes a box one or two voxels thick.
+    """
+    vertices = np.asarray(vertices, np.float64).reshape(-1, 3)
+    if len(vertices) == 0:
+        return np.array([[-1.0] * 3, [1.0] * 3])
+    lo, hi = vertices.min(0), vertices.max(0)
+    longest = float((hi - lo).max())
+    scale = max(longest, float(np.abs(vertices).max()) * 1e-9, 1e-12)
+    pad = pad_voxels * scale / resolution
+    return np.stack([lo - pad, hi + pad])
+
+
+def voxelize(
+    vertices: np.ndarray, faces: np.ndarray, resolution: int, bounds: np.ndarray | None = None
+) -> VoxelGrid:
+    """Voxels of `bounds` (default: `padded_bounds`) that the triangles overlap, by an exact SAT test."""
+    if resolution < 1:
+        raise ValueError(f"the voxel resolution must be at least 1, got {resolution}")
+    vertices = np.asarray(vertices, np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    if bounds is None:
+        bounds = padded_bounds(vertices[faces.reshape(-1)] if len(faces) else vertices, resolution)
+    lo, hi = np.asarray(bounds, np.float64)
+    if not np.all(hi > lo):
+        raise ValueError(f"the voxel box must have a positive size on every axis, got {lo} .. {hi}")
+    grid = VoxelGrid(lo, (hi - lo) / resolution, np.zeros((resolution,) * 3, bool))
+    for start in range(0, len(faces), TRIANGLE_CHUNK):
+        _mark_overlaps(grid, vertices[faces[start : start + TRIANGLE_CHUNK]])
+    return grid
+
+
+def _mark_overlaps(grid: VoxelGrid, triangles: np.ndarray) -> None:
+    """Set the voxels each triangle (T, 3, 3) overlaps: candidates from its bounding box, then SAT."""
+    r = grid.resolution
+    local = (triangles - grid.lo) / grid.size  # voxel units: voxel (i, j, k) is [i, i+1] x ...
+    first = np.clip(np.floor(local.min(1)).astype(np.int64), 0, r - 1)
+    last = np.clip(np.floor(local.max(1)).astype(np.int64), 0, r - 1)
+    # A triangle touching a plane from below also touches the voxel above it (closed boxes).
+    first = np.maximum(first - (np.floor(local.min(1)) == local.min(1)), 0)
+    inside = np.all((local.max(1) >= 0) & (local.min(1) <= r), axis=1)
+    first, last, local = first[inside], last[inside], local[inside]
+    extent = last - first + 1
+    counts = extent.prod(1)
+    owner = np.repeat(np.arange(len(local)), counts)
+    rank = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    ex = extent[owner]
+    offset = np.stack([rank % ex[:, 0], (rank // ex[:, 0]) % ex[:, 1], rank // (ex[:, 0] * ex[:, 1])], 1)
+    cell = first[owner] + offset
+    hit = triangle_box_overlap(local[owner] - (cell + 0.5)[:, None, :], np.full(3, 0.5))
+    cell = cell[hit]
+    grid.occupied[cell[:, 0], cell[:, 1], cell[:, 2]] = True
+
+
+def triangle_box_overlap(triangles: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Whether triangles (N, 3, 3), given relative to a box's centre, touch the closed box of half-size
+    `half` (3,): Akenine-Möller's 13 separating axes. Zero axes (degenerate triangles) never separate."""
+    eps = OVERLAP_SLACK * float(half.max())
+    overlap = np.all(
+        (triangles.min(1) <= half + eps) & (triangles.max(1) >= -half - eps), axis=1
+    )  # the three box normals
+    edges = np.roll(triangles, -1, axis=1) - triangles
+    normal = np.cross(edges[:, 0], edges[:, 1])
+    axes = [normal] + [np.cross(np.eye(3)[a], edges[:, e]) for a in range(3) for e in range(3)]
+    for axis in axes:
+        projected = np.einsum("nvk,nk->nv", triangles, axis)
+        radius = np.abs(axis) @ half
+        scale = np.abs(axis).sum(1)
+        overlap &= (projected.min(1) <= radius + eps * scale) & (projected.max(1) >= -radius - eps * scale)
+    return overlap
+
+
+@dataclass
+class BoundaryPoints:
+    """The walk of N rays through a `VoxelGrid`, up to H boundary points each, zero-filled."""
+
+    points: np.ndarray  # (N, H, 3) positions in the grid's space, ordered along the ray
+    t: np.ndarray  # (N, H) ray parameters of the points
+    count: np.ndarray  # (N,) points recorded (<= H)
+    t_near: np.ndarray  # (N,) start of the ray's segment inside the box (>= 0)
+    t_far: np.ndarray  # (N,) end of that segment; t_far < t_near where the ray misses the box
+    truncated: np.ndarray  # (N,) all H slots filled before the walk ended: later points were dropped
+
+    @property
+    def in_box(self) -> np.ndarray:
+        return self.t_far >= self.t_near
+
+
+def clip_to_box(
+    grid: VoxelGrid, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t_near, t_far) of the rays' segments [0, t_max] inside the closed box (slab test).
+
+    A direction component of zero constrains nothing when the origin lies within that slab (a ray
+    grazing a face counts as inside) and misses otherwise.
+    """
+    n = len(origins)
+    t_near = np.zeros(n)
+    t_far = np.full(n, np.inf) if t_max is None else np.asarray(t_max, np.float64).copy()
+    lo, hi = grid.lo, grid.hi
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for axis in range(3):
+            o, d = origins[:, axis], directions[:, axis]
+            moving = d != 0
+            t0 = (lo[axis] - o) / d
+            t1 = (hi[axis] - o) / d
+            near = np.where(moving, np.minimum(t0, t1), -np.inf)
+            far = np.where(moving, np.maximum(t0, t1), np.inf)
+            outside = ~moving & ((o < lo[axis]) | (o > hi[axis]))
+            t_near = np.maximum(t_near, near)
+            t_far = np.where(outside, -np.inf, np.minimum(t_far, far))
+    return t_near, t_far
+
+
+def check_rays(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """float64 (N, 3) copies; a clear error for non-finite values or a zero-length direction."""
+    origins = np.asarray(origins, np.float64).reshape(-1, 3)
+    directions = np.asarray(directions, np.float64).reshape(-1, 3)
+    if len(origins) != len(directions):
+        raise ValueError(f"{len(origins)} origins but {len(directions)} directions")
+    if not (np.isfinite(origins).all() and np.isfinite(directions).all()):
+        raise ValueError("ray origins and directions must be finite")
+    if len(directions) and not np.all(np.abs(directions).max(1) > 0):
+        raise ValueError("a ray direction has zero length; every ray needs a non-zero direction")
+    return origins, directions
+
+
+def boundary_points(
+    grid: VoxelGrid,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    max_points: int,
+    t_max: np.ndarray | None = None,
+) -> BoundaryPoints:
+    """Walk every ray (Amanatides-Woo) and record up to `max_points` boundary points (module docstring).
+
+    Directions need not be unit length; `t` is in units of the given direction.
+    """
+    origins, directions = check_rays(origins, directions)
+    n, r = len(origins), grid.resolution
+    t_near, t_far = clip_to_box(grid, origins, directions, t_max)
+    out = BoundaryPoints(
+        np.zeros((n, max_points, 3)), np.zeros((n, max_points)), np.zeros(n, np.int64), t_near, t_far,
+        np.zeros(n, bool),
+    )  # fmt: skip
+    live = np.flatnonzero(t_far >= t_near)
+    if max_points < 1:
+        raise ValueError(f"max_points must be at least 1, got {max_points}")
+    o, d = origins[live], directions[live]
+    t_cur, t_end = t_near[live], t_far[live]
+    step = np.where(d > 0, 1, -1).astype(np.int64)
+    # The voxel the segment starts in: inside the box, on the side the ray moves to when on a plane.
+    start = o + t_cur[:, None] * d
+    cell = np.clip(np.floor((start - grid.lo) / grid.size).astype(np.int64), 0, r - 1)
+    on_lower_plane = (grid.plane(cell) == start) & (d < 0)
+    cell = np.where(on_lower_plane & (cell > 0), cell - 1, cell)
+    previous = np.zeros(len(live), bool)  # whether the voxel before t_cur is occupied
+    safe_d = np.where(d != 0, d, 1.0)
+    rows = live
+    while len(rows):
+        # Next plane crossing per axis, and the first of them (capped by the segment's end).
+        t_axis = np.where(d != 0, (grid.plane(cell + (step > 0)) - o) / safe_d, np.inf)
+        t_next = np.minimum(t_axis.min(1), t_end)
+        entered = t_next > t_cur  # a voxel entered for a positive length, not just touched
+        inside_now = np.all((cell >= 0) & (cell < r), axis=1)
+        occupied = np.zeros(len(rows), bool)
+        occupied[inside_now] = grid.occupied[tuple(cell[inside_now].T)]
+        occupied &= entered & inside_now
+        record = entered & (previous | occupied)
+        _record(out, rows, record, o, d, t_cur)
+        previous = np.where(entered, occupied, previous)
+        t_cur = np.where(entered, t_next, t_cur)
+        cell = cell + step * (t_axis <= t_next[:, None])
+        finished = (t_cur >= t_end) | ~np.all((cell >= 0) & (cell < r), axis=1)
+        full = out.count[rows] >= max_points
+        _record(out, rows, finished & previous & ~full, o, d, t_cur)
+        out.truncated[rows[full & ~(finished & ~previous)]] = True
+        keep = ~finished & ~full
+        rows, o, d, t_cur, t_end = rows[keep], o[keep], d[keep], t_cur[keep], t_end[keep]
+        step, cell, previous, safe_d = step[keep], cell[keep], previous[keep], safe_d[keep]
+    return out
+
+
+def _record(out: BoundaryPoints, rows, mask, o, d, t) -> None:
+    """Append the point at t to each masked ray that still has room."""
+    sel = np.flatnonzero(mask)
+    if len(sel) == 0:
+        return
+    target = rows[sel]
+    slot = out.count[target]
+    room = slot < out.points.shape[1]
+    sel, target, slot = sel[room], target[room], slot[room]
+    out.points[target, slot] = o[sel] + t[sel, None] * d[sel]
+    out.t[target, slot] = t[sel]
+    out.count[target] += 1
