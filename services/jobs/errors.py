@@ -8,6 +8,7 @@ class JobServiceError(Exception):
 
     status = 400
     title = "Bad request"
+    headers: dict[str, str] | None = None
 
     def __init__(self, detail: str, field: str | None = None):
         self.detail, self.field = detail, field

@@ -13,6 +13,7 @@ from typing import Any
 
 from services.artifacts.assets import AssetNotFound, load_asset, materialize
 from services.artifacts.store import BlobStore
+from services.artifacts.validation import file_references
 from services.jobs.errors import InvalidInput
 from services.jobs.identity import scene_hash
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
@@ -46,6 +47,10 @@ class SceneResolver:
         try:
             if isinstance(scene, dict):
                 spec = scene_from_dict(scene)
+                for field, path in file_references(spec.model_dump(mode="json", exclude_none=True)):
+                    raise SceneError(
+                        field, f"an inline scene cannot name files ({path!r}): upload it as an asset"
+                    )
                 return ResolvedScene(spec, {"source": "inline", "name": spec.name}, self._hash(spec, {}))
             if scene.startswith(ASSET_PREFIX):
                 return self._asset(scene)

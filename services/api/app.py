@@ -1,0 +1,47 @@
+"""The FastAPI application factory: routes, problem+json errors, body limits, and the services'
+lifecycle (migrations, tokens and the scheduler start with the app and stop with it).
+"""
+
+from __future__ import annotations
+
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from services.api import problems
+from services.api.limits import MULTIPART_OVERHEAD, BodyLimit
+from services.api.routes import artifacts, assets, health, jobs
+from services.api.services import Services
+from services.api.settings import ServiceSettings
+
+
+def create_app(settings: ServiceSettings) -> FastAPI:
+    services = Services.build(settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        services.start()
+        try:
+            yield
+        finally:
+            services.stop()
+
+    app = FastAPI(
+        title="neuralbake",
+        version="1",
+        summary="Train neural rendering representations of 3D scenes on Ray.",
+        description="Upload a scene, submit a job (`render`, later neural kinds), follow its events, "
+        "download its artifact. Errors are `application/problem+json`.",
+        lifespan=lifespan,
+    )
+    app.state.services = services
+    problems.install(app)
+    app.add_middleware(
+        BodyLimit,
+        json_bytes=settings.max_json_bytes,
+        upload_bytes=settings.upload_limits.max_total_bytes + MULTIPART_OVERHEAD,
+        upload_paths=("/v1/assets",),
+    )
+    for module in (jobs, assets, artifacts, health):
+        app.include_router(module.router)
+    return app

@@ -1,0 +1,128 @@
+"""Every error answer is `application/problem+json` (RFC 9457) with a `detail` a person can act on and,
+for bad input, the `field` at fault. Bad input is always a 4xx; only a real bug is a 500.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from services.artifacts.artifacts import ArtifactNotFound, FileNotFoundInArtifact
+from services.artifacts.assets import AssetNotFound
+from services.artifacts.staging import UploadError
+from services.jobs.errors import JobServiceError
+from services.jobs.states import InvalidTransition
+from workers.scene.errors import SceneError
+from workers.scene.io import dotted_path
+
+PROBLEM_JSON = "application/problem+json"
+log = logging.getLogger(__name__)
+
+
+class Problem(BaseModel):
+    type: str = "about:blank"
+    title: str
+    status: int
+    detail: str
+    instance: str | None = None
+    field: str | None = None
+
+
+def problem(
+    request: Request, status: int, title: str, detail: str, field: str | None = None, headers=None
+) -> JSONResponse:
+    body = Problem(title=title, status=status, detail=detail, instance=request.url.path, field=field)
+    return JSONResponse(
+        body.model_dump(exclude_none=True), status_code=status, media_type=PROBLEM_JSON, headers=headers
+    )
+
+
+PROBLEM_RESPONSES = {
+    status: {"model": Problem, "content": {PROBLEM_JSON: {}}, "description": text}
+    for status, text in {
+        400: "Malformed request",
+        401: "Missing or unknown bearer token",
+        403: "The token lacks the scope",
+        404: "Not found",
+        409: "Conflict",
+        413: "Request body too large",
+        422: "Invalid input (the `field` names it)",
+    }.items()
+}
+
+
+def install(app: FastAPI) -> None:
+    """Register the handlers that turn every error into a problem document."""
+
+    @app.exception_handler(JobServiceError)
+    async def _service_error(request: Request, error: JobServiceError):
+        return problem(request, error.status, error.title, error.detail, error.field, error.headers)
+
+    @app.exception_handler(InvalidTransition)
+    async def _transition(request: Request, error: InvalidTransition):
+        return problem(request, 409, "Conflict", str(error))
+
+    @app.exception_handler(UploadError)
+    async def _upload(request: Request, error: UploadError):
+        title = "Upload too large" if error.status == 413 else "Unusable upload"
+        return problem(request, error.status, title, error.problem, error.field)
+
+    @app.exception_handler(SceneError)
+    async def _scene(request: Request, error: SceneError):
+        return problem(request, 422, "Invalid scene", error.problem, error.field)
+
+    @app.exception_handler(AssetNotFound)
+    @app.exception_handler(ArtifactNotFound)
+    @app.exception_handler(FileNotFoundInArtifact)
+    async def _not_found(request: Request, error: LookupError):
+        return problem(request, 404, "Not found", str(error))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(request: Request, error: RequestValidationError):
+        return validation_problem(request, error)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, error: StarletteHTTPException):
+        title = {404: "Not found", 405: "Method not allowed", 413: "Request body too large"}
+        return problem(
+            request,
+            error.status_code,
+            title.get(error.status_code, "Error"),
+            str(error.detail),
+            None,
+            headers=getattr(error, "headers", None),
+        )
+
+    @app.exception_handler(Exception)
+    async def _bug(request: Request, error: Exception):
+        log.exception("unhandled error on %s %s", request.method, request.url.path)
+        return problem(request, 500, "Internal server error", f"{type(error).__name__}: the server failed")
+
+
+def validation_problem(request: Request, error: RequestValidationError) -> JSONResponse:
+    """400 for unparsable JSON (with where it broke); 422 naming the first invalid field otherwise."""
+    errors = error.errors()
+    first = errors[0] if errors else {"loc": ("body",), "msg": "invalid request", "type": ""}
+    if first.get("type") == "json_invalid":
+        where = first.get("ctx", {}).get("error", "")
+        return problem(request, 400, "Malformed JSON", f"the body is not valid JSON: {where}".rstrip(": "))
+    location, *path = first["loc"] or ("body",)
+    body = _body(error)
+    field = (
+        dotted_path(tuple(path), body) if location == "body" else ".".join(str(p) for p in first["loc"][1:])
+    )
+    field = field or str(location)
+    return problem(request, 422, "Invalid input", f"{field}: {first['msg']}", field)
+
+
+def _body(error: RequestValidationError):
+    try:
+        return json.loads(error.body) if isinstance(error.body, bytes | str) else error.body
+    except ValueError:
+        return None

@@ -1,0 +1,41 @@
+"""`/v1/artifacts`: an artifact's manifest and its files (ETag, Range, Content-Length)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Depends, Request
+from fastapi.responses import Response
+
+from services.api.auth import require
+from services.api.deps import ServicesDep, known_digest
+from services.api.files import blob_response
+from services.api.problems import PROBLEM_RESPONSES
+from services.artifacts.artifacts import ArtifactNotFound
+from services.artifacts.manifest import Manifest
+
+router = APIRouter(
+    prefix="/v1/artifacts",
+    tags=["artifacts"],
+    dependencies=[Depends(require("read"))],
+    responses={s: PROBLEM_RESPONSES[s] for s in (401, 403, 404)},
+)
+
+
+@router.get("/{artifact_id}", response_model=Manifest)
+def get_manifest(artifact_id: str, svc: ServicesDep) -> Manifest:
+    """The OCI-style manifest: files (media types, digests, sizes); kind, job, scene, config, metrics."""
+    return svc.artifacts.manifest(known_digest(artifact_id, ArtifactNotFound))
+
+
+@router.get(
+    "/{artifact_id}/files/{name:path}",
+    response_class=Response,
+    responses={
+        200: {"description": "The file", "content": {"application/octet-stream": {}}},
+        206: {"description": "The requested byte range"},
+        304: {"description": "Not modified (If-None-Match)"},
+        416: {"description": "Range not satisfiable"},
+    },
+)
+def get_file(artifact_id: str, name: str, request: Request, svc: ServicesDep) -> Response:
+    entry = svc.artifacts.file(known_digest(artifact_id, ArtifactNotFound), name)
+    return blob_response(request, svc.blobs, entry)

@@ -1,0 +1,42 @@
+"""Open endpoints for orchestrators and scrapers: liveness, readiness, Prometheus metrics."""
+
+from __future__ import annotations
+
+import ray
+from fastapi import APIRouter
+from fastapi.responses import JSONResponse, Response
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+
+from services.api.deps import ServicesDep
+
+router = APIRouter(tags=["health"])
+PROBE = "sha256:" + "0" * 64
+
+
+@router.get("/healthz")
+def healthz() -> dict[str, str]:
+    """The process answers."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", responses={503: {"description": "A dependency is unreachable"}})
+def readyz(svc: ServicesDep) -> JSONResponse:
+    """The database, the artifact store and Ray are all reachable."""
+    checks = {"database": svc.db.ping, "store": lambda: svc.blobs.exists(PROBE), "ray": ray.cluster_resources}
+    results = {}
+    for name, check in checks.items():
+        try:
+            check()
+            results[name] = "ok"
+        except Exception as error:  # any failure means not ready; say which and why
+            results[name] = f"{type(error).__name__}: {error}"
+    ready = all(value == "ok" for value in results.values())
+    return JSONResponse(
+        {"status": "ok" if ready else "unavailable", "checks": results}, 200 if ready else 503
+    )
+
+
+@router.get("/metrics", response_class=Response)
+def metrics(svc: ServicesDep) -> Response:
+    """Jobs by state, queue wait, job duration and samples/s, in the Prometheus text format."""
+    return Response(generate_latest(svc.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -1,0 +1,120 @@
+"""`/v1/jobs`: submit, list, read, cancel, and follow a job's events."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi.responses import StreamingResponse
+
+from services.api.auth import require
+from services.api.deps import ServicesDep
+from services.api.problems import PROBLEM_RESPONSES
+from services.api.schemas import EventView, JobList, JobView
+from services.api.sse import event_stream
+from services.jobs.states import JobState
+from services.jobs.submission import JobRequest
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses={401: PROBLEM_RESPONSES[401]})
+
+
+@router.post(
+    "",
+    status_code=201,
+    response_model=JobView,
+    dependencies=[Depends(require("submit"))],
+    responses={200: {"model": JobView, "description": "An identical job already exists: that job"}}
+    | {s: PROBLEM_RESPONSES[s] for s in (400, 403, 409, 413, 422)},
+)
+def submit_job(
+    body: JobRequest,
+    response: Response,
+    svc: ServicesDep,
+    idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
+) -> JobView:
+    """Queue a job (201), or return the existing identical one (200) unless `force` is set."""
+    job, created = svc.submitter.submit(body, idempotency_key)
+    svc.metrics.submissions.labels(str(created).lower()).inc()
+    if created:
+        svc.scheduler.wake()
+    else:
+        response.status_code = 200
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
+    return JobView.of(job)
+
+
+@router.get(
+    "",
+    response_model=JobList,
+    dependencies=[Depends(require("read"))],
+    responses={s: PROBLEM_RESPONSES[s] for s in (403, 422)},
+)
+def list_jobs(
+    svc: ServicesDep,
+    state: Annotated[list[JobState] | None, Query(description="Repeat to match any of several.")] = None,
+    kind: Annotated[str | None, Query(max_length=64)] = None,
+    cursor: Annotated[
+        str | None, Query(max_length=64, description="`next_cursor` of the previous page.")
+    ] = None,
+    limit: Annotated[int, Query(ge=1, le=200)] = 50,
+) -> JobList:
+    """Jobs, newest first."""
+    jobs, next_cursor = svc.jobs.list([s.value for s in state or []], kind, cursor, limit)
+    return JobList(items=[JobView.of(job) for job in jobs], next_cursor=next_cursor)
+
+
+@router.get(
+    "/{job_id}",
+    response_model=JobView,
+    dependencies=[Depends(require("read"))],
+    responses={s: PROBLEM_RESPONSES[s] for s in (403, 404)},
+)
+def get_job(job_id: str, svc: ServicesDep) -> JobView:
+    return JobView.of(svc.jobs.get(job_id))
+
+
+@router.post(
+    "/{job_id}:cancel",
+    response_model=JobView,
+    status_code=202,
+    dependencies=[Depends(require("submit"))],
+    responses={200: {"model": JobView, "description": "A queued job: cancelled at once"}}
+    | {s: PROBLEM_RESPONSES[s] for s in (403, 404, 409)},
+)
+def cancel_job(job_id: str, response: Response, svc: ServicesDep) -> JobView:
+    """A queued job is cancelled at once (200); a running one stops within seconds (202)."""
+    job = svc.jobs.request_cancel(job_id)
+    if job.state == JobState.CANCELLED:
+        response.status_code = 200
+    svc.scheduler.wake()
+    return JobView.of(job)
+
+
+@router.get(
+    "/{job_id}/events",
+    dependencies=[Depends(require("read"))],
+    response_class=StreamingResponse,
+    responses={
+        200: {
+            "description": "Server-Sent Events: `id` is the event's `seq`, `event` its `type`, `data` an "
+            "EventView as JSON. The stream ends after the final state.",
+            "content": {"text/event-stream": {"schema": EventView.model_json_schema()}},
+        },
+    }
+    | {s: PROBLEM_RESPONSES[s] for s in (403, 404, 422)},
+)
+def job_events(
+    job_id: str,
+    request: Request,
+    svc: ServicesDep,
+    last_event_id: Annotated[int | None, Header(ge=0, le=2**31 - 1)] = None,
+    after: Annotated[int | None, Query(ge=0, le=2**31 - 1, description="Like Last-Event-ID.")] = None,
+) -> StreamingResponse:
+    """State changes, progress (step, loss, samples/s, ETA) and log lines; resumable with Last-Event-ID."""
+    svc.jobs.get(job_id)  # 404 before the stream starts
+    start = max(last_event_id or 0, after or 0)
+    return StreamingResponse(
+        event_stream(request, svc.jobs, job_id, start),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )

@@ -1,0 +1,69 @@
+"""The objects one server instance is made of, built from its settings and shared by every route."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import ray
+
+from services.api.auth import configured_tokens, generated_admin_token, store_tokens
+from services.api.settings import ServiceSettings
+from services.artifacts.artifacts import ArtifactStore
+from services.artifacts.store import BlobStore
+from services.jobs.db import Database
+from services.jobs.metrics import ServiceMetrics
+from services.jobs.repository import JobRepository
+from services.jobs.scenes import SceneResolver
+from services.jobs.scheduler import Scheduler, SchedulerSettings
+from services.jobs.submission import Submitter
+
+
+@dataclass
+class Services:
+    settings: ServiceSettings
+    db: Database
+    jobs: JobRepository
+    blobs: BlobStore
+    artifacts: ArtifactStore
+    scenes: SceneResolver
+    submitter: Submitter
+    metrics: ServiceMetrics
+    scheduler: Scheduler
+    admin_token_file: Path | None = None
+
+    @classmethod
+    def build(cls, settings: ServiceSettings) -> Services:
+        data_dir = settings.data_dir
+        data_dir.mkdir(parents=True, exist_ok=True)
+        db = Database(settings.db_url, settings.database_schema)
+        jobs = JobRepository(db)
+        blobs = BlobStore(settings.store)
+        artifacts = ArtifactStore(blobs, settings.store, checkpoint_root=data_dir / "checkpoints")
+        scenes = SceneResolver(blobs, settings.store, data_dir / "scenes")
+        metrics = ServiceMetrics(jobs.count_by_state)
+        scheduler_settings = SchedulerSettings(
+            owner=settings.owner,
+            work_dir=data_dir / "work",
+            max_running=settings.max_running,
+            lease_s=settings.lease_s,
+        )
+        scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
+        submitter = Submitter(jobs, scenes, settings.max_attempts)
+        return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler)
+
+    def start(self) -> None:
+        """Migrate the database, install the tokens, start scheduling (Ray must be initialised)."""
+        if not ray.is_initialized():
+            raise RuntimeError("ray.init() first: the scheduler runs jobs on Ray")
+        self.db.migrate()
+        tokens = configured_tokens(self.settings.tokens, self.settings.tokens_file)
+        if not tokens:
+            token, self.admin_token_file = generated_admin_token(self.settings.data_dir)
+            tokens = {token: "admin"}
+        store_tokens(self.db, tokens)
+        self.scheduler.start()
+
+    def stop(self) -> None:
+        self.scheduler.stop()
+        self.db.dispose()

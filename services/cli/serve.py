@@ -1,0 +1,91 @@
+"""`nbake serve`: the embedded default in one process tree (FastAPI under uvicorn, a local Ray cluster,
+a SQLite job database and a local artifact directory), or parts of a scale-out via `NBAKE_*` and
+`RAY_ADDRESS`.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Annotated
+
+import ray
+import typer
+import uvicorn
+
+from services.api.app import create_app
+from services.api.auth import configured_tokens, generated_admin_token
+from services.api.settings import ServiceSettings
+from services.cli.errors import fail
+from services.cli.main import app
+
+RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+@app.command("serve")
+def serve_command(
+    host: Annotated[
+        str, typer.Option(help="Address to listen on; a non-loopback one needs tokens.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port.")] = 8080,
+    data_dir: Annotated[
+        Path, typer.Option(help="Job database, artifact store, checkpoints, tokens.", envvar="NBAKE_DATA_DIR")
+    ] = Path("nbake-data"),
+    max_running: Annotated[
+        int | None, typer.Option(min=1, help="Jobs running at once (NBAKE_MAX_RUNNING).")
+    ] = None,
+    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+) -> None:
+    """Serve the REST API (OpenAPI at /docs) and run submitted jobs on Ray.
+
+    Tokens: NBAKE_TOKENS=token:scope,... or NBAKE_TOKENS_FILE (scopes read, submit, admin). With none,
+    an admin token is generated into DATA_DIR/admin-token. Database: NBAKE_DATABASE_URL (default SQLite
+    in DATA_DIR); store: NBAKE_STORE_URL (default DATA_DIR/store).
+    """
+    try:
+        settings = ServiceSettings.from_env(data_dir, max_running=max_running)
+        tokens = configured_tokens(settings.tokens, settings.tokens_file)
+    except (ValueError, OSError) as error:
+        fail("tokens", str(error))
+    if not tokens and not is_loopback(host):
+        fail("--host", f"{host} is not a loopback address: configure NBAKE_TOKENS or NBAKE_TOKENS_FILE first")
+    data_dir.mkdir(parents=True, exist_ok=True)
+    if not tokens:
+        _, path = generated_admin_token(data_dir)
+        typer.echo(f"admin token: {path}", err=True)
+    ray_temp = _start_ray(data_dir)
+    try:
+        uvicorn.run(
+            create_app(settings), host=host, port=port, log_level=log_level, timeout_graceful_shutdown=5
+        )
+    finally:
+        ray.shutdown()
+        if ray_temp is not None:
+            shutil.rmtree(ray_temp, ignore_errors=True)
+
+
+def _start_ray(data_dir: Path) -> Path | None:
+    """Join `RAY_ADDRESS`, or start a local cluster with its session files under the data dir (or, if that
+    path is too long for Ray's sockets, a private /tmp folder: returned, to be removed on exit).
+    """
+    if os.environ.get("RAY_ADDRESS"):
+        ray.init(address=os.environ["RAY_ADDRESS"], log_to_driver=False)
+        return None
+    temp_dir = (data_dir / "ray").resolve()
+    private = len(str(temp_dir)) > RAY_TEMP_DIR_MAX
+    if private:
+        temp_dir = Path(tempfile.mkdtemp(prefix="nbake-ray-", dir="/tmp"))
+    ray.init(address="local", include_dashboard=False, _temp_dir=str(temp_dir), log_to_driver=False)
+    return temp_dir if private else None
