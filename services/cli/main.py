@@ -26,3 +26,6 @@ def scenes_command() -> None:
     for name in sorted(BUILTIN_SCENES):
         doc = (BUILTIN_SCENES[name].__doc__ or "").strip().splitlines()
         print(f"{name:<{width}}  {doc[0] if doc else ''}".rstrip())
+
+
+import services.cli.serve  # noqa: E402, F401  (registers `nbake serve`)
