@@ -14,6 +14,7 @@ import ray
 import torch
 from ray.exceptions import ObjectLostError, RayActorError
 
+from workers.runtime.resources import ResourceRequest, actor_options
 from workers.runtime.sources import Batch, SourceSpec
 
 SAMPLER_FAILURES = (RayActorError, ObjectLostError)
@@ -30,6 +31,10 @@ class BatchStream(Protocol):
     def __next__(self) -> Batch: ...
 
     def close(self) -> None: ...
+
+    def __enter__(self) -> BatchStream: ...
+
+    def __exit__(self, *exc: object) -> None: ...
 
 
 class InProcessBatches:
@@ -174,8 +179,14 @@ class SamplerPool:
         self.close()
 
 
-def open_batches(spec: SourceSpec, samplers: int, max_in_flight: int | None = None) -> BatchStream:
+def open_batches(
+    spec: SourceSpec,
+    samplers: int,
+    max_in_flight: int | None = None,
+    resources: ResourceRequest | None = None,
+) -> BatchStream:
     """A Ray pool of `samplers` actors, or the in-process stream when `samplers` is 0."""
     if samplers == 0:
         return InProcessBatches(spec)
-    return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight)
+    options = actor_options(resources or ResourceRequest())
+    return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight, actor_options=options)
