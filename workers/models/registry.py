@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 import threading
 from collections.abc import Callable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -63,12 +64,23 @@ class InfrastructureFailure(RuntimeError):
     """Raised by a kind when the cluster, not the job, failed (workers keep dying): a retry may succeed."""
 
 
+@dataclass(frozen=True)
+class SamplerSlots:
+    """Sampler actors a kind may start (its request, capped to the cluster) and the Ray options that place
+    each one in the job's reservation."""
+
+    count: int
+    actor_options: dict[str, Any]
+
+
 @dataclass
 class JobContext:
     """Everything a kind's `run` gets from the driver: inputs, where to write, and how to talk back.
 
     A render reports samples per pixel as steps; a training kind reports optimizer steps and its loss.
     `checkpoints` is the job's own store: a kind resumes from `checkpoints.latest()` when there is one.
+    Sampler actors are started inside `with ctx.reserve_samplers(n) as slots:`, which waits until the
+    cluster fits them all at once.
     """
 
     job_id: str
@@ -78,7 +90,7 @@ class JobContext:
     seed: int
     output_dir: Path
     checkpoints: CheckpointStore
-    sampler_options: dict[str, Any]  # Ray `.options(...)` for sampler actors
+    reserve_samplers: Callable[[int], AbstractContextManager[SamplerSlots]] = field(repr=False)
     on_progress: Callable[..., None] = field(repr=False)
     on_log: Callable[[str], None] = field(repr=False)
     cancel_requested: threading.Event = field(default_factory=threading.Event, repr=False)

@@ -32,6 +32,7 @@ from ray.exceptions import (
 
 from workers.models.registry import InfrastructureFailure, JobCancelled, JobContext, get_kind
 from workers.runtime.checkpoints import CheckpointStore
+from workers.runtime.job_placement import remove_reservation, sampler_reserver
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.scene.errors import SceneError
 from workers.scene.io import scene_from_dict
@@ -40,6 +41,7 @@ NAMESPACE = "neuralbake"
 MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory
 CALL_TIMEOUT_S = 1.0
 NAME_RELEASE_TIMEOUT_S = 30.0
+CANCEL_GRACE_S = 5.0  # how long a kind may take to notice a cancel before it is abandoned
 INFRASTRUCTURE_ERRORS = (
     InfrastructureFailure,
     RayActorError,
@@ -103,6 +105,10 @@ def one_line(error: BaseException) -> str:
 
 def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.Event) -> JobOutcome:
     """Run the spec's kind to its outcome; every failure becomes an outcome, none escapes."""
+
+    def log(message: str) -> None:
+        emit(JobEvent(type="log", time=time.time(), message=message))
+
     try:
         kind = get_kind(spec.kind)
         ctx = JobContext(
@@ -113,9 +119,9 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
             seed=spec.seed,
             output_dir=Path(spec.output_dir),
             checkpoints=CheckpointStore(spec.checkpoint_dir, keep=2),
-            sampler_options=actor_options(ResourceRequest(cpus=SAMPLER_CPUS)),
+            reserve_samplers=sampler_reserver(spec.job_id, SAMPLER_CPUS, cancel, log),
             on_progress=lambda **fields: emit(JobEvent(type="progress", time=time.time(), **fields)),
-            on_log=lambda message: emit(JobEvent(type="log", time=time.time(), message=message)),
+            on_log=log,
             cancel_requested=cancel,
         )
         output = kind.run(ctx)
@@ -151,8 +157,20 @@ class JobDriver:
         with self.lock:
             self.events.append(event)
 
+    def _finish(self, outcome: JobOutcome) -> None:
+        with self.lock:
+            if self.result is None:  # the first outcome stands: a late one from an abandoned run is dropped
+                self.result = outcome
+
     def _run(self) -> None:
-        self.result = run_job(self.spec, self._emit, self.cancel_requested)
+        self._finish(run_job(self.spec, self._emit, self.cancel_requested))
+
+    def _cancel_overdue(self) -> None:
+        """A kind stuck inside one item (say, waiting for samplers the cluster cannot place) is abandoned:
+        the job reports cancelled now, and releasing the driver ends it and its sampler actors with it."""
+        if self.thread.is_alive():
+            self._emit(JobEvent(type="log", time=time.time(), message="cancel: the job did not stop in time"))
+            self._finish(JobOutcome(state="cancelled"))
 
     def poll(self, max_events: int) -> list[dict]:
         with self.lock:
@@ -163,7 +181,11 @@ class JobDriver:
         return None if self.result is None else self.result.model_dump(mode="json")
 
     def cancel(self) -> None:
-        self.cancel_requested.set()
+        if not self.cancel_requested.is_set():
+            self.cancel_requested.set()
+            timer = threading.Timer(CANCEL_GRACE_S, self._cancel_overdue)
+            timer.daemon = True
+            timer.start()
 
     def ping(self) -> bool:
         return True
@@ -174,7 +196,11 @@ def actor_name(job_id: str) -> str:
 
 
 class JobHandle:
-    """The service's view of one driver. Keep the handle `start_job` returned: dropping it ends the driver."""
+    """The service's view of one driver.
+
+    Keep the handle `start_job` returned while the job runs (dropping it ends the driver), and call
+    `release` once the outcome is stored: that ends the driver's process and any actor it still owns.
+    """
 
     def __init__(self, job_id: str, actor: ray.actor.ActorHandle) -> None:
         self.job_id = job_id
@@ -219,8 +245,9 @@ class JobHandle:
             return False
 
     def release(self) -> None:
-        """End the driver process (after its outcome was read, or to abandon the job at once)."""
+        """End the driver process and free its samplers' reservation (after its outcome was stored)."""
         ray.kill(self.actor, no_restart=True)
+        remove_reservation(self.job_id)
 
 
 def start_job(spec: JobSpec) -> JobHandle:

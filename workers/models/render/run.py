@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import time
 
-from workers.models.registry import InfrastructureFailure, JobContext, RunOutput
+from workers.models.registry import InfrastructureFailure, JobContext, RunOutput, SamplerSlots
 from workers.models.render import checkpoint
 from workers.models.render.config import RenderConfig
 from workers.models.render.outputs import write_outputs
 from workers.models.render.source import TileSource, TileSourceConfig, from_batch
 from workers.render.camera import PinholeCamera
-from workers.render.render import ImageAccumulator, TileResult, plan_render
+from workers.render.render import ImageAccumulator, RenderPlan, RenderSettings, TileResult, plan_render
 from workers.runtime.samplers import BatchStream, InProcessBatches, SamplerPool
 from workers.runtime.sources import SourceSpec
 from workers.scene.compile import compile_scene
@@ -26,48 +26,24 @@ def run(ctx: JobContext) -> RunOutput:
     compile_scene(ctx.scene, ctx.scene_dir)  # scene errors surface here, in one clear line, not in actors
     plan = plan_render(PinholeCamera(ctx.scene.camera, settings.width, settings.height), settings)
     accum = ImageAccumulator(plan, settings.aovs)
-    resumed = checkpoint.restore(ctx.checkpoints, settings, accum)
-    passes_done = resumed.passes_done if resumed else 0
-    seconds_before = resumed.seconds if resumed else 0.0
-    if resumed:
-        ctx.log(f"resuming from the checkpoint after pass {passes_done} of {len(plan.passes)}")
-    ctx.log(
-        f"rendering {plan.width}x{plan.height} at {settings.spp} spp: {len(plan.passes)} passes of "
-        f"{len(plan.tiles)} tiles on {config.samplers or 'no'} sampler actor(s)"
-    )
-    scene_dir = None if ctx.scene_dir is None else str(ctx.scene_dir)
-    source = TileSourceConfig(scene=ctx.scene.model_dump(mode="json"), scene_dir=scene_dir, settings=settings)
-    spec = SourceSpec(TileSource, source, ctx.seed)
-    start = last_checkpoint = time.perf_counter()
-    pixels = plan.width * plan.height
-    samples_before = sum(plan.passes[:passes_done])
-    with _open_stream(spec, config, ctx, passes_done * len(plan.tiles)) as stream:
-        for pass_index in range(passes_done, len(plan.passes)):
-            for tile in plan.tiles:
-                ctx.raise_if_cancelled()
-                accum.add(tile, _next_item(stream))
-            now = time.perf_counter()
-            samples_done = sum(plan.passes[: pass_index + 1])
-            rate = (samples_done - samples_before) * pixels / max(now - start, 1e-9)
-            last = pass_index == len(plan.passes) - 1
-            if last or now - last_checkpoint >= config.checkpoint_interval_s:
-                state = checkpoint.RenderState(
-                    passes_done=pass_index + 1,
-                    rays_traced=accum.rays_traced,
-                    seconds=seconds_before + now - start,
-                    settings=settings,
-                )
-                checkpoint.save(ctx.checkpoints, state, accum)
-                last_checkpoint = time.perf_counter()
-            ctx.progress(
-                samples_done,
-                settings.spp,
-                samples_per_s=rate,
-                eta_s=(settings.spp - samples_done) * pixels / max(rate, 1e-9),
+    state = checkpoint.restore(ctx.checkpoints, settings, accum)
+    if state is not None:
+        ctx.log(f"resuming from the checkpoint after pass {state.passes_done} of {len(plan.passes)}")
+    resumed_after = state.passes_done if state else None
+    state = state or checkpoint.RenderState(passes_done=0, rays_traced=0, seconds=0.0, settings=settings)
+    samplers = 0
+    if state.passes_done < len(plan.passes):
+        with ctx.reserve_samplers(config.samplers) as slots:
+            samplers = slots.count
+            ctx.log(
+                f"rendering {plan.width}x{plan.height} at {settings.spp} spp: {len(plan.passes)} passes of "
+                f"{len(plan.tiles)} tiles on {samplers or 'no'} sampler actor(s)"
             )
-    seconds = seconds_before + time.perf_counter() - start
-    result = accum.result(settings.spp, seconds)
-    metrics = {"seconds": seconds, "rays_per_second": result.rays_per_second, "spp": float(settings.spp)}
+            with _open_stream(ctx, settings, slots, state.passes_done * len(plan.tiles)) as stream:
+                state = _render_passes(ctx, config, plan, accum, stream, state)
+    result = accum.result(settings.spp, state.seconds)
+    metrics = {"seconds": state.seconds, "rays_per_second": result.rays_per_second}
+    metrics["spp"] = float(settings.spp)
     report = {
         **metrics,
         "width": plan.width,
@@ -75,17 +51,57 @@ def run(ctx: JobContext) -> RunOutput:
         "rays_traced": result.rays_traced,
         "passes": len(plan.passes),
         "tiles": len(plan.tiles),
-        "samplers": config.samplers,
+        "samplers": samplers,
         "seed": ctx.seed,
-        "resumed_after_pass": passes_done if resumed else None,
+        "resumed_after_pass": resumed_after,
     }
     return RunOutput(files=write_outputs(ctx.output_dir, result, report), metrics=metrics)
 
 
-def _open_stream(spec: SourceSpec, config: RenderConfig, ctx: JobContext, start: int) -> BatchStream:
-    if config.samplers == 0:
+def _render_passes(
+    ctx: JobContext,
+    config: RenderConfig,
+    plan: RenderPlan,
+    accum: ImageAccumulator,
+    stream: BatchStream,
+    state: checkpoint.RenderState,
+) -> checkpoint.RenderState:
+    """Add the remaining passes in plan order; progress after each, a checkpoint when one is due."""
+    spp = sum(plan.passes)
+    pixels = plan.width * plan.height
+    run_start = start = last_checkpoint = time.perf_counter()
+    samples_before = sum(plan.passes[: state.passes_done])
+    for pass_index in range(state.passes_done, len(plan.passes)):
+        for tile in plan.tiles:
+            ctx.raise_if_cancelled()
+            accum.add(tile, _next_item(stream))
+        now = time.perf_counter()
+        state = state.model_copy(
+            update={
+                "passes_done": pass_index + 1,
+                "rays_traced": accum.rays_traced,
+                "seconds": state.seconds + now - start,
+            }
+        )
+        start = now
+        if state.passes_done == len(plan.passes) or now - last_checkpoint >= config.checkpoint_interval_s:
+            checkpoint.save(ctx.checkpoints, state, accum)
+            last_checkpoint = time.perf_counter()
+        samples_done = sum(plan.passes[: state.passes_done])
+        rate = (samples_done - samples_before) * pixels / max(now - run_start, 1e-9)
+        eta = (spp - samples_done) * pixels / max(rate, 1e-9)
+        ctx.progress(samples_done, spp, samples_per_s=rate, eta_s=eta)
+    return state
+
+
+def _open_stream(ctx: JobContext, settings: RenderSettings, slots: SamplerSlots, start: int) -> BatchStream:
+    """Items from `start` on, rendered by the reserved sampler actors, or in the driver without any."""
+    scene_dir = None if ctx.scene_dir is None else str(ctx.scene_dir)
+    source = TileSourceConfig(scene=ctx.scene.model_dump(mode="json"), scene_dir=scene_dir, settings=settings)
+    spec = SourceSpec(TileSource, source, ctx.seed)
+    if slots.count == 0:
         return InProcessBatches(spec, start=start)
-    return SamplerPool(spec, actors=config.samplers, actor_options=ctx.sampler_options, start=start)
+    return SamplerPool(spec, actors=slots.count, actor_options=slots.actor_options, start=start)
 
 
 def _next_item(stream: BatchStream) -> TileResult:
