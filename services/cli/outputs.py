@@ -16,8 +16,6 @@ from services.cli.errors import fail
 from workers.render.image_io import write_exr, write_png
 from workers.render.render import AOV_NAMES, RenderResult
 
-SCALAR_AOVS = frozenset({"roughness", "depth"})
-
 
 @dataclass(frozen=True)
 class RenderOutputs:
@@ -65,9 +63,9 @@ class RenderOutputs:
             write_exr(self.image, result.image)
             if self.preview:
                 write_png(self.preview, result.image, exposure=exposure)
+            layers = result.aov_images()
             for name, path in self.aovs.items():
-                buffer = result.aovs[name]
-                write_exr(path, buffer[..., 0] if name in SCALAR_AOVS else buffer)
+                write_exr(path, layers[name])
         except (OSError, RuntimeError) as error:  # OpenEXR reports I/O failures as RuntimeError
             fail("--output", f"cannot write the output: {error}")
 

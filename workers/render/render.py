@@ -28,6 +28,7 @@ from workers.scene.compile import CompiledScene
 
 MAX_PATHS_PER_ITEM = 1 << 16
 AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission")
+SCALAR_AOVS = frozenset({"roughness", "depth"})  # stored three times in `aovs`, written as one channel
 
 
 class RenderSettings(BaseModel):
@@ -67,6 +68,10 @@ class RenderResult:
     @property
     def rays_per_second(self) -> float:
         return self.rays_traced / max(self.seconds, 1e-12)
+
+    def aov_images(self) -> dict[str, np.ndarray]:
+        """G-buffers as written to files: RGB, or (H, W) for the scalar ones."""
+        return {name: value[..., 0] if name in SCALAR_AOVS else value for name, value in self.aovs.items()}
 
 
 @dataclass(frozen=True)

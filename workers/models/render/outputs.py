@@ -18,7 +18,6 @@ from workers.render.render import RenderResult
 EXR = "image/x-exr"
 PNG = "image/png"
 JSON = "application/json"
-SCALAR_AOVS = frozenset({"roughness", "depth"})
 
 
 def _atomic(path: Path, write: Callable[[Path], None]) -> str:
@@ -35,8 +34,7 @@ def write_outputs(folder: Path, result: RenderResult, report: dict) -> dict[str,
         "image.exr": (_atomic(folder / "image.exr", lambda p: write_exr(p, result.image)), EXR),
         "preview.png": (_atomic(folder / "preview.png", lambda p: write_png(p, result.image)), PNG),
     }
-    for name, buffer in result.aovs.items():
-        layer = buffer[..., 0] if name in SCALAR_AOVS else buffer
+    for name, layer in result.aov_images().items():
         file = f"image.{name}.exr"
         files[file] = (_atomic(folder / file, lambda p, layer=layer: write_exr(p, layer)), EXR)
     text = json.dumps(report, indent=2)
