@@ -10,6 +10,7 @@ given rays, `first_hits` for surface records, `occluded` for visibility.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -31,6 +32,14 @@ from workers.render.sampling import (
 from workers.scene.compile import CompiledScene
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
+
+
+class Intersector(Protocol):
+    """What the path tracer asks of geometry: `RayScene` and the neural intersectors answer it."""
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits: ...
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass
@@ -82,9 +91,11 @@ class _Interaction:
 class PathTracer:
     """Everything needed to trace paths in one compiled scene; safe to share between threads."""
 
-    def __init__(self, scene: CompiledScene, robust: bool = True):
+    def __init__(self, scene: CompiledScene, robust: bool = True, intersector: Intersector | None = None):
+        """`intersector` answers closest-hit and occlusion queries in place of an Embree scene over every
+        triangle (e.g. neural objects beside Embree); it must index hits by the scene's triangles."""
         self.scene = scene
-        self.rays = RayScene(scene.positions, robust=robust)
+        self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)
         self.lights = LightSampler(scene)
         self.materials = MaterialTable(scene)
         self._positions = scene.positions.astype(np.float64)
@@ -125,6 +136,10 @@ class PathTracer:
             b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
             uvs = self._uv[prim]
             uv = (1.0 - b1 - b2) * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
+        if hits.neural is not None and hits.neural.any():
+            neural = np.flatnonzero(hits.neural)
+            ng[neural] = hits.normal[neural]  # ng is a fresh gather; ns is ng or a copy of it
+            ns[neural] = hits.normal[neural]
         scale = np.maximum(max3(np.abs(position)), self._coordinate_scale[prim])
         return _Interaction(position, ng, ns, uv, scale)
 
@@ -168,16 +183,16 @@ class PathTracer:
         sel = np.flatnonzero(found)
         if len(sel) == 0:
             return rec
-        sub = Hits(hits.prim[sel], hits.t[sel], hits.u[sel], hits.v[sel])
+        sub = hits.take(sel)
         it = self._interaction(sub, origins[sel], directions[sel], need_uv=True)
         prim = sub.prim
-        mat = self.scene.material_ids[prim]
+        mat = self._material_ids(sub)
         rec.t[sel], rec.position[sel], rec.uv[sel] = sub.t, it.position, it.uv
         rec.geometric_normal[sel], rec.shading_normal[sel], rec.prim[sel] = it.ng, it.ns, prim
         rec.material_id[sel] = mat
         rec.object_id[sel] = self.scene.object_ids[prim]
         rec.instance_id[sel] = self.scene.instance_ids[prim]
-        rec.albedo[sel] = self.materials.surfaces(mat, it.uv).base
+        rec.albedo[sel] = self._surfaces(sub, mat, it.uv).base
         rec.roughness[sel] = self.materials.roughness(mat)
         rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
         return rec
@@ -195,6 +210,18 @@ class PathTracer:
         )
         radiance = self.trace(origins, directions, rng, max_depth).radiance
         return RegionSamples(origins, directions, records, inside, radiance)
+
+    def _material_ids(self, hits: Hits) -> np.ndarray:
+        mat = self.scene.material_ids[hits.prim]
+        if hits.neural is not None:
+            mat = np.where(hits.neural, hits.material, mat)
+        return mat
+
+    def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray):
+        surf = self.materials.surfaces(mat, uv)
+        if hits.neural is not None and hits.neural.any():
+            surf.base[hits.neural] = hits.albedo[hits.neural]
+        return surf
 
     def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
         front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
@@ -242,7 +269,7 @@ class PathTracer:
                 keep = np.flatnonzero(found)
                 idx, o, d, beta = idx[keep], o[keep], d[keep], beta[keep]
                 prev_pdf, prev_delta = prev_pdf[keep], prev_delta[keep]
-                hits = Hits(hits.prim[keep], hits.t[keep], hits.u[keep], hits.v[keep])
+                hits = hits.take(keep)
             if len(idx) == 0:
                 break
             it = self._interaction(hits, o, d, self._needs_uv)
@@ -260,7 +287,7 @@ class PathTracer:
             if segment == max_depth:
                 break
 
-            surf = self.materials.surfaces(self.scene.material_ids[prim], it.uv)
+            surf = self._surfaces(hits, self._material_ids(hits), it.uv)
             ns = it.ns
             flip = (dot(wo, ns) < 0) & (surf.kind != Kind.DIELECTRIC)
             ns = np.where(flip[:, None], -ns, ns)
