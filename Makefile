@@ -6,7 +6,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 
-.PHONY: venv run test test-all bench lint clean
+.PHONY: venv run test test-all bench lint clean proto
 
 venv: $(STAMP)
 
@@ -15,6 +15,7 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q torch==2.13.0
 	$(PIP) install -q -e '.[dev]'
+	$(PIP) install -q -e clients/python
 	touch $(STAMP)
 
 ## The main job on the embedded default.
@@ -35,6 +36,12 @@ bench: venv
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+## Regenerate the gRPC stubs from proto/ into the client package (the server imports them from there).
+PROTO_OUT ?= clients/python
+proto: venv
+	$(PY) -m grpc_tools.protoc -I proto --python_out=$(PROTO_OUT) --pyi_out=$(PROTO_OUT) \
+		--grpc_python_out=$(PROTO_OUT) proto/neuralbake/v1/*.proto
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

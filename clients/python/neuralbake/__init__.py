@@ -1,0 +1,1 @@
+"""Generated protocol buffers of the neuralbake API (`make proto`); the package mirrors proto/neuralbake."""
