@@ -91,11 +91,20 @@ class _Interaction:
 class PathTracer:
     """Everything needed to trace paths in one compiled scene; safe to share between threads."""
 
-    def __init__(self, scene: CompiledScene, robust: bool = True, intersector: Intersector | None = None):
+    def __init__(
+        self,
+        scene: CompiledScene,
+        robust: bool = True,
+        intersector: Intersector | None = None,
+        primary: Intersector | None = None,
+    ):
         """`intersector` answers closest-hit and occlusion queries in place of an Embree scene over every
-        triangle (e.g. neural objects beside Embree); it must index hits by the scene's triangles."""
+        triangle (e.g. neural objects beside Embree); it must index hits by the scene's triangles.
+        `primary` (default: the same) answers the first segment of paths and `first_hits`, as a
+        rasteriser would for camera rays."""
         self.scene = scene
         self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)
+        self.primary = primary if primary is not None else self.rays
         self.lights = LightSampler(scene)
         self.materials = MaterialTable(scene)
         self._positions = scene.positions.astype(np.float64)
@@ -163,7 +172,7 @@ class PathTracer:
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> SurfaceRecords:
         n = len(origins)
-        hits = self.rays.intersect(origins, directions)
+        hits = self.primary.intersect(origins, directions)
         found = hits.found
         rec = SurfaceRecords(
             hit=found,
@@ -252,7 +261,7 @@ class PathTracer:
         for segment in range(1, max_depth + 1):
             if len(idx) == 0:
                 break
-            hits = self.rays.intersect(o, d)
+            hits = (self.primary if segment == 1 else self.rays).intersect(o, d)
             rays_traced += len(idx)
             bounces[idx] = segment
             found = hits.found
