@@ -1,0 +1,62 @@
+"""The `lsnif` kind's config and presets: the paper's sizes (`paper`) and sizes this 2-core CPU trains.
+
+The defaults are the paper's network (Sec. 5.1): V = 32 voxels, H = 18 points, two grid levels 64^3 to
+128^3 with 3 features and a 2^17-entry table, two hidden layers of 128. The presets change the batch and
+the number of steps (and, for `quick`, the sizes), not the method.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from workers.runtime.training import Schedule, TrainConfig
+
+
+class LsnifConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    voxel_resolution: int = Field(32, ge=1, le=256, description="V: voxels per side of an object's box")
+    max_points: int = Field(18, ge=1, le=256, description="H: boundary points per ray fed to the MLP")
+    grid_levels: int = Field(2, ge=1, le=8)
+    grid_base_resolution: int = Field(64, ge=2)
+    grid_per_level_scale: float = Field(2.0, ge=1.0)
+    grid_features: int = Field(3, ge=1, le=16)
+    log2_table_size: int = Field(17, ge=8, le=24, description="M: feature rows per level (folded beyond)")
+    width: int = Field(128, ge=8, le=1024)
+    depth: int = Field(2, ge=1, le=8)
+    batch_size: int = Field(1 << 14, ge=64)
+    train: TrainConfig = TrainConfig(
+        steps=400, schedule=Schedule(lr=0.01), checkpoint_every=100, progress_every=10
+    )
+    min_triangles: int = Field(
+        5000, ge=0, description="objects with fewer triangles stay on Embree (LSNIF pays off on complex ones)"
+    )
+    evaluation_rays: int = Field(1 << 15, ge=256, description="held-out rays per object for the report")
+    preview_size: int = Field(96, ge=8, le=2048, description="side of the report's comparison image")
+    preview_spp: int = Field(16, ge=1, le=65536)
+    num_gpus: float = Field(0, ge=0)
+
+
+PRESETS: dict[str, dict] = {
+    "quick": {
+        "voxel_resolution": 16,
+        "max_points": 12,
+        "grid_base_resolution": 32,
+        "log2_table_size": 14,
+        "width": 64,
+        "batch_size": 2048,
+        "train": {"steps": 60, "schedule": {"lr": 0.01}, "checkpoint_every": 30, "progress_every": 10},
+        "evaluation_rays": 4096,
+        "preview_size": 32,
+        "preview_spp": 4,
+    },
+    "default": {},
+    "paper": {
+        "batch_size": 1 << 18,
+        "train": {"steps": 2000, "schedule": {"lr": 0.01}, "checkpoint_every": 250, "progress_every": 20},
+        "evaluation_rays": 1 << 18,
+        "preview_size": 512,
+        "preview_spp": 256,
+        "num_gpus": 1,
+    },
+}

@@ -1,0 +1,72 @@
+"""LSNIF's input encoder (Sec. 3.2): a sparse grid whose features live only around occupied voxels.
+
+The grids of `workers.nn` place lattice vertices at x * (N - 1) + 0.5, so voxel faces do not fall on
+lattice planes: a point on a face reads the corners of the lattice cell around it, and a ray that starts
+on the surface starts inside an occupied voxel. The stored vertices are therefore those of every lattice
+cell touching an occupied (closed) voxel: every point the encoder is asked about reads stored corners,
+and empty space stores nothing. The vertex set is a pure function of the voxels, so an artifact stores
+the voxels and the feature table, never the keys.
+
+Levels with more vertices than the table size M fold their rows modulo M (shared rows, as a hash table
+of size M shares them), which bounds memory at the paper's M = 2^17 per level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from workers.nn.encodings.grid import GridGeometry
+from workers.nn.encodings.hashgrid import INIT_RANGE
+from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
+
+
+def occupied_vertices(occupied: np.ndarray, geometry: GridGeometry) -> list[Tensor]:
+    """Per level, the lattice vertices [M_l, 3] of cells touching occupied voxels of [0, 1]^3."""
+    resolution = occupied.shape[0]
+    voxels = np.argwhere(occupied)
+    if len(voxels) == 0:  # an empty object still needs a (tiny) table to be a valid module
+        voxels = np.zeros((1, 3), np.int64)
+    levels = []
+    for level in range(geometry.n_levels):
+        scale = geometry.scale(level)
+        first = np.floor(voxels / resolution * scale + 0.5).astype(np.int64)
+        last = np.floor((voxels + 1) / resolution * scale + 0.5).astype(np.int64) + 1  # + the upper corner
+        span = int((last - first).max()) + 1
+        steps = np.stack(np.meshgrid(*[np.arange(span)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        candidates = first[:, None, :] + steps[None]
+        keep = np.all(candidates <= last[:, None, :], axis=-1)
+        vertices = np.unique(candidates[keep], axis=0)
+        side = geometry.vertices_per_side(level)
+        vertices = vertices[np.all((vertices >= 0) & (vertices < side), axis=1)]
+        levels.append(torch.from_numpy(vertices))
+    return levels
+
+
+class VoxelGridEncoding(SparseHashGrid):
+    """`SparseHashGrid` over the vertices of occupied voxels, with at most `table_size` rows per level."""
+
+    def __init__(
+        self,
+        occupied: np.ndarray,
+        table_size: int,
+        n_levels: int = 2,
+        n_features_per_level: int = 3,
+        base_resolution: int = 64,
+        per_level_scale: float = 2.0,
+    ) -> None:
+        geometry = GridGeometry(3, n_levels, base_resolution, per_level_scale)
+        super().__init__(
+            occupied_vertices(occupied, geometry), 3, n_features_per_level, base_resolution, per_level_scale
+        )
+        sizes = [min(size, table_size) for _, size in self.level_blocks]
+        self.level_blocks = [(sum(sizes[:level]), size) for level, size in enumerate(sizes)]
+        self.table = nn.Parameter(
+            torch.empty(sum(sizes), n_features_per_level).uniform_(-INIT_RANGE, INIT_RANGE)
+        )
+        self.table_size = table_size
+
+    def corner_rows(self, level: int, cell: Tensor) -> tuple[Tensor, Tensor]:
+        rows, stored = super().corner_rows(level, cell)
+        return torch.remainder(rows, self.level_blocks[level][1]), stored

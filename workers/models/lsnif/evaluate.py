@@ -1,0 +1,89 @@
+"""How good and how cheap a trained LSNIF object is: the figures the issue's report asks for.
+
+Held-out rays come from the training distribution with a seed no training batch uses. The BVH size is
+estimated as the paper does for its uncompressed 4-wide BVH (Table 1, "BVH A"): leaves of up to two
+triangles, 4-wide internal nodes, 128 bytes per node, triangles not counted.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from workers.models.lsnif.network import LsnifObject
+from workers.models.lsnif.sampling import PreparedObject, training_rays
+from workers.nn.metrics import flip
+from workers.render.integrator import PathTracer
+from workers.render.neural_intersector import NeuralIntersector
+from workers.render.render import RenderSettings, render
+from workers.scene.compile import CompiledScene
+
+HELD_OUT_SEED = 2**31 - 1
+BVH_NODE_BYTES = 128
+BVH_WIDTH = 4
+TRIANGLES_PER_LEAF = 2
+
+
+def bvh_bytes_estimate(triangles: int) -> int:
+    leaves = -(-triangles // TRIANGLES_PER_LEAF)
+    internal = max(-(-(leaves - 1) // (BVH_WIDTH - 1)), 1)
+    return (leaves + internal) * BVH_NODE_BYTES
+
+
+@dataclass
+class HeldOut:
+    occlusion_accuracy: float
+    normal_error_deg: float  # mean angle between predicted and reference normals where both hit
+    distance_error: float  # mean |t - t_ref| / box diagonal where both hit
+    lsnif_rays_per_s: float
+    embree_rays_per_s: float
+
+
+def held_out(model: LsnifObject, prepared: PreparedObject, n: int) -> HeldOut:
+    rng = np.random.default_rng(HELD_OUT_SEED)
+    origins, directions = training_rays(prepared.grid, prepared.reference, n, rng)
+    labels = prepared.reference.intersect(origins, directions)
+    start = time.perf_counter()
+    prediction = model.predict(origins, directions)
+    lsnif_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    prepared.reference.rays.intersect(origins, directions)
+    embree_seconds = time.perf_counter() - start
+    both = prediction.hit & labels.hit
+    cosine = np.clip(np.sum(prediction.normal[both] * labels.normal[both], axis=1), -1.0, 1.0)
+    diagonal = float(np.linalg.norm(prepared.grid.hi - prepared.grid.lo))
+    return HeldOut(
+        occlusion_accuracy=float(np.mean(prediction.hit == labels.hit)),
+        normal_error_deg=float(np.degrees(np.arccos(cosine)).mean()) if both.any() else 0.0,
+        distance_error=float(np.abs(prediction.t[both] - labels.t[both]).mean() / diagonal)
+        if both.any()
+        else 0.0,
+        lsnif_rays_per_s=n / max(lsnif_seconds, 1e-9),
+        embree_rays_per_s=n / max(embree_seconds, 1e-9),
+    )
+
+
+@dataclass
+class ImageComparison:
+    flip: float
+    lsnif_seconds: float
+    embree_seconds: float
+    lsnif_image: np.ndarray
+    embree_image: np.ndarray
+
+
+def compare_images(scene: CompiledScene, intersector: NeuralIntersector, size: int, spp: int, seed: int = 0):
+    """FLIP of a path-traced image whose secondary and shadow rays use LSNIF against pure Embree, at the
+    same samples per pixel and seed; camera rays stay on Embree in both (the paper rasterises them)."""
+    settings = RenderSettings(spp=spp, width=size, height=size, seed=seed, threads=1)
+    embree = PathTracer(scene)
+    start = time.perf_counter()
+    reference = render(embree, settings).image
+    embree_seconds = time.perf_counter() - start
+    hybrid = PathTracer(scene, intersector=intersector, primary=embree.rays)
+    start = time.perf_counter()
+    image = render(hybrid, settings).image
+    lsnif_seconds = time.perf_counter() - start
+    return ImageComparison(float(flip(reference, image)), lsnif_seconds, embree_seconds, image, reference)

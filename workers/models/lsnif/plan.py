@@ -1,0 +1,76 @@
+"""What a scene needs from LSNIF: which objects get a network, which stay on Embree, and why.
+
+An object gets a network when it has at least `min_triangles` triangles (below that a BVH is small and
+fast, Sec. 4) and emits no light (light sampling needs its triangles). An instanced object is trained
+once, in its local space, and shared by all its instances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from workers.models.lsnif.config import LsnifConfig
+from workers.models.registry import Plan, PlanItem
+from workers.scene.errors import SceneError
+from workers.scene.shapes import shape_mesh
+from workers.scene.spec import SceneSpec
+
+LSNIF = "lsnif"
+EMBREE = "embree"
+TRAINING_RAYS_PER_SECOND = 20_000.0  # one 2-core CPU at the default sizes, measured by bench_lsnif
+SECONDS_PER_MILLION_TRIANGLES = 6.0  # voxelising and building the object's reference BVH
+
+
+@dataclass(frozen=True)
+class ObjectChoice:
+    index: int
+    name: str
+    choice: str  # LSNIF or EMBREE
+    triangles: int | None
+    instances: int
+    reason: str
+
+
+def choose_objects(scene: SceneSpec, config: LsnifConfig, base_dir=None) -> list[ObjectChoice]:
+    choices = []
+    for index, obj in enumerate(scene.objects):
+        instances = len(obj.instance_matrices())
+        try:
+            triangles = shape_mesh(obj.shape, f"objects[{index}].shape", base_dir).num_triangles
+        except SceneError:
+            triangles = None  # a mesh file the planner cannot read here; the job decides on the real mesh
+        if obj.emission is not None:
+            choice, reason = EMBREE, "emits light: light sampling needs its triangles"
+        elif triangles is None:
+            choice, reason = LSNIF, "mesh not readable while planning; the job checks its triangle count"
+        elif triangles < config.min_triangles:
+            choice, reason = EMBREE, f"{triangles} triangles < {config.min_triangles}: a BVH is cheaper"
+        else:
+            shared = f", shared by its {instances} instances" if instances > 1 else ""
+            choice, reason = LSNIF, f"{triangles} triangles >= {config.min_triangles}: trained once{shared}"
+        choices.append(ObjectChoice(index, obj.name, choice, triangles, instances, reason))
+    return choices
+
+
+def plan(scene: SceneSpec, config: LsnifConfig) -> Plan:
+    choices = choose_objects(scene, config)
+    trained = [c for c in choices if c.choice == LSNIF]
+    rays = config.train.steps * config.batch_size
+    seconds = sum(
+        rays / TRAINING_RAYS_PER_SECOND + SECONDS_PER_MILLION_TRIANGLES * (c.triangles or 0) / 1e6
+        for c in trained
+    )
+    items = [PlanItem(name=c.name, choice=c.choice, reason=c.reason) for c in choices]
+    items.append(
+        PlanItem(
+            name="training",
+            choice=f"{config.train.steps} steps of {config.batch_size} rays per network",
+            reason=f"V={config.voxel_resolution}, H={config.max_points}, grid {config.grid_levels} levels "
+            f"from {config.grid_base_resolution}, table 2^{config.log2_table_size}, "
+            f"MLP {config.depth}x{config.width}",
+        )
+    )
+    instances = sum(c.instances for c in trained)
+    on_embree = len(choices) - len(trained)
+    summary = f"{len(trained)} network(s) for {instances} instance(s); {on_embree} object(s) on Embree"
+    return Plan(items=items, estimated_seconds=seconds, summary=summary)
