@@ -22,7 +22,7 @@ from workers.runtime.checkpoints import CheckpointStore
 from workers.scene.spec import SceneSpec
 
 # One line per kind: a module exposing `KIND`, an object satisfying `ModelKind`.
-KIND_MODULES = ("workers.models.render",)
+KIND_MODULES = ("workers.models.render", "workers.models.lsnif")
 PRESET_NAMES = ("quick", "default", "paper")
 
 
