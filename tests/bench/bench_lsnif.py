@@ -1,0 +1,124 @@
+"""LSNIF against Embree on three assets, and its speed-against-error curve (issue 6, "What to report").
+
+Per asset (`high_poly`'s sphere, `dense_foliage`'s leaves, `fur_patch`'s strands), one network at the
+default sizes but a CPU-sized training budget (`STEPS` x `BATCH`, far below the paper's 2000 x 2^18):
+held-out occlusion accuracy and normal error, model bytes against the paper's 4-wide BVH estimate, LSNIF
+rays/s against Embree rays/s on the same rays in the same run, and the FLIP of a path-traced image whose
+secondary and shadow rays use LSNIF against pure Embree at the same spp and seed (camera rays on Embree).
+The curve trains `high_poly` at the paper's low (H 10, width 64) and high (H 18, width 128) quality
+configurations and two table sizes.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from tests.bench.common import BenchSection
+from workers.models.lsnif.artifact import LsnifArtifact
+from workers.models.lsnif.config import PRESETS, LsnifConfig
+from workers.models.lsnif.evaluate import bvh_bytes_estimate, compare_images, held_out
+from workers.models.lsnif.network import LsnifObject
+from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
+from workers.models.lsnif.train import train_object
+from workers.runtime.samplers import InProcessBatches
+from workers.runtime.sources import SourceSpec
+from workers.scene.builtin import get_builtin
+from workers.scene.compile import compile_scene
+
+STEPS = 150
+BATCH = 1 << 13
+IMAGE_SIZE = 64
+IMAGE_SPP = 8
+HELD_OUT_RAYS = 1 << 15
+ASSETS = (("high_poly", "displaced_sphere"), ("dense_foliage", "leaves"), ("fur_patch", None))
+CURVE = (
+    ("paper low (H 10, width 64)", {"max_points": 10, "width": 64}),
+    ("paper high (H 18, width 128)", {}),
+    ("high, table 2^14", {"log2_table_size": 14}),
+    ("H 6, width 32", {"max_points": 6, "width": 32}),
+)
+
+
+def config(**overrides) -> LsnifConfig:
+    base = LsnifConfig.model_validate(PRESETS["default"])
+    train = base.train.model_copy(update={"steps": STEPS})
+    return base.model_copy(update={"batch_size": BATCH, "train": train, **overrides})
+
+
+def trained(scene, index: int, cfg: LsnifConfig) -> tuple[LsnifObject, ObjectRaySource, float]:
+    source_config = ObjectSourceConfig(
+        scene=scene.model_dump(mode="json"), scene_dir=None, object_index=index, lsnif=cfg
+    )
+    source = ObjectRaySource(source_config, 0)
+    torch.manual_seed(0)
+    model = LsnifObject(source.prepared.grid, len(source.prepared.material_names), cfg)
+    with InProcessBatches(SourceSpec(ObjectRaySource, source_config, 0)) as batches:
+        result = train_object(model, batches, cfg.train)
+    return model.eval(), source, result.seconds
+
+
+def run() -> list[BenchSection]:
+    torch.set_num_threads(2)
+    assets = BenchSection(f"LSNIF vs Embree per asset ({STEPS} steps x {BATCH} rays, V 32, H 18, M 2^17)")
+    for scene_name, object_name in ASSETS:
+        scene = get_builtin(scene_name)
+        compiled = compile_scene(scene)
+        geometry = (
+            next(o for o in compiled.objects if o.name == object_name)
+            if object_name
+            else max(compiled.objects, key=lambda o: o.mesh.num_triangles)
+        )
+        cfg = config()
+        model, source, seconds = trained(scene, geometry.index, cfg)
+        scores = held_out(model, source.prepared, HELD_OUT_RAYS)
+        bundle = LsnifArtifact(
+            cfg, {geometry.name: model}, {geometry.name: source.prepared.material_names}, {}
+        )
+        image = compare_images(compiled, bundle.intersector(compiled), IMAGE_SIZE, IMAGE_SPP)
+        bvh = bvh_bytes_estimate(geometry.mesh.num_triangles)
+        assets.add(
+            asset=f"{scene_name}/{geometry.name}",
+            triangles=geometry.mesh.num_triangles,
+            train_s=seconds,
+            occlusion_acc=scores.occlusion_accuracy,
+            normal_err_deg=scores.normal_error_deg,
+            dist_err=scores.distance_error,
+            model_MB=model.size_bytes() / 1e6,
+            bvh_MB=bvh / 1e6,
+            bvh_over_model=bvh / model.size_bytes(),
+            lsnif_Mrays_s=scores.lsnif_rays_per_s / 1e6,
+            embree_Mrays_s=scores.embree_rays_per_s / 1e6,
+            lsnif_over_embree=scores.lsnif_rays_per_s / scores.embree_rays_per_s,
+            flip=image.flip,
+            frame_s_lsnif=image.lsnif_seconds,
+            frame_s_embree=image.embree_seconds,
+        )
+    assets.notes += [
+        "BVH estimate: the paper's uncompressed 4-wide BVH (Table 1, BVH A): ceil(T/2) leaves of <= 2 "
+        "triangles plus ceil((leaves-1)/3) internal nodes, 128 bytes per node, triangles not counted",
+        f"FLIP: {IMAGE_SIZE}x{IMAGE_SIZE} at {IMAGE_SPP} spp, same seed; LSNIF for secondary + shadow rays",
+        "rays/s: the same held-out rays; LSNIF = DDA + encoder + MLP in torch on this CPU",
+    ]
+
+    curve = BenchSection(f"Speed against error on high_poly ({STEPS} steps x {BATCH} rays)")
+    scene = get_builtin("high_poly")
+    compiled = compile_scene(scene)
+    for label, overrides in CURVE:
+        cfg = config(**overrides)
+        model, source, _ = trained(scene, 0, cfg)
+        scores = held_out(model, source.prepared, HELD_OUT_RAYS)
+        curve.add(
+            setting=label,
+            model_MB=model.size_bytes() / 1e6,
+            lsnif_Mrays_s=scores.lsnif_rays_per_s / 1e6,
+            occlusion_acc=scores.occlusion_accuracy,
+            normal_err_deg=scores.normal_error_deg,
+            dist_err=scores.distance_error,
+        )
+    curve.notes.append(f"{compiled.num_triangles} triangles; held-out rays {HELD_OUT_RAYS}")
+    return [assets, curve]
+
+
+if __name__ == "__main__":
+    for section in run():
+        print(section.table())
