@@ -1,0 +1,49 @@
+"""`neuralbake.v1.AssetService`: uploads arrive as a client stream of chunks, are spooled to anonymous
+temporary files (names from the client never touch the file system here) and then go through the same
+`ingest_upload` as REST uploads, which checks names, archives, limits and the scene.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Iterator
+from contextlib import ExitStack
+from typing import BinaryIO
+
+from neuralbake.v1 import assets_pb2, assets_pb2_grpc
+
+from services.api.deps import known_digest
+from services.api.grpc.messages import asset_message
+from services.api.services import Services
+from services.artifacts.staging import PAYLOAD_TOO_LARGE, UploadError
+from services.artifacts.uploads import AssetNotFound, ingest_upload, load_asset, save_asset
+
+
+class AssetServicer(assets_pb2_grpc.AssetServiceServicer):
+    def __init__(self, services: Services):
+        self.svc = services
+
+    def UploadAsset(self, request_iterator: Iterator[assets_pb2.UploadAssetRequest], context):
+        limits = self.svc.settings.upload_limits
+        work = self.svc.settings.data_dir
+        parts: list[tuple[str, BinaryIO]] = []
+        received = 0
+        with ExitStack() as spools:
+            for chunk in request_iterator:
+                received += len(chunk.data)
+                if received > limits.max_total_bytes:
+                    raise UploadError(
+                        "files", f"the upload exceeds {limits.max_total_bytes} bytes", PAYLOAD_TOO_LARGE
+                    )
+                if not parts or parts[-1][0] != chunk.path:
+                    parts.append((chunk.path, spools.enter_context(tempfile.TemporaryFile(dir=work))))
+                parts[-1][1].write(chunk.data)
+            for _, spool in parts:
+                spool.seek(0)
+            asset = ingest_upload(parts, self.svc.blobs, limits, work_dir=work)
+        save_asset(asset, self.svc.blobs, self.svc.settings.store)
+        return assets_pb2.UploadAssetResponse(asset=asset_message(asset))
+
+    def GetAsset(self, request, context):
+        asset = load_asset(known_digest(request.asset_id, AssetNotFound), self.svc.settings.store)
+        return assets_pb2.GetAssetResponse(asset=asset_message(asset))

@@ -1,0 +1,131 @@
+"""The job service's errors as gRPC statuses: the same problem (status, title, detail, field) the REST API
+answers with, carried as a status code, a message and rich details (`google.rpc.ErrorInfo` with the
+problem, `google.rpc.BadRequest` naming the field), so a client can act on it exactly as over HTTP.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import grpc
+from google.protobuf import any_pb2
+from google.rpc import error_details_pb2, status_pb2
+from grpc_status import rpc_status
+from pydantic import ValidationError
+
+from services.api.grpc.handlers import Behaviour, rewrap
+from services.artifacts.artifacts import ArtifactNotFound, FileNotFoundInArtifact
+from services.artifacts.assets import AssetNotFound
+from services.artifacts.staging import UploadError
+from services.jobs.errors import JobServiceError
+from services.jobs.states import InvalidTransition
+from workers.scene.errors import SceneError
+from workers.scene.io import dotted_path
+
+DOMAIN = "neuralbake"
+log = logging.getLogger(__name__)
+
+CODES = {
+    400: grpc.StatusCode.INVALID_ARGUMENT,
+    401: grpc.StatusCode.UNAUTHENTICATED,
+    403: grpc.StatusCode.PERMISSION_DENIED,
+    404: grpc.StatusCode.NOT_FOUND,
+    409: grpc.StatusCode.FAILED_PRECONDITION,
+    413: grpc.StatusCode.RESOURCE_EXHAUSTED,
+    422: grpc.StatusCode.INVALID_ARGUMENT,
+    503: grpc.StatusCode.UNAVAILABLE,
+}
+
+
+@dataclass(frozen=True)
+class Problem:
+    status: int
+    title: str
+    detail: str
+    field: str | None = None
+
+
+def problem_of(error: Exception) -> Problem | None:
+    """The problem an error stands for, or None for a bug."""
+    match error:
+        case JobServiceError():
+            return Problem(error.status, error.title, error.detail, error.field)
+        case InvalidTransition():
+            return Problem(409, "Conflict", str(error))
+        case UploadError():
+            title = "Upload too large" if error.status == 413 else "Unusable upload"
+            return Problem(error.status, title, error.problem, error.field)
+        case SceneError():
+            return Problem(422, "Invalid scene", error.problem, error.field)
+        case AssetNotFound() | ArtifactNotFound() | FileNotFoundInArtifact():
+            return Problem(404, "Not found", str(error))
+        case ValidationError():
+            first = error.errors()[0]
+            field = dotted_path(first["loc"], None) or "request"
+            return Problem(422, "Invalid input", f"{field}: {first['msg']}", field)
+    return None
+
+
+def to_status(problem: Problem) -> grpc.Status:
+    info = error_details_pb2.ErrorInfo(
+        reason=problem.title.upper().replace(" ", "_"),
+        domain=DOMAIN,
+        metadata={"status": str(problem.status), "title": problem.title}
+        | ({"field": problem.field} if problem.field else {}),
+    )
+    details = [info]
+    if problem.field:
+        violation = error_details_pb2.BadRequest.FieldViolation(
+            field=problem.field, description=problem.detail
+        )
+        details.append(error_details_pb2.BadRequest(field_violations=[violation]))
+    packed = []
+    for detail in details:
+        wrapper = any_pb2.Any()
+        wrapper.Pack(detail)
+        packed.append(wrapper)
+    code = CODES.get(problem.status, grpc.StatusCode.INVALID_ARGUMENT)
+    message = f"{problem.field}: {problem.detail}" if problem.field else problem.detail
+    return rpc_status.to_status(status_pb2.Status(code=code.value[0], message=message, details=packed))
+
+
+def abort(context: grpc.ServicerContext, error: Exception):
+    """End the call with the status `error` maps to; a bug is INTERNAL (and logged), never a leaked trace."""
+    if context.code() is not None:  # already aborted (e.g. by an inner layer): keep that status
+        raise error
+    problem = problem_of(error)
+    if problem is None:
+        log.error("unhandled error in a gRPC call", exc_info=error)
+        problem = Problem(500, "Internal server error", f"{type(error).__name__}: the server failed")
+        context.abort(grpc.StatusCode.INTERNAL, problem.detail)
+    context.abort_with_status(to_status(problem))
+
+
+class ErrorMapping(grpc.ServerInterceptor):
+    """Turns exceptions raised by a call (or while streaming its responses) into statuses."""
+
+    def intercept_service(self, continuation, handler_call_details):
+        handler = continuation(handler_call_details)
+        return None if handler is None else rewrap(handler, _mapped)
+
+
+def _mapped(behaviour: Behaviour, streaming: bool) -> Behaviour:
+    if streaming:
+
+        def stream(request, context) -> Iterator:
+            try:
+                yield from behaviour(request, context)
+            except Exception as error:
+                abort(context, error)
+
+        return stream
+
+    def unary(request, context):
+        try:
+            return behaviour(request, context)
+        except Exception as error:
+            abort(context, error)
+
+    return unary

@@ -1,0 +1,73 @@
+"""`neuralbake.v1.JobService`: a thin adapter over the job service's submitter, repository and scheduler."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import grpc
+from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
+
+from services.api.grpc.messages import STATE_NAMES, event_message, job_message, submit_fields
+from services.api.grpc.streams import StreamTracker, pause
+from services.api.services import Services
+from services.jobs.errors import InvalidInput
+from services.jobs.states import TERMINAL, JobState
+from services.jobs.submission import JobRequest
+
+DEFAULT_PAGE, MAX_PAGE = 50, 200
+
+
+def idempotency_key(context: grpc.ServicerContext) -> str | None:
+    return next((value for key, value in context.invocation_metadata() if key == "idempotency-key"), None)
+
+
+class JobServicer(jobs_pb2_grpc.JobServiceServicer):
+    def __init__(self, services: Services, streams: StreamTracker):
+        self.svc, self.streams = services, streams
+
+    def SubmitJob(self, request, context):
+        body = JobRequest.model_validate(submit_fields(request))
+        job, created = self.svc.submitter.submit(body, idempotency_key(context))
+        self.svc.metrics.submissions.labels(str(created).lower()).inc()
+        if created:
+            self.svc.scheduler.wake()
+        return jobs_pb2.SubmitJobResponse(job=job_message(job), created=created)
+
+    def GetJob(self, request, context):
+        return jobs_pb2.GetJobResponse(job=job_message(self.svc.jobs.get(request.job_id)))
+
+    def ListJobs(self, request, context):
+        size = request.page_size or DEFAULT_PAGE
+        if not 1 <= size <= MAX_PAGE:
+            raise InvalidInput(f"must be 1 to {MAX_PAGE}", "page_size")
+        unknown = [s for s in request.states if s not in STATE_NAMES]
+        if unknown:
+            raise InvalidInput(f"unknown or unspecified state {unknown[0]}", "states")
+        states = [STATE_NAMES[s].value for s in request.states]
+        jobs, cursor = self.svc.jobs.list(states, request.kind or None, request.page_token or None, size)
+        return jobs_pb2.ListJobsResponse(jobs=[job_message(j) for j in jobs], next_page_token=cursor or "")
+
+    def CancelJob(self, request, context):
+        job = self.svc.jobs.request_cancel(request.job_id)
+        self.svc.scheduler.wake()
+        return jobs_pb2.CancelJobResponse(job=job_message(job))
+
+    def WatchJob(self, request, context) -> Iterator[jobs_pb2.WatchJobResponse]:
+        """Events in order from the database (any replica serves any job) until the final state."""
+        jobs, job_id, after = self.svc.jobs, request.job_id, request.after_seq
+        jobs.get(job_id)  # NOT_FOUND before anything is sent
+        with self.streams.track("WatchJob"):
+            while context.is_active():
+                events = jobs.events_after(job_id, after)
+                for event in events:
+                    yield jobs_pb2.WatchJobResponse(event=event_message(event))
+                    after = event.seq
+                    if event.type == "state" and event.data.get("state") in TERMINAL:
+                        return
+                if events:
+                    continue
+                job = jobs.get(job_id)
+                if JobState(job.state).terminal and job.last_event_seq <= after:
+                    return  # resumed after the final event: nothing more will come
+                if not pause(context):
+                    return
