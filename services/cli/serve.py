@@ -18,6 +18,7 @@ import uvicorn
 
 from services.api.app import create_app
 from services.api.auth import configured_tokens, generated_admin_token
+from services.api.grpc.server import with_grpc
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
 from services.cli.main import app
@@ -40,6 +41,7 @@ def serve_command(
         str, typer.Option(help="Address to listen on; a non-loopback one needs tokens.")
     ] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port.")] = 8080,
+    grpc_port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port of the gRPC API.")] = 50051,
     data_dir: Annotated[
         Path, typer.Option(help="Job database, artifact store, checkpoints, tokens.", envvar="NBAKE_DATA_DIR")
     ] = Path("nbake-data"),
@@ -68,7 +70,11 @@ def serve_command(
     ray_temp = _start_ray(data_dir)
     try:
         uvicorn.run(
-            create_app(settings), host=host, port=port, log_level=log_level, timeout_graceful_shutdown=5
+            with_grpc(create_app(settings), host, grpc_port),
+            host=host,
+            port=port,
+            log_level=log_level,
+            timeout_graceful_shutdown=5,
         )
     finally:
         ray.shutdown()
