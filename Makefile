@@ -40,7 +40,7 @@ lint: venv
 ## Regenerate the gRPC stubs from proto/ into the client package (the server imports them from there).
 PROTO_OUT ?= clients/python
 proto: venv
-	$(PY) -m grpc_tools.protoc -I proto --python_out=$(PROTO_OUT) --pyi_out=$(PROTO_OUT) \
+	$(PY) -m grpc_tools.protoc -I proto --python_out=$(PROTO_OUT) \
 		--grpc_python_out=$(PROTO_OUT) proto/neuralbake/v1/*.proto
 
 clean:

@@ -1,0 +1,87 @@
+"""`AsyncClient`: the same operations for asyncio code. Each call runs the synchronous client in a
+worker thread (one implementation of retries, resumption and checksums, not two), so the event loop
+never blocks; event streams are async iterators.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import os
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Any
+
+from neuralbake_client.client import ArtifactRef, Client, JobRef, SceneRef
+from neuralbake_client.download import DownloadedFile
+from neuralbake_client.models import Asset, Job, JobEvent, JobList, Manifest, Progress
+from neuralbake_client.retry import DEFAULT_RETRY, Retry
+
+_END = object()
+
+
+class AsyncClient:
+    """`async with AsyncClient(url, token) as client: job = await client.submit(...)`."""
+
+    def __init__(
+        self, url: str, token: str | None = None, *, timeout: float = 30.0, retry: Retry = DEFAULT_RETRY
+    ):
+        self.sync = Client(url, token, timeout=timeout, retry=retry)
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        await asyncio.to_thread(self.sync.close)
+
+    async def upload(self, path: str | os.PathLike) -> Asset:
+        return await asyncio.to_thread(self.sync.upload, path)
+
+    async def get_asset(self, asset_id: str) -> Asset:
+        return await asyncio.to_thread(self.sync.get_asset, asset_id)
+
+    async def submit(self, kind: str, scene: SceneRef, **options: Any) -> Job:
+        return await asyncio.to_thread(self.sync.submit, kind, scene, **options)
+
+    async def get(self, job: JobRef) -> Job:
+        return await asyncio.to_thread(self.sync.get, job)
+
+    async def list(self, state=None, kind: str | None = None, **options: Any) -> JobList:
+        return await asyncio.to_thread(self.sync.list, state, kind, **options)
+
+    async def cancel(self, job: JobRef) -> Job:
+        return await asyncio.to_thread(self.sync.cancel, job)
+
+    async def events(self, job: JobRef, after: int = 0) -> AsyncIterator[JobEvent]:
+        stream = self.sync.events(job, after)
+        try:
+            while (event := await asyncio.to_thread(next, stream, _END)) is not _END:
+                yield event
+        finally:
+            stream.close()
+
+    async def wait(
+        self,
+        job: JobRef,
+        on_progress: Callable[[Progress], Awaitable[None] | None] | None = None,
+        *,
+        on_event: Callable[[JobEvent], Awaitable[None] | None] | None = None,
+    ) -> Job:
+        """Like `Client.wait`; the callbacks may be plain functions or coroutines."""
+        async for event in self.events(job):
+            for callback, value in ((on_event, event), (on_progress, event.progress)):
+                if callback is not None and value is not None:
+                    result = callback(value)
+                    if inspect.isawaitable(result):
+                        await result
+        return await self.get(job)
+
+    async def manifest(self, artifact: ArtifactRef) -> Manifest:
+        return await asyncio.to_thread(self.sync.manifest, artifact)
+
+    async def download(
+        self, artifact: ArtifactRef, dest: str | os.PathLike, names: list[str] | None = None
+    ) -> list[DownloadedFile]:
+        return await asyncio.to_thread(self.sync.download, artifact, dest, names)

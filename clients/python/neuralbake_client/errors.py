@@ -1,0 +1,89 @@
+"""Exceptions that carry the server's problem detail (RFC 9457 over HTTP, rich status over gRPC), so the
+caller sees the same `status`, `title`, `detail` and `field` whichever transport it uses.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class NeuralbakeError(Exception):
+    """Base class of every error this package raises."""
+
+
+class ApiError(NeuralbakeError):
+    """The server answered with a problem. `status` is the HTTP status (also for gRPC calls)."""
+
+    status: int = 0
+
+    def __init__(self, status: int, title: str, detail: str, field: str | None = None, **extra: Any):
+        self.status, self.title, self.detail, self.field, self.extra = status, title, detail, field, extra
+        super().__init__(f"{status} {title}: {detail}")
+
+    @property
+    def problem(self) -> dict[str, Any]:
+        body = {"status": self.status, "title": self.title, "detail": self.detail, "field": self.field}
+        return {k: v for k, v in body.items() if v is not None} | self.extra
+
+
+class InvalidRequest(ApiError):
+    """400 / 422 (INVALID_ARGUMENT): `field` names the input at fault."""
+
+
+class Unauthenticated(ApiError):
+    """401 (UNAUTHENTICATED): no token, or one the server does not know."""
+
+
+class PermissionDenied(ApiError):
+    """403 (PERMISSION_DENIED): the token lacks the scope (read < submit < admin)."""
+
+
+class NotFound(ApiError):
+    """404 (NOT_FOUND)."""
+
+
+class Conflict(ApiError):
+    """409 (FAILED_PRECONDITION), e.g. cancelling a finished job."""
+
+
+class TooLarge(ApiError):
+    """413 (RESOURCE_EXHAUSTED): an upload or body over the server's limits."""
+
+
+class ServerError(ApiError):
+    """500: a bug on the server."""
+
+
+class Unavailable(ApiError):
+    """503 (UNAVAILABLE): retried with backoff before it reaches the caller."""
+
+
+class ConnectionFailed(NeuralbakeError):
+    """The server could not be reached (after the retries)."""
+
+
+class ChecksumMismatch(NeuralbakeError):
+    """A downloaded file's sha256 differs from the manifest's digest (the partial file is discarded)."""
+
+
+BY_STATUS: dict[int, type[ApiError]] = {
+    400: InvalidRequest,
+    401: Unauthenticated,
+    403: PermissionDenied,
+    404: NotFound,
+    409: Conflict,
+    413: TooLarge,
+    422: InvalidRequest,
+    500: ServerError,
+    503: Unavailable,
+}
+
+
+def api_error(status: int, title: str, detail: str, field: str | None = None, **extra: Any) -> ApiError:
+    cls = BY_STATUS.get(
+        status, ServerError if status >= 500 else InvalidRequest if status >= 400 else ApiError
+    )
+    return cls(status, title, detail, field, **extra)
+
+
+RETRYABLE = (Unavailable, ConnectionFailed)

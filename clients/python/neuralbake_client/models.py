@@ -1,0 +1,125 @@
+"""Typed results: the same shapes the server's REST schemas have (a contract test compares them with the
+server's OpenAPI document), whichever transport (HTTP or gRPC) produced them.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from enum import StrEnum
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+
+class JobState(StrEnum):
+    QUEUED = "QUEUED"
+    RUNNING = "RUNNING"
+    SUCCEEDED = "SUCCEEDED"
+    FAILED = "FAILED"
+    CANCELLED = "CANCELLED"
+
+    @property
+    def terminal(self) -> bool:
+        return self in (JobState.SUCCEEDED, JobState.FAILED, JobState.CANCELLED)
+
+
+class Job(BaseModel):
+    id: str
+    kind: str
+    state: JobState
+    scene: dict[str, str]
+    scene_hash: str
+    preset: str
+    config: dict[str, Any]
+    seed: int
+    priority: int
+    code_version: str
+    idempotency_key: str
+    plan: dict[str, Any] | None = None
+    attempts: int
+    max_attempts: int
+    cancel_requested: bool
+    error: str | None = None
+    artifact_id: str | None = None
+    progress: dict[str, Any] | None = Field(None, description="The latest progress event's data.")
+    created_at: datetime
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
+    links: dict[str, str] = Field(default_factory=dict, description="REST links (empty over gRPC).")
+
+
+class JobList(BaseModel):
+    items: list[Job]
+    next_cursor: str | None = None
+
+
+class Progress(BaseModel):
+    """What a `progress` event says: step of total, loss, samples per second, seconds to go."""
+
+    step: int | None = None
+    total: int | None = None
+    loss: float | None = None
+    samples_per_s: float | None = None
+    eta_s: float | None = None
+
+
+class JobEvent(BaseModel):
+    """One event of a job: `type` is `state`, `progress` or `log`; `seq` counts from 1 per job."""
+
+    job_id: str
+    seq: int
+    type: str
+    time: datetime
+    data: dict[str, Any]
+
+    @property
+    def state(self) -> JobState | None:
+        """The new state of a `state` event."""
+        return JobState(self.data["state"]) if self.type == "state" else None
+
+    @property
+    def progress(self) -> Progress | None:
+        return Progress.model_validate(self.data) if self.type == "progress" else None
+
+    @property
+    def final(self) -> bool:
+        return self.state is not None and self.state.terminal
+
+
+class FileEntry(BaseModel):
+    name: str
+    media_type: str
+    digest: str
+    size: int
+
+
+class Asset(BaseModel):
+    asset_id: str
+    scene_file: str
+    scene_name: str
+    files: list[FileEntry]
+    created: datetime
+
+
+class Manifest(BaseModel):
+    schema_version: int
+    media_type: str
+    artifact_id: str
+    kind: str
+    job_id: str
+    scene_hash: str
+    config: dict[str, Any]
+    code_version: str
+    metrics: dict[str, float]
+    created: datetime
+    files: list[FileEntry]
+    annotations: dict[str, str] = Field(default_factory=dict)
+
+    def file(self, name: str) -> FileEntry:
+        for entry in self.files:
+            if entry.name == name:
+                return entry
+        raise KeyError(f"{name!r} is not in artifact {self.artifact_id} ({', '.join(self.names())})")
+
+    def names(self) -> list[str]:
+        return [entry.name for entry in self.files]

@@ -1,0 +1,205 @@
+"""`nbake submit | jobs | show | watch | cancel | download`: the job service from a shell or a CI
+pipeline, built on the `neuralbake_client` SDK (the same calls a Python user makes).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+import yaml
+from neuralbake_client import Client, Job, JobState
+from rich.progress import DownloadColumn, Progress, TransferSpeedColumn
+
+from services.cli.job_output import Output
+from services.cli.remote import (
+    EXIT_BY_STATE,
+    USAGE,
+    JsonOption,
+    TokenOption,
+    UrlOption,
+    connect,
+    exit_with,
+    remote_errors,
+)
+
+JOB_PREFIX = "job-"
+
+
+def parse_sets(items: list[str]) -> dict[str, Any]:
+    """`key=value` overrides -> a config dict; values are YAML scalars (`32`, `0.5`, `true`), dotted keys
+    nest (`a.b=1` -> {"a": {"b": 1}})."""
+    config: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            exit_with(USAGE, f"error: --set: {item!r} is not key=value")
+        try:
+            value = yaml.safe_load(raw) if raw.strip() else ""
+        except yaml.YAMLError:
+            value = raw
+        *parents, leaf = key.strip().split(".")
+        node = config
+        for part in parents:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                exit_with(USAGE, f"error: --set: {key} conflicts with an earlier value")
+        node[leaf] = value
+    return config
+
+
+def scene_argument(scene: str) -> str | Path:
+    """A local file or folder is uploaded; anything else is a built-in scene name or an asset id."""
+    path = Path(scene)
+    return path if path.exists() else scene
+
+
+def follow(client: Client, job: Job, out: Output) -> None:
+    """Print the job's events until its final state, then the job; exit with the state's status."""
+    with out.following(job) as on_event:
+        final = client.wait(job, on_event=on_event)
+    out.job(final, event="result")
+    raise typer.Exit(EXIT_BY_STATE[final.state])
+
+
+def submit_command(
+    scene: Annotated[
+        str, typer.Argument(help="A scene file or folder (uploaded), a built-in name or an asset id.")
+    ],
+    kind: Annotated[str, typer.Option("--kind", "-k", help="The model kind, e.g. render.")],
+    preset: Annotated[
+        str | None, typer.Option(help="quick, default or paper (the server's default).")
+    ] = None,
+    set_: Annotated[
+        list[str] | None, typer.Option("--set", help="A config override key=value; repeat.")
+    ] = None,
+    seed: Annotated[int | None, typer.Option(min=0, help="Seed of every sampler.")] = None,
+    priority: Annotated[int | None, typer.Option(help="Higher starts first.")] = None,
+    wait: Annotated[bool, typer.Option("--wait", help="Follow the job; exit with its outcome.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Run even if identical work exists.")] = False,
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Submit a job. With --wait, exit 0 succeeded, 1 failed, 3 cancelled."""
+    out, config = Output(json_lines), parse_sets(set_ or [])
+    with remote_errors(), connect(url, token) as client:
+        job = client.submit(
+            kind,
+            scene_argument(scene),
+            preset=preset,
+            config=config,
+            seed=seed,
+            priority=priority,
+            force=force,
+        )
+        out.job(job, event="submitted")
+        if wait:
+            follow(client, job, out)
+
+
+def jobs_command(
+    state: Annotated[list[JobState] | None, typer.Option(help="Only jobs in this state; repeat.")] = None,
+    kind: Annotated[str | None, typer.Option(help="Only jobs of this kind.")] = None,
+    limit: Annotated[int, typer.Option(min=1, max=200, help="How many (newest first).")] = 20,
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """List jobs, newest first."""
+    out = Output(json_lines)
+    with remote_errors(), connect(url, token) as client:
+        for job in client.list(state, kind, limit=limit).items:
+            out.job(job)
+
+
+def show_command(
+    job: Annotated[str, typer.Argument(help="A job id.")],
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Show one job."""
+    out = Output(json_lines)
+    with remote_errors(), connect(url, token) as client:
+        out.job(client.get(job))
+
+
+def watch_command(
+    job: Annotated[str, typer.Argument(help="A job id.")],
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Follow a job to its end: exit 0 succeeded, 1 failed, 3 cancelled."""
+    out = Output(json_lines)
+    with remote_errors(), connect(url, token) as client:
+        follow(client, client.get(job), out)
+
+
+def cancel_command(
+    job: Annotated[str, typer.Argument(help="A job id.")],
+    wait: Annotated[bool, typer.Option("--wait", help="Follow the job until it has stopped.")] = False,
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Cancel a queued or running job."""
+    out = Output(json_lines)
+    with remote_errors(), connect(url, token) as client:
+        cancelled = client.cancel(job)
+        out.job(cancelled, event="cancel_requested")
+        if wait:
+            follow(client, cancelled, out)
+
+
+def download_command(
+    artifact: Annotated[str, typer.Argument(help="An artifact id, or a job id (its artifact).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write the files into.")],
+    name: Annotated[list[str] | None, typer.Option("--name", help="Only this file; repeat.")] = None,
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Download an artifact's files (resuming partial ones, verifying sha256)."""
+    out = Output(json_lines)
+    with remote_errors(), connect(url, token) as client:
+        target = client.get(artifact) if artifact.startswith(JOB_PREFIX) else artifact
+        manifest = client.manifest(target)
+        try:
+            entries = [manifest.file(n) for n in name] if name else manifest.files
+        except KeyError as error:
+            exit_with(USAGE, f"error: --name: {error.args[0]}")
+        if out.json:
+            files = client.download(manifest, output, [e.name for e in entries])
+        else:
+            total = sum(e.size for e in entries)
+            with Progress(
+                *Progress.get_default_columns()[:2], DownloadColumn(), TransferSpeedColumn()
+            ) as bar:
+                task = bar.add_task(manifest.artifact_id[:19], total=total)
+                files = client.download(
+                    manifest,
+                    output,
+                    [e.name for e in entries],
+                    on_bytes=lambda count: bar.advance(task, count),
+                )
+        for file in files:
+            if out.json:
+                fields = file.entry.model_dump() | {"path": str(file.path), "resumed_from": file.resumed_from}
+                out.line("file", **fields, skipped=file.skipped)
+            else:
+                print(file.path)
+
+
+def register(app: typer.Typer) -> None:
+    for name, command in (
+        ("submit", submit_command),
+        ("jobs", jobs_command),
+        ("show", show_command),
+        ("watch", watch_command),
+        ("cancel", cancel_command),
+        ("download", download_command),
+    ):
+        app.command(name)(command)

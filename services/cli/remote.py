@@ -1,0 +1,98 @@
+"""How the job commands reach a server and how their outcome becomes an exit status.
+
+The server and token come from `--url` / `--token`, else `NBAKE_URL` / `NBAKE_TOKEN`, else a TOML config
+file (`NBAKE_CONFIG`, default `~/.config/nbake/config.toml`, keys `url` and `token`). Exit statuses are
+what a pipeline branches on: 0 succeeded, 1 job failed, 2 usage or validation error, 3 cancelled,
+4 server unreachable or auth error.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, NoReturn
+
+import typer
+from neuralbake_client import (
+    ApiError,
+    ChecksumMismatch,
+    Client,
+    ConnectionFailed,
+    JobState,
+    NeuralbakeError,
+    PermissionDenied,
+    ServerError,
+    Unauthenticated,
+    Unavailable,
+)
+
+SUCCEEDED, FAILED, USAGE, CANCELLED, UNREACHABLE = 0, 1, 2, 3, 4
+EXIT_BY_STATE = {JobState.SUCCEEDED: SUCCEEDED, JobState.FAILED: FAILED, JobState.CANCELLED: CANCELLED}
+DEFAULT_URL = "http://127.0.0.1:8080"
+DEFAULT_CONFIG = Path("~/.config/nbake/config.toml")
+
+UrlOption = Annotated[
+    str | None,
+    typer.Option(
+        "--url",
+        help="http(s)://host:port (REST) or grpc(s)://host:port (gRPC). Env NBAKE_URL; default "
+        f"from the config file, else {DEFAULT_URL}.",
+        show_default=False,
+    ),
+]
+TokenOption = Annotated[
+    str | None,
+    typer.Option("--token", help="Bearer token. Env NBAKE_TOKEN or the config file.", show_default=False),
+]
+JsonOption = Annotated[
+    bool, typer.Option("--json", help="One JSON object per line (the default when stdout is not a terminal).")
+]
+
+
+def config_file() -> dict:
+    path = Path(os.environ.get("NBAKE_CONFIG") or DEFAULT_CONFIG).expanduser()
+    if not path.is_file():
+        return {}
+    try:
+        return tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as error:
+        exit_with(USAGE, f"error: {path}: {error}")
+
+
+def connect(url: str | None, token: str | None) -> Client:
+    """A client for the server named by the flags, the environment or the config file (in that order)."""
+    file = config_file()
+    url = url or os.environ.get("NBAKE_URL") or file.get("url") or DEFAULT_URL
+    token = token or os.environ.get("NBAKE_TOKEN") or file.get("token")
+    try:
+        return Client(url, token)
+    except ValueError as error:
+        exit_with(USAGE, f"error: --url: {error}")
+
+
+def exit_with(code: int, message: str) -> NoReturn:
+    typer.echo(message, err=True)
+    raise typer.Exit(code)
+
+
+def exit_code(error: NeuralbakeError) -> int:
+    if isinstance(error, ConnectionFailed | Unavailable | Unauthenticated | PermissionDenied | ServerError):
+        return UNREACHABLE
+    if isinstance(error, ChecksumMismatch):
+        return FAILED
+    return USAGE
+
+
+@contextmanager
+def remote_errors() -> Iterator[None]:
+    """Turn the SDK's exceptions into one `error: ...` line on stderr and the matching exit status."""
+    try:
+        yield
+    except ApiError as error:
+        where = f"{error.field}: " if error.field and not error.detail.startswith(error.field) else ""
+        exit_with(exit_code(error), f"error: {where}{error.detail} ({error.status} {error.title})")
+    except NeuralbakeError as error:
+        exit_with(exit_code(error), f"error: {error}")
