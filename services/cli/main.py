@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import typer
 
+from services.cli.jobs_commands import register as register_job_commands
 from services.cli.render import render_command
 from workers.scene.builtin import BUILTIN_SCENES
 
@@ -17,6 +18,7 @@ app = typer.Typer(
 )
 
 app.command("render")(render_command)
+register_job_commands(app)  # submit, jobs, show, watch, cancel, download
 
 
 @app.command("scenes")
