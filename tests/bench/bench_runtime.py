@@ -6,6 +6,7 @@ real loop harness fitting a small MLP. Ratios are against producing batches in-p
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
 from collections.abc import Callable
@@ -76,6 +77,7 @@ def run() -> list[BenchSection]:
         "ratio = samples/s against in-process in this run"
     )
     with tempfile.TemporaryDirectory(prefix="nbake-bench-ray-", dir="/tmp") as temp_dir:
+        # Ray nices its workers to 15; on a shared machine that would measure other people's load
         ray.init(
             num_cpus=2,
             include_dashboard=False,
@@ -96,6 +98,7 @@ def run() -> list[BenchSection]:
                 stream.close()
         finally:
             ray.shutdown()
+    section.notes.append(f"load average over the last minute at the end: {os.getloadavg()[0]:.1f} on 2 cores")
     samples = STEPS * BATCH_SIZE
     for name, train_s, draw_s in zip(producers, training, drawing, strict=True):
         section.add(
