@@ -139,3 +139,23 @@ def test_infinite_gradient_names_the_parameter():
     with pytest.raises(TrainingDiverged, match=r"step 0: gradient of 3\.bias is inf") as error:
         train(small_mlp(), finite_loss_infinite_gradient, InProcessBatches(SPEC), CONFIG)
     assert error.value.tensor == "gradient of 3.bias"
+
+
+def test_parameter_groups_scale_the_scheduled_rate(tmp_path):
+    model = small_mlp()
+    frozen_before = model[0].weight.detach().clone()
+    trained_before = model[3].weight.detach().clone()
+    groups = [
+        {"params": list(model[0].parameters()), "lr_scale": 0.0},
+        {"params": list(model[3].parameters()), "lr_scale": 0.5},
+    ]
+    store = CheckpointStore(str(tmp_path), keep=1)
+    train(
+        model, mse, InProcessBatches(SPEC), CONFIG.model_copy(update={"steps": 4}), store, param_groups=groups
+    )
+    assert torch.equal(model[0].weight, frozen_before)
+    assert not torch.equal(model[3].weight, trained_before)
+    fresh = small_mlp()
+    optimizer = torch.optim.Adam([{"params": list(fresh[i].parameters()), "lr_scale": 1.0} for i in (0, 3)])
+    training_state.decode_optimizer(store.load(4), optimizer)
+    assert [g["lr_scale"] for g in optimizer.param_groups] == [0.0, 0.5]

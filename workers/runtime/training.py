@@ -11,7 +11,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 from pydantic import BaseModel, Field
@@ -103,16 +103,43 @@ def select_device() -> torch.device:
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
-def _batch_size(batch: Batch) -> int:
-    return len(next(iter(batch.values())))
-
-
 def _first_nonfinite_gradient(model: torch.nn.Module) -> tuple[str, float]:
     for name, parameter in model.named_parameters():
         if parameter.grad is not None and not torch.isfinite(parameter.grad).all():
             bad = parameter.grad[~torch.isfinite(parameter.grad)]
             return f"gradient of {name}", float(bad[0])
     return "gradient norm", math.nan
+
+
+class _ProgressMeter:
+    """Turns steps into progress events: rates and ETA over the window since the previous event."""
+
+    def __init__(self, total_steps: int) -> None:
+        self.total_steps = total_steps
+        self.samples = 0
+        self._restart_window()
+
+    def _restart_window(self) -> None:
+        self.window_start, self.window_samples, self.window_steps = time.perf_counter(), 0, 0
+
+    def count(self, batch: Batch) -> None:
+        size = len(next(iter(batch.values())))
+        self.samples += size
+        self.window_samples += size
+        self.window_steps += 1
+
+    def event(self, step: int, loss: float, lr: float) -> Progress:
+        window = max(time.perf_counter() - self.window_start, 1e-9)
+        progress = Progress(
+            step=step,
+            total_steps=self.total_steps,
+            loss=loss,
+            lr=lr,
+            samples_per_s=self.window_samples / window,
+            eta_s=(self.total_steps - step) * window / self.window_steps,
+        )
+        self._restart_window()
+        return progress
 
 
 def train(
@@ -122,16 +149,19 @@ def train(
     config: TrainConfig,
     checkpoints: CheckpointStore | None = None,
     on_progress: Callable[[Progress], None] | None = None,
+    param_groups: list[dict[str, Any]] | None = None,
 ) -> TrainResult:
     """Train `model` on `batches` for `config.steps` steps, resuming from the latest checkpoint if any.
 
     `loss_fn(model, batch)` returns a scalar loss; the batch is already on the model's device.
+    `param_groups` (Adam's, default one group of all parameters) may set `weight_decay` and an
+    `lr_scale` that multiplies the scheduled rate, e.g. to treat a hash grid and an MLP differently.
     """
     device = select_device()
     model.to(device)
     amp = config.mixed_precision and device.type == "cuda"
     optimizer = torch.optim.Adam(
-        model.parameters(),
+        param_groups or model.parameters(),
         lr=config.schedule.lr,
         betas=config.betas,
         eps=config.eps,
@@ -144,16 +174,15 @@ def train(
         loop.restore_rng()
     batches.seek(loop.batch_position)
     step, best_loss = loop.step, loop.best_loss
-    parameters = [p for p in model.parameters() if p.requires_grad]
-
-    started = window_start = time.perf_counter()
-    samples = window_samples = window_steps = 0
+    parameters = [p for group in optimizer.param_groups for p in group["params"]]
+    meter = _ProgressMeter(config.steps)
+    started = time.perf_counter()
     loss_value = math.nan
     while step < config.steps:
         batch = {k: v.to(device, non_blocking=True) for k, v in next(batches).items()}
         lr = config.schedule.at(step, config.steps)
         for group in optimizer.param_groups:
-            group["lr"] = lr
+            group["lr"] = lr * group.get("lr_scale", 1.0)
         with torch.autocast(device.type, enabled=amp):
             loss = loss_fn(model, batch)
         scaler.scale(loss).backward()
@@ -172,32 +201,17 @@ def train(
 
         step += 1
         best_loss = loss_value if best_loss is None else min(best_loss, loss_value)
-        size = _batch_size(batch)
-        samples += size
-        window_samples += size
-        window_steps += 1
+        meter.count(batch)
         if checkpoints is not None and (step % config.checkpoint_every == 0 or step == config.steps):
             state = training_state.LoopState.capture(step, batches.position, best_loss)
             checkpoints.save(step, training_state.encode(model, optimizer, scaler, state))
         if on_progress is not None and (step % config.progress_every == 0 or step == config.steps):
-            now = time.perf_counter()
-            window = max(now - window_start, 1e-9)
-            on_progress(
-                Progress(
-                    step=step,
-                    total_steps=config.steps,
-                    loss=loss_value,
-                    lr=lr,
-                    samples_per_s=window_samples / window,
-                    eta_s=(config.steps - step) * window / window_steps,
-                )
-            )
-            window_start, window_samples, window_steps = time.perf_counter(), 0, 0
+            on_progress(meter.event(step, loss_value, lr))
 
     return TrainResult(
         steps=step,
         final_loss=loss_value,
         best_loss=math.nan if best_loss is None else best_loss,
         seconds=time.perf_counter() - started,
-        samples=samples,
+        samples=meter.samples,
     )
