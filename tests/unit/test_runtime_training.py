@@ -159,3 +159,14 @@ def test_parameter_groups_scale_the_scheduled_rate(tmp_path):
     optimizer = torch.optim.Adam([{"params": list(fresh[i].parameters()), "lr_scale": 1.0} for i in (0, 3)])
     training_state.decode_optimizer(store.load(4), optimizer)
     assert [g["lr_scale"] for g in optimizer.param_groups] == [0.0, 0.5]
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="on CUDA mixed precision is meant to change results")
+def test_mixed_precision_is_a_no_op_on_cpu():
+    results = []
+    for mixed_precision in (True, False):
+        model = small_mlp()
+        config = CONFIG.model_copy(update={"steps": 3, "mixed_precision": mixed_precision})
+        train(model, mse, InProcessBatches(SPEC), config)
+        results.append(model.state_dict())
+    assert all(torch.equal(results[0][k], results[1][k]) for k in results[0])
