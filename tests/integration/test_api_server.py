@@ -147,15 +147,16 @@ def submit(client: httpx.Client, expect: int = 201, headers: dict | None = None,
 
 
 def events(
-    client: httpx.Client, job_id: str, last_event_id: int | None = None, timeout: float = 180
+    client: httpx.Client, job_id: str, last_event_id: int | None = None, timeout: float = 240
 ) -> list[dict]:
     """Follow a job's SSE stream until the server ends it (after the final state); the parsed events."""
     headers = {"Last-Event-ID": str(last_event_id)} if last_event_id is not None else {}
-    parsed, fields = [], {}
-    with client.stream("GET", f"/v1/jobs/{job_id}/events", headers=headers, timeout=timeout) as response:
+    parsed, fields, deadline = [], {}, time.monotonic() + timeout
+    with client.stream("GET", f"/v1/jobs/{job_id}/events", headers=headers, timeout=60) as response:
         assert response.status_code == 200, response.read()
         assert response.headers["content-type"].startswith("text/event-stream")
-        for line in response.iter_lines():
+        for line in response.iter_lines():  # a keep-alive comment arrives at least every 15 s
+            assert time.monotonic() < deadline, f"no final state within {timeout} s; events so far: {parsed}"
             if line == "":
                 if "data" in fields:
                     event = json.loads(fields["data"])

@@ -1,0 +1,161 @@
+"""Crash recovery: SIGKILL the `nbake serve` process (and with it its Ray cluster) while a job renders,
+start it again on the same data dir, and the job finishes from its checkpoint: the same image as an
+uninterrupted render, no event lost, and the job queued behind it runs too."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from tests.integration import test_api_server as api
+from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, events, free_port, submit, wait_for
+from workers.models.render.config import RenderConfig
+from workers.render.image_io import read_exr
+from workers.render.render import render
+from workers.scene.builtin import get_builtin
+from workers.scene.compile import compile_scene
+
+database = api.database  # fixture
+SEED = 3
+
+
+class ServeProcess:
+    """`nbake serve` in its own session (process group), so a SIGKILL hits the server alone and the
+    teardown can still remove anything of the group that outlived it."""
+
+    def __init__(self, data_dir: Path, database: api.DatabaseChoice):
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = {**os.environ, "NBAKE_TOKENS": TOKENS_ENV, "NBAKE_MAX_RUNNING": "1"}
+        env.pop("RAY_ADDRESS", None)
+        if database.url:
+            env |= {"NBAKE_DATABASE_URL": database.url, "NBAKE_DATABASE_SCHEMA": database.schema}
+        command = [
+            NBAKE,
+            "serve",
+            "--port",
+            str(self.port),
+            "--data-dir",
+            str(data_dir),
+            "--log-level",
+            "warning",
+        ]
+        self.log = open(data_dir.parent / f"serve-{self.port}.log", "w")  # noqa: SIM115  (closed in stop)
+        self.process = subprocess.Popen(
+            command, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True
+        )
+        deadline = time.monotonic() + 120
+        while not self._ready():
+            assert self.process.poll() is None, f"nbake serve exited: {self.process.returncode}"
+            assert time.monotonic() < deadline, "nbake serve was not ready in time"
+            time.sleep(0.25)
+
+    def _ready(self) -> bool:
+        try:
+            return httpx.get(f"{self.url}/readyz", timeout=2).status_code == 200
+        except httpx.TransportError:
+            return False
+
+    def client(self) -> httpx.Client:
+        return httpx.Client(
+            base_url=self.url, headers={"Authorization": f"Bearer {TOKENS['admin']}"}, timeout=60
+        )
+
+    def kill(self) -> None:
+        """SIGKILL the server process only, as a crash would."""
+        self.process.kill()
+        self.process.wait()
+        self._wait_group_gone(timeout=60)
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+        self._wait_group_gone(timeout=30)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.process.pid, signal.SIGKILL)  # our own group: Ray processes that outlived us
+        self.log.close()
+
+    def _wait_group_gone(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                os.killpg(self.process.pid, 0)
+            except ProcessLookupError:
+                return
+            time.sleep(0.2)
+
+
+@pytest.fixture
+def serve(database) -> Iterator:
+    """Start servers on one short-pathed data dir (Ray's sockets live under it); stop them all after."""
+    started: list[ServeProcess] = []
+    with tempfile.TemporaryDirectory(prefix="nbt-", dir="/tmp") as root:
+        data_dir = Path(root) / "data"
+        data_dir.mkdir()
+
+        def start() -> ServeProcess:
+            started.append(ServeProcess(data_dir, database))
+            return started[-1]
+
+        try:
+            yield start
+        finally:
+            for process in started:
+                process.stop()
+
+
+def test_a_killed_server_resumes_its_jobs_from_checkpoints(serve):
+    config = {"spp": 384, "checkpoint_interval_s": 0}
+    first = serve()
+    with first.client() as client:
+        running = submit(client, kind="render", scene="cornell_box", preset="quick", config=config, seed=SEED)
+        queued = submit(
+            client, kind="render", scene="cornell_box", preset="quick", config={"spp": 2}, seed=SEED
+        )
+        deadline = time.monotonic() + 180
+        while (client.get(f"/v1/jobs/{running['id']}").json()["progress"] or {}).get("step", 0) < 128:
+            assert time.monotonic() < deadline, "the render made no progress"
+            time.sleep(0.1)
+    first.kill()
+
+    second = serve()
+    with second.client() as client:
+        assert client.get(f"/v1/jobs/{queued['id']}").json()["state"] in ("QUEUED", "RUNNING", "SUCCEEDED")
+        stream = events(client, running["id"])
+        done = wait_for(client, queued["id"], {"SUCCEEDED"})
+        job = client.get(f"/v1/jobs/{running['id']}").json()
+        image = client.get(f"/v1/artifacts/{job['artifact_id']}/files/image.exr").content
+
+    assert job["state"] == "SUCCEEDED" and done["state"] == "SUCCEEDED"
+    assert [e["seq"] for e in stream] == list(range(1, len(stream) + 1))
+    resumed = [
+        e["data"]["message"]
+        for e in stream
+        if "resuming from the checkpoint" in (e["data"].get("message") or "")
+    ]
+    assert resumed, [e["data"] for e in stream]
+    assert any("driver was gone" in (e["data"].get("message") or "") for e in stream)
+    assert job["attempts"] == 1  # a server restart is not the job's failure
+
+    exr = Path(tempfile.mkdtemp(prefix="nbt-exr-", dir="/tmp")) / "image.exr"
+    exr.write_bytes(image)
+    direct = render(
+        compile_scene(get_builtin("cornell_box")), RenderConfig.model_validate(job["config"]).settings(SEED)
+    )
+    np.testing.assert_array_equal(read_exr(exr), direct.image)
+    exr.unlink()
+    exr.parent.rmdir()
