@@ -214,3 +214,51 @@ def test_no_nan_or_inf_with_extreme_roughness_grazing_views_and_a_blinding_sun(r
     compiled.environment_image[3, 5] = 1e9  # a single blinding texel
     image = render(compiled, RenderSettings(spp=8, max_depth=12)).image
     assert np.isfinite(image).all() and (image >= 0).all()
+
+
+def test_parallel_render_keeps_a_custom_intersector():
+    """Workers must answer with the tracer's own intersector, not a fresh Embree scene."""
+    compiled = compile_scene(cornell_box())
+
+    class Nothing:  # an intersector that sees no geometry: only the (absent) environment remains
+        def intersect(self, origins, directions):
+            from workers.render.embree import Hits
+
+            n = len(origins)
+            return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+
+        def occluded(self, origins, directions, t_max):
+            return np.zeros(len(origins), bool)
+
+    tracer = PathTracer(compiled, intersector=Nothing())
+    image = render(tracer, RenderSettings(spp=2, width=32, height=32, threads=2, tile_size=16)).image
+    assert not image.any()
+
+
+FORKED_RENDER = """
+import hashlib, numpy as np
+import workers.render.render as r
+from workers.scene.builtin import cornell_box
+from workers.scene.compile import compile_scene
+compiled = compile_scene(cornell_box())
+pools = []
+original = r._worker_pool.__init__
+def spy(self, *args):
+    original(self, *args)
+    pools.append(self.forked)
+r._worker_pool.__init__ = spy
+images = [r.render(compiled, r.RenderSettings(spp=4, width=40, height=24, tile_size=16, threads=t)).image
+          for t in (1, 2)]
+digests = [hashlib.sha256(image.tobytes()).hexdigest() for image in images]
+print(pools, digests[0] == digests[1])
+"""
+
+
+def test_forked_workers_render_the_same_image_as_one_worker():
+    """In a fresh single-threaded process two workers are forked processes; the image is unchanged."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", FORKED_RENDER], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["[False,", "True]", "True"]

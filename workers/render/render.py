@@ -23,6 +23,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.render.camera import PinholeCamera
+from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
 from workers.scene.compile import CompiledScene
 
@@ -175,7 +176,10 @@ class _worker_pool:
 
     def __init__(self, tracer: PathTracer, workers: int, items: int):
         fork_ok = "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
-        self.forked = fork_ok and workers > 1 and items > 1
+        # Forked workers rebuild a plain Embree tracer: one with other intersectors (neural objects,
+        # whose torch state is not fork-safe either) stays in this process, on threads.
+        plain = isinstance(tracer.rays, RayScene) and tracer.primary is tracer.rays
+        self.forked = fork_ok and plain and workers > 1 and items > 1
         self.tracer, self.workers = tracer, workers
         self.pool: Executor | None = None
 
