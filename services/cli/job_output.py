@@ -35,7 +35,9 @@ class Output:
     def following(self, job: Job) -> Iterator[Callable[[JobEvent], None]]:
         """A callback for each event of `job`: a JSON line, or a progress bar and log lines on stderr."""
         if self.json:
-            yield lambda e: self.line(e.type, job_id=e.job_id, seq=e.seq, time=e.time, data=e.data)
+            yield lambda e: self.line(
+                e.type, job_id=e.job_id, seq=e.seq, time=e.time.isoformat(), data=e.data
+            )
             return
         columns = (
             TextColumn("{task.description}"),
