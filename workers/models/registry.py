@@ -14,12 +14,15 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from pydantic import BaseModel
 
 from workers.runtime.checkpoints import CheckpointStore
 from workers.scene.spec import SceneSpec
+
+if TYPE_CHECKING:
+    import numpy as np
 
 # One line per kind: a module exposing `KIND`, an object satisfying `ModelKind`.
 KIND_MODULES = ("workers.models.render", "workers.models.lsnif")
@@ -136,6 +139,64 @@ class ModelKind(Protocol):
     def resources(self, config: BaseModel) -> Resources: ...
 
     def run(self, ctx: JobContext) -> RunOutput: ...
+
+
+# ------------------------------------------------------------------ inference
+# A kind that can be served sets `infer_module` (one line) to a module exposing `INFERENCE`, an object
+# satisfying `Inference`; the inference service reads it through `get_inference` and never names a kind.
+
+QUERY, RENDER = "query", "render"
+
+
+@dataclass(frozen=True)
+class ArraySpec:
+    """One input array of an operation: the dtype it is converted to and its shape, `None` where any
+    length goes. Axis 0 is the row axis that dynamic batching concatenates along."""
+
+    dtype: str
+    shape: tuple[int | None, ...]
+    required: bool = True
+
+
+@dataclass(frozen=True)
+class Operation:
+    """What an operation takes (typed parameters, input arrays) and whether concurrent requests with equal
+    parameters may be merged row-wise into one call (`batched`), which only row-independent models allow."""
+
+    params: type[BaseModel]
+    inputs: Mapping[str, ArraySpec] = field(default_factory=dict)
+    batched: bool = False
+
+
+@dataclass
+class Answer:
+    """Output arrays (row-aligned with the inputs for a batched operation; `image` (H, W, C) float32
+    linear for `render`) and JSON-serialisable metadata such as the names that indices refer to."""
+
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+class LoadedModel(Protocol):
+    """An artifact in memory, ready to answer; `nbytes` is what it holds, for the service's memory budget."""
+
+    nbytes: int
+
+    def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer: ...
+
+
+class Inference(Protocol):
+    """A kind's `infer`: the operations its artifacts answer and how to load one from its files."""
+
+    operations: Mapping[str, Operation]
+
+    def load(self, folder: Path, device: str) -> LoadedModel: ...
+
+
+def get_inference(name: str) -> Inference | None:
+    """The kind's inference (imported on first use), or None for a kind that cannot be served."""
+    module = getattr(get_kind(name), "infer_module", None)
+    return None if module is None else importlib.import_module(module).INFERENCE
 
 
 def resolve_preset(
