@@ -18,9 +18,10 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PIP) install -q -e clients/python
 	touch $(STAMP)
 
-## The main job on the embedded default.
+## The main job on the embedded default: nbake serve on a free port, a render job of cornell_box over
+## HTTP with its progress, the artifact's files downloaded to out/run/, the server stopped.
 run: venv
-	$(VENV)/bin/nbake render cornell_box --spp 64 --width 256 --height 256 -o out/cornell_box.exr --aov
+	$(PY) -m services.cli.run_job --scene cornell_box --preset default --config '{"spp": 64}' --out out/run
 
 ## The default test suite (what CI runs).
 test: venv
