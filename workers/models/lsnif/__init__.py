@@ -19,6 +19,7 @@ class LsnifKind:
     name = "lsnif"
     config_model = LsnifConfig
     presets = PRESETS
+    infer_module = "workers.models.lsnif.infer"
 
     def resolve_config(self, preset: str, overrides: dict) -> LsnifConfig:
         return resolve_preset(LsnifConfig, PRESETS, preset, overrides)

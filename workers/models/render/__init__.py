@@ -14,6 +14,7 @@ class RenderKind:
     name = "render"
     config_model = RenderConfig
     presets = PRESETS
+    infer_module = "workers.models.render.infer"
 
     def resolve_config(self, preset: str, overrides: dict) -> RenderConfig:
         return resolve_preset(RenderConfig, PRESETS, preset, overrides)
