@@ -62,7 +62,8 @@ class Services:
             token, self.admin_token_file = generated_admin_token(self.settings.data_dir)
             tokens = {token: "admin"}
         store_tokens(self.db, tokens)
-        self.scheduler.start()
+        if self.settings.scheduling:
+            self.scheduler.start()
 
     def stop(self) -> None:
         self.scheduler.stop()

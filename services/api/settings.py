@@ -26,6 +26,7 @@ class ServiceSettings(BaseModel):
     upload_limits: UploadLimits = UploadLimits()
     scheduler_owner: str | None = Field(None, description="default: host name and data dir")
     lease_s: float = Field(30.0, gt=0, description="a RUNNING job whose owner is silent this long is adopted")
+    scheduling: bool = Field(True, description="run the scheduler here; False for API-only replicas")
 
     @classmethod
     def from_env(cls, data_dir: Path, **overrides) -> ServiceSettings:
