@@ -44,43 +44,45 @@ class JobRepository:
         """Insert `job`, or return the job an idempotency key already names: (job, created).
 
         `content_key` (None with `force`) reuses a queued, running or succeeded job with the same work;
-        `header_key` reuses whatever job that key created and refuses a different request under it.
+        `header_key` reuses whatever job that key named and refuses a different request under it. Keys are
+        inserted, never overwritten blindly: of concurrent identical submissions one inserts, the others
+        hit the primary key, roll back, retry and find it.
         """
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
-                    existing = self._existing(session, job.idempotency_key, content_key, header_key)
-                    if existing is not None:
-                        return existing, False
-                    session.add(job)
-                    session.flush()
-                    self._append(session, job, "state", {"state": job.state, "message": "submitted"})
-                    key = job.idempotency_key
-                    keys = [(content_key, key), (header_key, key)] if content_key else [(header_key, key)]
-                    for name, request_hash in keys:
-                        if name is not None:
-                            session.merge(IdempotencyKey(key=name, job_id=job.id, request_hash=request_hash))
-                    return job, True
+                    return self._create(session, job, content_key, header_key)
             except IntegrityError:
                 if attempt == INSERT_ATTEMPTS - 1:
                     raise
                 job = _fresh_copy(job)
         raise AssertionError("unreachable")
 
-    def _existing(
-        self, session: Session, request_hash: str, content_key: str | None, header_key: str | None
-    ) -> Job | None:
-        if header_key is not None and (row := session.get(IdempotencyKey, header_key)) is not None:
+    def _create(
+        self, session: Session, job: Job, content_key: str | None, header_key: str | None
+    ) -> tuple[Job, bool]:
+        request_hash = job.idempotency_key
+        if header_key is not None and (row := _locked_key(session, header_key)) is not None:
             if row.request_hash != request_hash:
                 raise Conflict(
                     "this Idempotency-Key was used for a different request; use a new key", "Idempotency-Key"
                 )
-            return self._job(session, row.job_id)
-        if content_key is not None and (row := session.get(IdempotencyKey, content_key)) is not None:
-            job = self._job(session, row.job_id)
-            if job.state in REUSABLE:
-                return job
-        return None
+            return self._job(session, row.job_id), False
+        content = _locked_key(session, content_key) if content_key is not None else None
+        if content is not None and (existing := self._job(session, content.job_id)).state in REUSABLE:
+            if header_key is not None:
+                session.add(IdempotencyKey(key=header_key, job_id=existing.id, request_hash=request_hash))
+            return existing, False
+        session.add(job)
+        session.flush()
+        self._append(session, job, "state", {"state": job.state, "message": "submitted"})
+        if content is not None:  # the work failed or was cancelled before: this job takes the key over
+            content.job_id = job.id
+        elif content_key is not None:
+            session.add(IdempotencyKey(key=content_key, job_id=job.id, request_hash=request_hash))
+        if header_key is not None:
+            session.add(IdempotencyKey(key=header_key, job_id=job.id, request_hash=request_hash))
+        return job, True
 
     # ------------------------------------------------------------------ reading
 
@@ -243,6 +245,10 @@ class JobRepository:
     def _append(session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
         job.last_event_seq += 1
         session.add(Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow()))
+
+
+def _locked_key(session: Session, key: str) -> IdempotencyKey | None:
+    return session.get(IdempotencyKey, key, with_for_update=True)
 
 
 def _fresh_copy(job: Job) -> Job:
