@@ -1,0 +1,51 @@
+"""`nbake serve-inference`: the thin inference service in its own process and port, reading the same
+store and token database as `nbake serve` (same data dir or the same `NBAKE_*` settings)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+import uvicorn
+
+from services.cli.errors import fail
+from services.inference.app import create_inference_app
+from services.inference.settings import InferenceSettings
+
+
+def serve_inference_command(
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=0, max=65535, help="TCP port of the REST API.")] = 8090,
+    grpc_port: Annotated[
+        int, typer.Option(min=0, max=65535, help="TCP port of the gRPC InferenceService.")
+    ] = 50052,
+    data_dir: Annotated[
+        Path, typer.Option(help="The job server's data dir (store and tokens).", envvar="NBAKE_DATA_DIR")
+    ] = Path("nbake-data"),
+    memory_bytes: Annotated[
+        int | None, typer.Option(min=1, help="Memory budget of loaded models (NBAKE_INFERENCE_MEMORY_BYTES).")
+    ] = None,
+    max_wait_ms: Annotated[
+        float | None, typer.Option(min=0, help="How long a batch waits for more requests.")
+    ] = None,
+    device: Annotated[
+        str | None, typer.Option(help="auto (CUDA when present), cpu or cuda[:n] (NBAKE_INFERENCE_DEVICE).")
+    ] = None,
+    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+) -> None:
+    """Serve trained artifacts: GET /v1/models, POST /v1/artifacts/{id}:query and :render (OpenAPI at
+    /docs), and the gRPC InferenceService. Tokens are the job server's (start `nbake serve` once)."""
+    try:
+        settings = InferenceSettings.from_env(
+            data_dir, memory_budget_bytes=memory_bytes, max_wait_ms=max_wait_ms, device=device
+        )
+    except ValueError as error:
+        fail("settings", str(error))
+    uvicorn.run(
+        create_inference_app(settings, host, grpc_port),
+        host=host,
+        port=port,
+        log_level=log_level,
+        timeout_graceful_shutdown=5,
+    )

@@ -1,0 +1,56 @@
+"""The inference app factory: REST routes, problem+json errors (the job server's handlers), a body limit,
+and in its lifespan the gRPC `InferenceService` on its own port (when one is given)."""
+
+from __future__ import annotations
+
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from services.api import problems
+from services.api.limits import BodyLimit
+from services.inference.grpc_server import start_grpc_inference
+from services.inference.routes import artifacts, health, models
+from services.inference.service import InferenceService
+from services.inference.settings import InferenceSettings
+from services.inference.state import InferenceState
+from services.jobs.db import Database
+
+
+def create_inference_app(
+    settings: InferenceSettings, grpc_host: str = "127.0.0.1", grpc_port: int | None = None
+):
+    shared = settings.shared
+    state = InferenceState(InferenceService(settings), Database(shared.db_url, shared.database_schema))
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        grpc_server = None
+        if grpc_port is not None:
+            grpc_server = start_grpc_inference(state, grpc_host, grpc_port, settings.max_body_bytes)
+            app.state.grpc_port = grpc_server.port
+        try:
+            yield
+        finally:
+            if grpc_server is not None:
+                grpc_server.stop()
+            state.db.dispose()
+
+    app = FastAPI(
+        title="neuralbake inference",
+        version="1",
+        summary="Serve trained neuralbake artifacts: batched queries and renders.",
+        description="Loads artifacts from the job server's store by id (verified), keeps them in an LRU "
+        "cache bounded by a memory budget and merges concurrent queries for one model. Arrays travel as "
+        "base64 in JSON or as a binary body (a JSON header line, then raw arrays). Errors are "
+        "`application/problem+json`.",
+        lifespan=lifespan,
+    )
+    app.state.services = state
+    problems.install(app)
+    app.add_middleware(
+        BodyLimit, json_bytes=settings.max_body_bytes, upload_bytes=settings.max_body_bytes, upload_paths=()
+    )
+    for module in (models, artifacts, health):
+        app.include_router(module.router)
+    return app

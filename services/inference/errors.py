@@ -1,0 +1,36 @@
+"""The inference service's errors a caller can act on. They are job-service errors (status, title,
+detail, field), so the REST problem handlers and the gRPC error mapping of `services/api` serve them
+unchanged."""
+
+from __future__ import annotations
+
+from services.jobs.errors import JobServiceError
+
+
+class InvalidQuery(JobServiceError):
+    """A body whose arrays or parameters do not fit the operation (shape, dtype, NaN, unknown names)."""
+
+    status, title = 422, "Invalid query"
+
+
+class MalformedBody(JobServiceError):
+    status, title = 400, "Malformed body"
+
+
+class UnsupportedOperation(JobServiceError):
+    status, title = 400, "Unsupported operation"
+
+
+class TooManyRows(JobServiceError):
+    status, title = 413, "Request too large"
+
+
+class ArtifactRefused(JobServiceError):
+    """The artifact exists but cannot be served: a file fails its digest, or it exceeds the memory budget."""
+
+    status, title = 409, "Artifact refused"
+
+
+class Overloaded(JobServiceError):
+    status, title = 503, "Timed out"
+    headers = {"Retry-After": "1"}  # noqa: RUF012

@@ -1,0 +1,142 @@
+"""`InferenceService` over gRPC, beside the REST app on its own port: the same service core (cache,
+batching, limits), the same tokens (checked with `services.api.grpc.auth.authorize`) and the same
+error statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRPC API."""
+
+from __future__ import annotations
+
+from concurrent import futures
+from dataclasses import dataclass
+
+import grpc
+import numpy as np
+from google.protobuf import json_format, struct_pb2
+from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+from grpc_reflection.v1alpha import reflection
+from neuralbake.v1 import inference_pb2, inference_pb2_grpc
+
+from services.api.grpc.auth import authorize, bearer_token
+from services.api.grpc.errors import ErrorMapping
+from services.api.grpc.handlers import Behaviour, rewrap
+from services.inference import images
+from services.inference.errors import MalformedBody
+from services.inference.service import ModelInfo
+from services.inference.state import InferenceState
+from services.inference.wire import ArrayHeader, array_bytes, decode_array
+from services.jobs.db import Database
+from workers.models.registry import QUERY, RENDER
+
+SERVICE = inference_pb2.DESCRIPTOR.services_by_name["InferenceService"].full_name
+MAX_WORKERS = 96  # calls block while their batch runs: enough threads for many concurrent clients
+STOP_GRACE_S = 5.0
+
+
+class InferenceAuth(grpc.ServerInterceptor):
+    """Every InferenceService call needs scope `read`; health and reflection stay open."""
+
+    def __init__(self, db: Database):
+        self.db = db
+
+    def intercept_service(self, continuation, handler_call_details):
+        handler = continuation(handler_call_details)
+        if handler is None or not handler_call_details.method.startswith(f"/{SERVICE}/"):
+            return handler
+
+        def around(behaviour: Behaviour, streaming: bool) -> Behaviour:
+            def checked(request, context):
+                authorize(self.db, bearer_token(context), "read")
+                return behaviour(request, context)
+
+            return checked
+
+        return rewrap(handler, around)
+
+
+def _model(info: ModelInfo) -> inference_pb2.Model:
+    return inference_pb2.Model(**info.model_dump())
+
+
+def _struct(values: dict) -> struct_pb2.Struct:
+    message = struct_pb2.Struct()
+    message.update(values)
+    return message
+
+
+def _arrays(messages) -> dict[str, np.ndarray]:
+    arrays = {}
+    for message in messages:
+        if message.name in arrays:
+            raise MalformedBody("named twice", f"arrays.{message.name}")
+        header = ArrayHeader(dtype=message.dtype, shape=list(message.shape))
+        arrays[message.name] = decode_array(f"arrays.{message.name}", header, message.data)
+    return arrays
+
+
+def _array_message(name: str, array: np.ndarray) -> inference_pb2.Array:
+    return inference_pb2.Array(
+        name=name, dtype=array.dtype.name, shape=list(array.shape), data=array_bytes(array)
+    )
+
+
+class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
+    def __init__(self, state: InferenceState):
+        self.service = state.service
+
+    def ListModels(self, request, context):
+        return inference_pb2.ListModelsResponse(models=[_model(m) for m in self.service.models()])
+
+    def LoadModel(self, request, context):
+        return inference_pb2.LoadModelResponse(model=_model(self.service.served(request.artifact_id).info()))
+
+    def Query(self, request, context):
+        params = json_format.MessageToDict(request.params)
+        served, answer = self.service.call(request.artifact_id, QUERY, params, _arrays(request.arrays))
+        return inference_pb2.QueryResponse(
+            artifact_id=request.artifact_id,
+            kind=served.loaded.kind,
+            meta=_struct(answer.meta),
+            arrays=[_array_message(name, array) for name, array in answer.arrays.items()],
+        )
+
+    def Render(self, request, context):
+        params = json_format.MessageToDict(request.params)
+        _, answer = self.service.call(request.artifact_id, RENDER, params, {})
+        media_type = images.media_type_for(request.media_type)
+        return inference_pb2.RenderResponse(
+            media_type=media_type, data=images.encode(answer.arrays["image"], media_type)
+        )
+
+
+@dataclass
+class GrpcInference:
+    server: grpc.Server
+    health: health.HealthServicer
+    port: int
+
+    def stop(self) -> None:
+        self.health.enter_graceful_shutdown()
+        self.server.stop(STOP_GRACE_S).wait()
+
+
+def start_grpc_inference(
+    state: InferenceState, host: str, port: int, max_message_bytes: int
+) -> GrpcInference:
+    """Serve InferenceService on `host:port` (0: any free port; `.port` says which)."""
+    server = grpc.server(
+        futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-inference-grpc"),
+        interceptors=[ErrorMapping(), InferenceAuth(state.db)],
+        options=[
+            ("grpc.max_receive_message_length", max_message_bytes),
+            ("grpc.max_send_message_length", max_message_bytes),
+        ],
+    )
+    inference_pb2_grpc.add_InferenceServiceServicer_to_server(InferenceServicer(state), server)
+    checker = health.HealthServicer()
+    health_pb2_grpc.add_HealthServicer_to_server(checker, server)
+    health_name = health_pb2.DESCRIPTOR.services_by_name["Health"].full_name
+    reflection.enable_server_reflection((SERVICE, health_name, reflection.SERVICE_NAME), server)
+    address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    bound = server.add_insecure_port(address)
+    server.start()
+    for name in ("", SERVICE):
+        checker.set(name, health_pb2.HealthCheckResponse.SERVING)
+    return GrpcInference(server, checker, bound)

@@ -1,0 +1,1 @@
+"""REST routes of the inference service, one module per concern."""

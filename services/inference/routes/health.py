@@ -1,0 +1,47 @@
+"""Open endpoints for orchestrators and scrapers: liveness, readiness, Prometheus metrics."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+from fastapi.responses import JSONResponse, Response
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from sqlalchemy import select
+
+from services.api.routes.health import PROBE
+from services.inference.state import StateDep
+from services.jobs.tables import ApiToken
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/healthz")
+def healthz() -> dict[str, str]:
+    """The process answers."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", responses={503: {"description": "The token database or the store is unreachable"}})
+def readyz(state: StateDep) -> JSONResponse:
+    """The job database's tokens (start `nbake serve` once to create them) and the artifact store."""
+
+    def tokens() -> None:
+        with state.db.reading() as session:
+            session.execute(select(ApiToken.scope).limit(1))
+
+    checks = {"tokens": tokens, "store": lambda: state.service.blobs.exists(PROBE)}
+    results = {}
+    for name, check in checks.items():
+        try:
+            check()
+            results[name] = "ok"
+        except Exception as error:  # any failure means not ready; say which and why
+            results[name] = f"{type(error).__name__}: {error}"
+    ready = all(value == "ok" for value in results.values())
+    body = {"status": "ok" if ready else "unavailable", "device": state.service.device, "checks": results}
+    return JSONResponse(body, 200 if ready else 503)
+
+
+@router.get("/metrics", response_class=Response)
+def metrics(state: StateDep) -> Response:
+    """Requests, latency, batch sizes and cache hits, in the Prometheus text format."""
+    return Response(generate_latest(state.service.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -1,0 +1,26 @@
+"""What is loaded, and warming a model before its first query."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Depends
+from starlette.concurrency import run_in_threadpool
+
+from services.api.auth import require
+from services.api.problems import PROBLEM_RESPONSES
+from services.inference.service import ModelInfo
+from services.inference.state import StateDep
+
+router = APIRouter(prefix="/v1/models", tags=["models"], dependencies=[Depends(require("read"))])
+
+
+@router.get("", responses=PROBLEM_RESPONSES)
+def list_models(state: StateDep) -> list[ModelInfo]:
+    """Loaded models, least recently used first: the next to be evicted when the memory budget is full."""
+    return state.service.models()
+
+
+@router.post("/{artifact_id}:load", responses=PROBLEM_RESPONSES)
+async def load_model(artifact_id: str, state: StateDep) -> ModelInfo:
+    """Fetch, verify and load an artifact now, so its first query does not pay for it."""
+    served = await run_in_threadpool(state.service.served, artifact_id)
+    return served.info()

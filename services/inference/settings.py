@@ -1,0 +1,45 @@
+"""What an inference server is configured with. The database (for tokens) and the artifact store come
+from the same `NBAKE_*` settings as the job server's, so both read one store and share one set of tokens."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from services.api.settings import ServiceSettings
+
+
+class InferenceSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    shared: ServiceSettings = Field(description="the job server's settings: its database and store")
+    memory_budget_bytes: int = Field(1 << 30, ge=1, description="loaded models beyond it evict the LRU one")
+    max_batch_rows: int = Field(1 << 16, ge=1, description="rows one batched model call may merge")
+    max_wait_ms: float = Field(2.0, ge=0, description="how long a batch waits for more requests")
+    max_rows: int = Field(1 << 20, ge=1, description="rows (rays, pixels) one request may ask for")
+    request_timeout_s: float = Field(30.0, gt=0, description="a request waiting longer gets a 503")
+    max_body_bytes: int = Field(64 << 20, ge=1024, description="largest request body")
+    device: str = Field("auto", description="`auto` (CUDA when present, else CPU), `cpu` or `cuda[:n]`")
+
+    @classmethod
+    def from_env(cls, data_dir: Path, **overrides) -> InferenceSettings:
+        env = {
+            "memory_budget_bytes": os.environ.get("NBAKE_INFERENCE_MEMORY_BYTES"),
+            "device": os.environ.get("NBAKE_INFERENCE_DEVICE"),
+        }
+        values = {k: v for k, v in env.items() if v} | {k: v for k, v in overrides.items() if v is not None}
+        return cls(shared=ServiceSettings.from_env(data_dir), **values)
+
+    @property
+    def work_dir(self) -> Path:
+        """Where artifacts are downloaded (verified) before loading; nothing stays there."""
+        return self.shared.data_dir / "inference"
+
+    def resolved_device(self) -> str:
+        if self.device != "auto":
+            return self.device
+        import torch  # only where models are evaluated
+
+        return "cuda" if torch.cuda.is_available() else "cpu"
