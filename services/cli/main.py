@@ -6,6 +6,7 @@ import typer
 
 from services.cli.jobs_commands import register as register_job_commands
 from services.cli.render import render_command
+from services.cli.serve_inference import serve_inference_command
 from workers.scene.builtin import BUILTIN_SCENES
 
 app = typer.Typer(
@@ -19,6 +20,7 @@ app = typer.Typer(
 
 app.command("render")(render_command)
 register_job_commands(app)  # submit, jobs, show, watch, cancel, download
+app.command("serve-inference")(serve_inference_command)
 
 
 @app.command("scenes")
