@@ -8,15 +8,24 @@ import torch
 
 from workers.models.lsnif import artifact
 from workers.models.lsnif.config import PRESETS, LsnifConfig
-from workers.models.lsnif.encoding import VoxelGridEncoding
+from workers.models.lsnif.encoding import VoxelGridEncoding, occupied_vertices
 from workers.models.lsnif.network import LsnifObject
 from workers.models.lsnif.plan import EMBREE, LSNIF, choose_objects, plan
-from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig, prepare_object, training_rays
+from workers.models.lsnif.sampling import (
+    ObjectRaySource,
+    ObjectReference,
+    ObjectSourceConfig,
+    prepare_object,
+    training_rays,
+)
 from workers.models.lsnif.train import lsnif_loss
+from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
 from workers.render.integrator import PathTracer
+from workers.render.materials import MaterialTable
 from workers.render.voxels import boundary_points
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
+from workers.scene.shapes import MeshData
 from workers.scene.spec import SceneObject, SphereShape, Transform
 
 QUICK = LsnifConfig.model_validate({**PRESETS["quick"], "min_triangles": 1000})
@@ -66,6 +75,35 @@ def test_encoder_stores_only_vertices_near_occupied_voxels_and_folds_to_the_tabl
     centre = (np.argwhere(occupied)[0] + 0.5) / occupied.shape[0]
     assert torch.all(big(torch.tensor(centre[None], dtype=torch.float32)) != 0)
     assert torch.isfinite(folded(torch.rand(100, 3))).all()
+    # The dense row map finds the same rows as the parent's binary search over the sorted keys.
+    searched = SparseHashGrid(occupied_vertices(occupied, big.geometry), 3, 3, 32, 2.0)
+    searched.table.data.copy_(big.table.data)
+    points = torch.rand(2000, 3)
+    torch.testing.assert_close(big(points), searched(points), rtol=0, atol=0)
+
+
+def test_only_filled_slots_are_encoded_and_empty_ones_feed_zeros(compiled):
+    prepared = prepare_object(compiled, len(compiled.objects) - 1, 16)
+    torch.manual_seed(0)
+    model = LsnifObject(prepared.grid, 1, QUICK)
+    points = torch.rand(64, QUICK.max_points, 3)
+    valid = torch.rand(64, QUICK.max_points) < 0.3
+    masked = model.encoding(points) * valid[..., None]
+    torch.testing.assert_close(model(points, valid), model.mlp(masked.flatten(1)))
+
+
+def test_normal_labels_face_the_ray_on_both_sides_of_a_thin_surface(compiled):
+    vertices = np.array([[-1.0, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]])  # wound to face +y
+    origins = np.array([[0.1, 1.0, 0.2], [0.1, -1.0, 0.2]])
+    directions = np.array([[0.0, -1.0, 0.0], [0.2, 1.0, 0.1]])
+    materials = MaterialTable(compiled)
+    for normals in (None, np.tile([0.0, 1.0, 0.0], (4, 1))):
+        reference = ObjectReference(MeshData(vertices, faces, normals), np.array([0]), materials)
+        labels = reference.intersect(origins, directions)
+        assert labels.hit.all()
+        np.testing.assert_allclose(labels.geometric_normal, [[0, 1, 0], [0, -1, 0]], atol=1e-12)
+        np.testing.assert_allclose(labels.normal, [[0, 1, 0], [0, -1, 0]], atol=1e-12)
 
 
 def test_training_rays_half_on_the_surface_and_loss_is_finite_and_trainable(compiled):
@@ -79,10 +117,14 @@ def test_training_rays_half_on_the_surface_and_loss_is_finite_and_trainable(comp
     batch = source.batch(0)
     again = ObjectRaySource(config, seed=3).batch(0)
     assert all(torch.equal(batch[k], again[k]) for k in batch)  # a pure function of (seed, index)
-    half = len(batch["hit"]) // 2
-    assert float(batch["hit"][:half].mean()) > 0.1  # sphere rays reach the ball
-    assert float(batch["hit"][half:].mean()) == 0.0  # rays leaving a convex surface never come back
+    # Rays that meet no occupied voxel are left out (certain misses), every surface ray is kept last.
+    assert torch.all(batch["valid"].any(1)) and len(batch["hit"]) < QUICK.batch_size
+    surface = QUICK.batch_size // 2
+    assert float(batch["hit"][:-surface].mean()) > 0.3  # sphere rays that reach the voxels often hit
+    assert float(batch["hit"][-surface:].mean()) == 0.0  # rays leaving a convex surface never come back
     assert torch.all((batch["distance"] >= 0) & (batch["distance"] <= 1))
+    hit = batch["hit"] > 0.5
+    torch.testing.assert_close(batch["normal"][hit].norm(dim=1), torch.ones(int(hit.sum())))
     torch.manual_seed(0)
     model = LsnifObject(source.prepared.grid, 1, QUICK)
     optimizer = torch.optim.Adam(model.parameters(), lr=0.01)
@@ -184,7 +226,10 @@ def test_intersector_places_scaled_and_rotated_instances_like_embree(compiled):
 def test_artifact_round_trip_answers_identically(tmp_path, compiled):
     prepared = prepare_object(compiled, len(compiled.objects) - 1, 16)
     torch.manual_seed(0)
-    model = LsnifObject(prepared.grid, 1, QUICK).eval()
+    model = LsnifObject(prepared.grid, 1, QUICK).round_to_storage().eval()
+    stored = artifact.export_object(model)
+    assert stored["grid.table"].dtype == np.float16 and stored["mlp.layers.0.weight"].dtype == np.float16
+    assert model.size_bytes() == sum(v.nbytes for v in stored.values())  # counts what the file holds
     files = artifact.save(
         tmp_path, QUICK, {"ball": model}, {"ball": {"materials": ["white"], "instances": []}}
     )

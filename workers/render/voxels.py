@@ -19,7 +19,7 @@ expression (`plane`), so the walk and a brute-force reference agree bit for bit.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -145,6 +145,10 @@ class BoundaryPoints:
     @property
     def in_box(self) -> np.ndarray:
         return self.t_far >= self.t_near
+
+    def take(self, rows: np.ndarray) -> BoundaryPoints:
+        """The walks of the rays `rows`."""
+        return BoundaryPoints(*(getattr(self, f.name)[rows] for f in fields(self)))
 
 
 def clip_to_box(

@@ -1,4 +1,5 @@
-"""An LSNIF artifact: per trained object its voxels, feature table and MLP (safetensors), plus a JSON
+"""An LSNIF artifact: per trained object its voxels, feature table and MLP (safetensors, the table and the
+MLP in float16 as the paper's sizes assume; see `LsnifObject.round_to_storage`), plus a JSON
 manifest with the config, the material lists and the instance mapping (which scene objects use which
 network, with their transforms at training time).
 
@@ -18,7 +19,7 @@ import safetensors.numpy
 import torch
 
 from workers.models.lsnif.config import LsnifConfig
-from workers.models.lsnif.network import LsnifObject
+from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.render.neural_intersector import NeuralInstance, NeuralIntersector
 from workers.render.voxels import VoxelGrid
 from workers.scene.compile import CompiledScene
@@ -34,22 +35,26 @@ def export_object(model: LsnifObject) -> dict[str, np.ndarray]:
         "voxels.bits": np.packbits(grid.occupied.reshape(-1)),
         "voxels.lo": grid.lo,
         "voxels.size": grid.size,
-        "grid.table": model.encoding.table.detach().cpu().numpy(),
+        "grid.table": _stored(model.encoding.table),
     }
-    tensors.update({f"mlp.{k}": v.detach().cpu().numpy() for k, v in model.mlp.state_dict().items()})
+    tensors.update({f"mlp.{k}": _stored(v) for k, v in model.mlp.state_dict().items()})
     return tensors
+
+
+def _stored(tensor: torch.Tensor) -> np.ndarray:
+    return tensor.detach().to(STORAGE_DTYPE).cpu().numpy()
 
 
 def import_object(tensors: dict[str, np.ndarray], resolution: int, n_materials: int, config) -> LsnifObject:
     occupied = np.unpackbits(tensors["voxels.bits"], count=resolution**3).astype(bool)
     grid = VoxelGrid(tensors["voxels.lo"], tensors["voxels.size"], occupied.reshape((resolution,) * 3))
     model = LsnifObject(grid, n_materials, config)
-    table = torch.from_numpy(tensors["grid.table"])
+    table = torch.from_numpy(tensors["grid.table"]).float()
     if table.shape != model.encoding.table.shape:
         raise ValueError(f"feature table of shape {tuple(table.shape)} does not fit these voxels and config")
     with torch.no_grad():
         model.encoding.table.copy_(table)
-    mlp = {k.removeprefix("mlp."): torch.from_numpy(v) for k, v in tensors.items() if k.startswith("mlp.")}
+    mlp = {k.removeprefix("mlp."): torch.from_numpy(v).float() for k, v in tensors.items() if k[:4] == "mlp."}
     model.mlp.load_state_dict(mlp)
     return model.eval()
 

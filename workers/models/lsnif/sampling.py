@@ -39,8 +39,8 @@ class Labels:
     hit: np.ndarray  # (N,) bool
     t: np.ndarray  # (N,)
     position: np.ndarray  # (N, 3)
-    geometric_normal: np.ndarray  # (N, 3), follows the winding
-    normal: np.ndarray  # (N, 3) interpolated shading normal
+    geometric_normal: np.ndarray  # (N, 3), facing the ray (against its direction)
+    normal: np.ndarray  # (N, 3) interpolated shading normal, flipped with the geometric one
     albedo: np.ndarray  # (N, 3)
     material: np.ndarray  # (N,) index into the object's material list
 
@@ -70,13 +70,17 @@ class ObjectReference:
         b1, b2 = hits.u[sel].astype(np.float64)[:, None], hits.v[sel].astype(np.float64)[:, None]
         corners = self.mesh.faces[prim]
         labels.position[sel] = origins[sel] + hits.t[sel, None] * directions[sel]
-        labels.geometric_normal[sel] = self.face_normals[prim]
+        # Normals face the ray: thin two-sided geometry (leaves, strands) is hit from both sides, and a
+        # winding-signed label would ask the sign-sensitive cosine loss for a sign the ray's inputs barely
+        # show. The path tracer orients normals towards the ray anyway.
+        side = np.where(dot(self.face_normals[prim], directions[sel]) > 0, -1.0, 1.0)[:, None]
+        labels.geometric_normal[sel] = side * self.face_normals[prim]
         if self.mesh.normals is None:
-            labels.normal[sel] = self.face_normals[prim]
+            labels.normal[sel] = labels.geometric_normal[sel]
         else:
             ns = self.mesh.normals[corners]
             ns = (1 - b1 - b2) * ns[:, 0] + b1 * ns[:, 1] + b2 * ns[:, 2]
-            labels.normal[sel] = ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
+            labels.normal[sel] = side * ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
         uv = np.zeros((len(sel), 2))
         if self.mesh.uvs is not None:
             uvs = self.mesh.uvs[corners]
@@ -107,10 +111,8 @@ def training_rays(
         sel = np.flatnonzero(labels.hit)[:remaining]
         if len(sel) == 0:
             continue
-        incoming = probe_d[sel]
-        ng = labels.geometric_normal[sel]
-        facing = np.where((dot(incoming, ng) < 0)[:, None], ng, -ng)  # the side the probe came from
-        direction = cosine_about(facing, rng)
+        ng = labels.geometric_normal[sel]  # faces the side the probe came from
+        direction = cosine_about(ng, rng)
         found_o.append(PathTracer.offset(labels.position[sel], ng, direction))
         found_d.append(direction)
         remaining -= len(sel)
@@ -122,10 +124,14 @@ def training_rays(
 
 
 def label_batch(grid: VoxelGrid, max_points: int, reference: ObjectReference, origins, directions) -> Batch:
-    """Network inputs and reference outputs of the rays, as float32/int64 tensors."""
+    """Network inputs and reference outputs of the rays that meet an occupied voxel, as float32/int64
+    tensors. The others are certain misses that `LsnifObject.predict` answers without the network (a
+    third of the sphere's rays): training on them would spend steps on a constant."""
     encoded = network_inputs(grid, origins, directions, max_points)
+    reach = np.flatnonzero(encoded.walk.count > 0)
+    encoded = encoded.take(reach)
     walk = encoded.walk
-    labels = reference.intersect(origins, directions)
+    labels = reference.intersect(origins[reach], directions[reach])
     span = np.maximum(walk.t_far - walk.t_near, 1e-300)
     local = np.clip(np.where(labels.hit, (labels.t - walk.t_near) / span, 0.0), 0.0, 1.0)
     return {

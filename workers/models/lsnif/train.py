@@ -46,5 +46,8 @@ def train_object(
     checkpoints: CheckpointStore | None = None,
     on_progress: Callable[[Progress], None] | None = None,
 ) -> TrainResult:
-    """Adam on the grid and the MLP together (the paper's joint optimisation), resuming from checkpoints."""
-    return train(model, lsnif_loss, batches, config, checkpoints, on_progress)
+    """Adam on the grid and the MLP together (the paper's joint optimisation), resuming from checkpoints;
+    the trained weights are then rounded to the artifact's float16 (`LsnifObject.round_to_storage`)."""
+    result = train(model, lsnif_loss, batches, config, checkpoints, on_progress)
+    model.round_to_storage()
+    return result
