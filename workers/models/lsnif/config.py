@@ -24,9 +24,13 @@ class LsnifConfig(BaseModel):
     log2_table_size: int = Field(17, ge=8, le=24, description="M: feature rows per level (folded beyond)")
     width: int = Field(128, ge=8, le=1024)
     depth: int = Field(2, ge=1, le=8)
-    batch_size: int = Field(1 << 14, ge=64)
+    batch_size: int = Field(
+        1 << 13, ge=64, description="rays drawn per step; those meeting no voxel are dropped"
+    )
+    # 8M rays: held-out occlusion accuracy on high_poly went from 97.0% at 150 steps to 98.9% at 1000
+    # (normal error 33 -> 17 degrees), about two and a half minutes on an idle 2-core CPU.
     train: TrainConfig = TrainConfig(
-        steps=400, schedule=Schedule(lr=0.01), checkpoint_every=100, progress_every=10
+        steps=1000, schedule=Schedule(lr=0.01), checkpoint_every=250, progress_every=10
     )
     min_triangles: int = Field(
         5000, ge=0, description="objects with fewer triangles stay on Embree (LSNIF pays off on complex ones)"

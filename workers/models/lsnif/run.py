@@ -13,7 +13,12 @@ import torch
 
 from workers.models.lsnif import artifact
 from workers.models.lsnif.config import LsnifConfig
-from workers.models.lsnif.evaluate import bvh_bytes_estimate, compare_images, held_out
+from workers.models.lsnif.evaluate import (
+    bvh_bytes_estimate,
+    bvh_bytes_paper_table1,
+    compare_images,
+    held_out,
+)
 from workers.models.lsnif.network import LsnifObject
 from workers.models.lsnif.plan import LSNIF, choose_objects
 from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
@@ -75,6 +80,7 @@ def run(ctx: JobContext) -> RunOutput:
             "model_bytes": size,
             "bvh_bytes_estimate": bvh,
             "bvh_to_model": bvh / size,
+            "bvh_bytes_paper_table1": bvh_bytes_paper_table1(geometry.mesh.num_triangles),
             **scores.__dict__,
         }
     files = artifact.save(ctx.output_dir, config, models, placements)
