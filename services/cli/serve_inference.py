@@ -29,6 +29,10 @@ def serve_inference_command(
     max_wait_ms: Annotated[
         float | None, typer.Option(min=0, help="How long a batch waits for more requests.")
     ] = None,
+    max_rows: Annotated[
+        int | None, typer.Option(min=1, help="Rows (rays, pixels) one request may ask for.")
+    ] = None,
+    torch_threads: Annotated[int | None, typer.Option(min=1, help="Intra-op threads per model call.")] = None,
     device: Annotated[
         str | None, typer.Option(help="auto (CUDA when present), cpu or cuda[:n] (NBAKE_INFERENCE_DEVICE).")
     ] = None,
@@ -38,7 +42,11 @@ def serve_inference_command(
     /docs), and the gRPC InferenceService. Tokens are the job server's (start `nbake serve` once)."""
     try:
         settings = InferenceSettings.from_env(
-            data_dir, memory_budget_bytes=memory_bytes, max_wait_ms=max_wait_ms, device=device
+            data_dir,
+            memory_budget_bytes=memory_bytes,
+            max_wait_ms=max_wait_ms,
+            max_rows=max_rows,
+            device=device,
         )
     except ValueError as error:
         fail("settings", str(error))

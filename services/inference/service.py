@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import torch
 from pydantic import BaseModel
 
 from services.api.deps import known_digest
@@ -66,6 +67,7 @@ class InferenceService:
     def __init__(self, settings: InferenceSettings) -> None:
         self.settings = settings
         self.device = settings.resolved_device()
+        torch.set_num_threads(settings.torch_threads)  # one process, one setting: every model call shares it
         self.metrics = InferenceMetrics()
         self.blobs = BlobStore(settings.shared.store)
         self.artifacts = ArtifactStore(self.blobs, settings.shared.store, checkpoint_root=settings.work_dir)

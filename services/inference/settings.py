@@ -21,6 +21,9 @@ class InferenceSettings(BaseModel):
     max_rows: int = Field(1 << 20, ge=1, description="rows (rays, pixels) one request may ask for")
     request_timeout_s: float = Field(30.0, gt=0, description="a request waiting longer gets a 503")
     max_body_bytes: int = Field(64 << 20, ge=1024, description="largest request body")
+    torch_threads: int = Field(
+        1, ge=1, description="intra-op threads per model call; more oversubscribe the cores HTTP also needs"
+    )
     device: str = Field("auto", description="`auto` (CUDA when present, else CPU), `cpu` or `cuda[:n]`")
 
     @classmethod
