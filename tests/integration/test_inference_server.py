@@ -90,8 +90,8 @@ class Server:
     grpc_target: str
     data_dir: Path
     lsnif: Artifact
-    render: Artifact
-    corrupted: Artifact
+    render: Artifact | None = None
+    corrupted: Artifact | None = None
 
     def client(self, scope: str | None = "read") -> httpx.Client:
         headers = {"Authorization": f"Bearer {TOKENS[scope]}"} if scope else {}
@@ -116,6 +116,14 @@ class Server:
                 self.process.wait(30)
 
 
+def install_tokens(data_dir: Path) -> None:
+    """What `nbake serve` leaves in its data dir: a migrated job database holding the tokens."""
+    db = Database(f"sqlite:///{data_dir / 'jobs.db'}")
+    db.migrate()
+    store_tokens(db, {token: scope for scope, token in TOKENS.items()})
+    db.dispose()
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[Server]:
     data_dir = tmp_path_factory.mktemp("inference")
@@ -131,38 +139,39 @@ def server(tmp_path_factory) -> Iterator[Server]:
     image = store.file(corrupted.artifact_id, "image.exr")
     store.blobs.local_path(image.digest).write_bytes(b"not the image any more")
 
-    db = Database(f"sqlite:///{data_dir / 'jobs.db'}")  # what `nbake serve` leaves: migrated, tokens stored
-    db.migrate()
-    store_tokens(db, {token: scope for scope, token in TOKENS.items()})
-    db.dispose()
+    install_tokens(data_dir)
 
     # A budget that holds the lsnif model or the render model, not both: loading one evicts the other.
     budget = lsnif.in_process().nbytes + render.in_process().nbytes - 1
-    http_port, grpc_port = free_port(), free_port()
-    command = [NBAKE, "serve-inference", "--port", str(http_port), "--grpc-port", str(grpc_port)]
-    command += ["--data-dir", str(data_dir), "--memory-bytes", str(budget), "--max-wait-ms", "20"]
-    command += ["--max-rows", "20000", "--device", "cpu", "--log-level", "warning"]
-    log = (data_dir / "serve-inference.log").open("wb")
-    process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    running = Server(
-        process, f"http://127.0.0.1:{http_port}", f"127.0.0.1:{grpc_port}", data_dir, lsnif, render, corrupted
-    )
-    deadline = time.monotonic() + START_TIMEOUT_S
+    options = ["--memory-bytes", str(budget), "--max-wait-ms", "20", "--max-rows", "20000"]
+    running = start_server(data_dir, options, lsnif, render, corrupted)
     try:
-        while True:
-            if process.poll() is not None:
-                raise RuntimeError((data_dir / "serve-inference.log").read_text()[-3000:])
-            try:
-                if httpx.get(f"{running.url}/readyz", timeout=5).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError("nbake serve-inference did not become ready")
-            time.sleep(0.2)
         yield running
     finally:
         running.stop()
+
+
+def start_server(data_dir: Path, options: list[str], *artifacts: Artifact) -> Server:
+    """`nbake serve-inference` on free ports over `data_dir`, once it reports ready."""
+    http_port, grpc_port = free_port(), free_port()
+    command = [NBAKE, "serve-inference", "--port", str(http_port), "--grpc-port", str(grpc_port)]
+    command += ["--data-dir", str(data_dir), "--device", "cpu", "--log-level", "warning", *options]
+    log = (data_dir / "serve-inference.log").open("wb")
+    process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    running = Server(process, f"http://127.0.0.1:{http_port}", f"127.0.0.1:{grpc_port}", data_dir, *artifacts)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while True:
+        if process.poll() is not None:
+            raise RuntimeError((data_dir / "serve-inference.log").read_text()[-3000:])
+        try:
+            if httpx.get(f"{running.url}/readyz", timeout=5).status_code == 200:
+                return running
+        except httpx.TransportError:
+            pass
+        if time.monotonic() > deadline:
+            running.stop()
+            raise RuntimeError("nbake serve-inference did not become ready")
+        time.sleep(0.2)
 
 
 def aimed_rays(artifact: Artifact, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
