@@ -8,6 +8,8 @@ from __future__ import annotations
 import ipaddress
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 from typing import Annotated
@@ -49,6 +51,13 @@ def serve_command(
         int | None, typer.Option(min=1, help="Jobs running at once (NBAKE_MAX_RUNNING).")
     ] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    inference_port: Annotated[
+        int | None,
+        typer.Option(min=0, max=65535, help="Also start `nbake serve-inference` on this port (own process)."),
+    ] = None,
+    inference_grpc_port: Annotated[
+        int, typer.Option(min=0, max=65535, help="gRPC port of that inference process.")
+    ] = 50052,
 ) -> None:
     """Serve the REST API (OpenAPI at /docs) and run submitted jobs on Ray.
 
@@ -68,6 +77,11 @@ def serve_command(
         _, path = generated_admin_token(data_dir)
         typer.echo(f"admin token: {path}", err=True)
     ray_temp = _start_ray(data_dir)
+    inference = None
+    if inference_port is not None:
+        command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--host", host]
+        command += ["--port", str(inference_port), "--grpc-port", str(inference_grpc_port)]
+        inference = subprocess.Popen([*command, "--data-dir", str(data_dir), "--log-level", log_level])
     try:
         uvicorn.run(
             with_grpc(create_app(settings), host, grpc_port),
@@ -77,6 +91,9 @@ def serve_command(
             timeout_graceful_shutdown=5,
         )
     finally:
+        if inference is not None:
+            inference.terminate()
+            inference.wait(30)
         ray.shutdown()
         if ray_temp is not None:
             shutil.rmtree(ray_temp, ignore_errors=True)
