@@ -33,7 +33,7 @@ from workers.scene.compile import compile_scene
 
 CURVE_STEPS = 300
 IMAGE_SIZE = 64
-IMAGE_SPP = 8
+IMAGE_SPP = 64
 HELD_OUT_RAYS = 1 << 15
 ASSETS = (("high_poly", "displaced_sphere"), ("dense_foliage", "leaves"), ("fur_patch", None))
 CURVE = (
@@ -100,6 +100,7 @@ def run() -> list[BenchSection]:
             embree_Mrays_s=scores.embree_rays_per_s / 1e6,
             lsnif_over_embree=scores.lsnif_rays_per_s / scores.embree_rays_per_s,
             flip=image.flip,
+            flip_noise_floor=image.flip_noise_floor,
             frame_s_lsnif=image.lsnif_seconds,
             frame_s_embree=image.embree_seconds,
         )
@@ -108,7 +109,8 @@ def run() -> list[BenchSection]:
         "leaves (ceil(T/2) 128-byte leaves + ceil((leaves-1)/3) 128-byte internal nodes, a lower bound); "
         "bvh_table1: 140 bytes/triangle, what the paper's Table 1 figures imply",
         "model bytes: packed voxel bits + box + float16 feature table and MLP (the artifact's payload)",
-        f"FLIP: {IMAGE_SIZE}x{IMAGE_SIZE} at {IMAGE_SPP} spp, same seed; LSNIF for secondary + shadow rays",
+        f"FLIP: {IMAGE_SIZE}x{IMAGE_SIZE} at {IMAGE_SPP} spp, same seed; LSNIF for secondary + shadow rays; "
+        "flip_noise_floor: Embree against Embree with another seed (Monte Carlo noise alone)",
         "rays/s: the same held-out rays; LSNIF = DDA + encoder + MLP in torch on this CPU",
     ]
 

@@ -101,6 +101,7 @@ def run(ctx: JobContext) -> RunOutput:
         files["preview.png"] = (str(ctx.output_dir / "preview.png"), "image/png")
         report["image"] = {
             "flip": images.flip,
+            "flip_noise_floor": images.flip_noise_floor,
             "size": config.preview_size,
             "spp": config.preview_spp,
             "lsnif_seconds": images.lsnif_seconds,
