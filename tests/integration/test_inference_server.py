@@ -130,7 +130,7 @@ def server(tmp_path_factory) -> Iterator[Server]:
     work = tmp_path_factory.mktemp("jobs")
     store = ArtifactStore(BlobStore(str(data_dir / "store")), str(data_dir / "store"))
     lsnif = run_and_publish(
-        store, work, "lsnif", instanced_scene(), {"min_triangles": 1000, "train": {"steps": 200}}, seed=7
+        store, work, "lsnif", instanced_scene(), {"min_triangles": 1000, "train": {"steps": 60}}, seed=7
     )
     render_overrides = {"samplers": 0, "width": 32, "height": 24, "spp": 4}
     cornell = BUILTIN_SCENES["cornell_box"]()
