@@ -233,32 +233,3 @@ def test_parallel_render_keeps_a_custom_intersector():
     tracer = PathTracer(compiled, intersector=Nothing())
     image = render(tracer, RenderSettings(spp=2, width=32, height=32, threads=2, tile_size=16)).image
     assert not image.any()
-
-
-FORKED_RENDER = """
-import hashlib, numpy as np
-import workers.render.render as r
-from workers.scene.builtin import cornell_box
-from workers.scene.compile import compile_scene
-compiled = compile_scene(cornell_box())
-pools = []
-original = r._worker_pool.__init__
-def spy(self, *args):
-    original(self, *args)
-    pools.append(self.forked)
-r._worker_pool.__init__ = spy
-images = [r.render(compiled, r.RenderSettings(spp=4, width=40, height=24, tile_size=16, threads=t)).image
-          for t in (1, 2)]
-digests = [hashlib.sha256(image.tobytes()).hexdigest() for image in images]
-print(pools, digests[0] == digests[1])
-"""
-
-
-def test_forked_workers_render_the_same_image_as_one_worker():
-    """In a fresh single-threaded process two workers are forked processes; the image is unchanged."""
-    import subprocess
-    import sys
-
-    out = subprocess.run([sys.executable, "-c", FORKED_RENDER], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["[False,", "True]", "True"]
