@@ -47,8 +47,6 @@ def relative_mse(image: np.ndarray, reference: np.ndarray) -> float:
 
 
 def run() -> list[BenchSection]:
-    from tests.support.mitsuba_scene import render_mitsuba
-
     compiled = compile_scene(cornell_box())
     throughput = BenchSection("Path tracer throughput, cornell_box 256x256, 16 spp, max_depth 8")
     embree = raw_embree_rays_per_second(compiled.positions, THREADS)
@@ -60,7 +58,14 @@ def run() -> list[BenchSection]:
     throughput.add(what="neuralbake path tracer (NEE+MIS)", mrays_per_s=ours / 1e6, ratio=ours / embree)
     throughput.notes.append("target: ratio >= 0.35 of raw Embree inside the path tracer")
 
-    workdir = Path(tempfile.mkdtemp(prefix="nbake-bench-"))
+    with tempfile.TemporaryDirectory(prefix="nbake-bench-") as workdir:
+        peer = against_mitsuba(compiled, Path(workdir))
+    return [throughput, peer]
+
+
+def against_mitsuba(compiled, workdir: Path) -> BenchSection:
+    from tests.support.mitsuba_scene import render_mitsuba
+
     peer = BenchSection("Against Mitsuba 3 scalar_rgb, cornell_box 128x128, max_depth 8")
     size = 128
     t0 = time.perf_counter()
@@ -95,4 +100,4 @@ def run() -> list[BenchSection]:
         )
     peer.notes.append("ratios > 1 mean we are slower; equal-error ratio = (MSE x time) ours / Mitsuba")
     peer.notes.append("Mitsuba time includes scene loading (PLY export excluded), as a user would pay it")
-    return [throughput, peer]
+    return peer
