@@ -5,7 +5,6 @@ error statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRP
 from __future__ import annotations
 
 from concurrent import futures
-from dataclasses import dataclass
 
 import grpc
 import numpy as np
@@ -17,6 +16,7 @@ from neuralbake.v1 import inference_pb2, inference_pb2_grpc
 from services.api.grpc.auth import authorize, bearer_token
 from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.handlers import Behaviour, rewrap
+from services.api.grpc.server import GrpcServer
 from services.inference import images
 from services.inference.errors import MalformedBody
 from services.inference.service import ModelInfo
@@ -27,7 +27,6 @@ from workers.models.registry import QUERY, RENDER
 
 SERVICE = inference_pb2.DESCRIPTOR.services_by_name["InferenceService"].full_name
 MAX_WORKERS = 96  # calls block while their batch runs: enough threads for many concurrent clients
-STOP_GRACE_S = 5.0
 
 
 class InferenceAuth(grpc.ServerInterceptor):
@@ -106,20 +105,7 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
         )
 
 
-@dataclass
-class GrpcInference:
-    server: grpc.Server
-    health: health.HealthServicer
-    port: int
-
-    def stop(self) -> None:
-        self.health.enter_graceful_shutdown()
-        self.server.stop(STOP_GRACE_S).wait()
-
-
-def start_grpc_inference(
-    state: InferenceState, host: str, port: int, max_message_bytes: int
-) -> GrpcInference:
+def start_grpc_inference(state: InferenceState, host: str, port: int, max_message_bytes: int) -> GrpcServer:
     """Serve InferenceService on `host:port` (0: any free port; `.port` says which)."""
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-inference-grpc"),
@@ -139,4 +125,4 @@ def start_grpc_inference(
     server.start()
     for name in ("", SERVICE):
         checker.set(name, health_pb2.HealthCheckResponse.SERVING)
-    return GrpcInference(server, checker, bound)
+    return GrpcServer(server, checker, bound)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import ray
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse, Response
@@ -11,6 +13,20 @@ from services.api.deps import ServicesDep
 
 router = APIRouter(tags=["health"])
 PROBE = "sha256:" + "0" * 64
+
+
+def readiness(checks: dict[str, Callable[[], object]], **extra) -> JSONResponse:
+    """Run every check; 200 when all pass, else 503 naming each failure and why."""
+    results = {}
+    for name, check in checks.items():
+        try:
+            check()
+            results[name] = "ok"
+        except Exception as error:  # any failure means not ready; say which and why
+            results[name] = f"{type(error).__name__}: {error}"
+    ready = all(value == "ok" for value in results.values())
+    body = {"status": "ok" if ready else "unavailable", **extra, "checks": results}
+    return JSONResponse(body, 200 if ready else 503)
 
 
 @router.get("/healthz")
@@ -23,17 +39,7 @@ def healthz() -> dict[str, str]:
 def readyz(svc: ServicesDep) -> JSONResponse:
     """The database, the artifact store and Ray are all reachable."""
     checks = {"database": svc.db.ping, "store": lambda: svc.blobs.exists(PROBE), "ray": ray.cluster_resources}
-    results = {}
-    for name, check in checks.items():
-        try:
-            check()
-            results[name] = "ok"
-        except Exception as error:  # any failure means not ready; say which and why
-            results[name] = f"{type(error).__name__}: {error}"
-    ready = all(value == "ok" for value in results.values())
-    return JSONResponse(
-        {"status": "ok" if ready else "unavailable", "checks": results}, 200 if ready else 503
-    )
+    return readiness(checks)
 
 
 @router.get("/metrics", response_class=Response)

@@ -7,7 +7,7 @@ from fastapi.responses import JSONResponse, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from sqlalchemy import select
 
-from services.api.routes.health import PROBE
+from services.api.routes.health import PROBE, readiness
 from services.inference.state import StateDep
 from services.jobs.tables import ApiToken
 
@@ -29,16 +29,7 @@ def readyz(state: StateDep) -> JSONResponse:
             session.execute(select(ApiToken.scope).limit(1))
 
     checks = {"tokens": tokens, "store": lambda: state.service.blobs.exists(PROBE)}
-    results = {}
-    for name, check in checks.items():
-        try:
-            check()
-            results[name] = "ok"
-        except Exception as error:  # any failure means not ready; say which and why
-            results[name] = f"{type(error).__name__}: {error}"
-    ready = all(value == "ok" for value in results.values())
-    body = {"status": "ok" if ready else "unavailable", "device": state.service.device, "checks": results}
-    return JSONResponse(body, 200 if ready else 503)
+    return readiness(checks, device=state.service.device)
 
 
 @router.get("/metrics", response_class=Response)
