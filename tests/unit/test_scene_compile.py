@@ -115,6 +115,9 @@ EXPECTED_TRIANGLES = {
     "high_poly": (900_000, 1_100_000),
     "fur_patch": (50_000, 200_000),
     "env_lit_objects": (1_000, 200_000),
+    "menger_sponge": (30_000, 40_000),
+    "thin_walls": (5_000, 50_000),
+    "closed_box": (24, 24),
 }
 
 

@@ -9,6 +9,7 @@ from workers.scene.spec import (
     BoxShape,
     Camera,
     Conductor,
+    ConstantBackground,
     Dielectric,
     Diffuse,
     DirectionalLight,
@@ -282,4 +283,91 @@ def env_lit_objects() -> SceneSpec:
         ],
         environment=EnvironmentMap(builtin="courtyard"),
         camera=Camera(position=(0.0, 1.7, 5.8), target=(0.0, 0.4, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+def sun_and_sky(
+    elevation: float, azimuth: float, irradiance=(3.0, 2.8, 2.5)
+) -> tuple[list[DirectionalLight], EnvironmentMap]:
+    """A directional sun and a procedural sky whose own sun disc is off, as in `dense_foliage`."""
+    toward_sun = sun_direction(elevation, azimuth)
+    sky = EnvironmentMap(
+        procedural="sky", params={"sun_elevation": elevation, "sun_azimuth": azimuth, "sun_irradiance": 0.0}
+    )
+    return [DirectionalLight(direction=tuple(-toward_sun), irradiance=irradiance)], sky
+
+
+@builtin
+def menger_sponge() -> SceneSpec:
+    """A level-3 Menger sponge (36k triangles, closed, holes at every scale) on a ground plane, sun and sky.
+
+    A test asset for neural levels of detail: its visibility through the holes changes with scale.
+    """
+    lights, sky = sun_and_sky(45.0, 120.0)
+    return SceneSpec(
+        name="menger_sponge",
+        materials={
+            "ground": Diffuse(reflectance=(0.3, 0.26, 0.18)),
+            "sponge": Diffuse(reflectance=(0.7, 0.7, 0.7)),
+        },
+        objects=[
+            ground(20.0),
+            SceneObject(
+                name="sponge",
+                shape=ProceduralShape(generator="menger_sponge", params={"level": 3, "size": 1.0}),
+                material="sponge",
+            ),
+        ],
+        lights=lights,
+        environment=sky,
+        camera=Camera(position=(1.5, 1.4, 2.1), target=(0.0, 0.45, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def thin_walls() -> SceneSpec:
+    """A 3 x 3-room, two-storey shell of thin walls (1/100 of its size) with windows, on a ground plane.
+
+    A test asset for neural levels of detail: thin closed walls must stay opaque when prefiltered.
+    """
+    lights, sky = sun_and_sky(35.0, 160.0)
+    return SceneSpec(
+        name="thin_walls",
+        materials={
+            "ground": Diffuse(reflectance=(0.3, 0.26, 0.18)),
+            "walls": Diffuse(reflectance=(0.75, 0.72, 0.68)),
+        },
+        objects=[
+            ground(30.0),
+            SceneObject(
+                name="rooms",
+                shape=ProceduralShape(generator="thin_wall_rooms", params={"seed": 0}),
+                material="walls",
+            ),
+        ],
+        lights=lights,
+        environment=sky,
+        camera=Camera(position=(2.6, 2.2, 3.4), target=(0.0, 0.4, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def closed_box() -> SceneSpec:
+    """Inside a sealed thin-walled box under a strong constant environment: the correct image is black.
+
+    The light-leak test of Weier et al. (Fig. 10): the camera looks at the inner back wall, corners
+    and edges in view; any light in the image leaked through the 0.02-thick walls.
+    """
+    return SceneSpec(
+        name="closed_box",
+        materials={"box": Diffuse(reflectance=(0.8, 0.8, 0.8))},
+        objects=[
+            SceneObject(
+                name="box",
+                shape=ProceduralShape(generator="hollow_box", params={"size": 2.0, "thickness": 0.02}),
+                material="box",
+            )
+        ],
+        environment=ConstantBackground(radiance=(6.0, 4.0, 2.0)),
+        camera=Camera(position=(0.0, 1.0, 0.9), target=(0.0, 1.0, -1.0), fov=70.0, width=256, height=256),
     )

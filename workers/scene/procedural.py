@@ -12,10 +12,20 @@ from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from workers.scene.errors import SceneError
-from workers.scene.shapes import MeshData
+from workers.scene.shapes import MeshData, box
+from workers.scene.spec import Vec3
 
 PositiveFloat = Annotated[FiniteFloat, Field(gt=0)]
 Seed = Annotated[int, Field(ge=0, lt=2**63)]
@@ -183,6 +193,54 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, weld: np.ndarray) ->
         [np.bincount(ids, weights=np.repeat(face_normals[:, k], 3), minlength=size) for k in range(3)], axis=1
     )
     return normalized(summed)[weld]
+
+
+def grid_surface(occupied: np.ndarray, edges: tuple[np.ndarray, np.ndarray, np.ndarray]) -> MeshData:
+    """The boundary of a union of cells of a rectilinear grid, without the faces between two occupied cells.
+
+    `occupied` is (X, Y, Z) bool and `edges` the increasing cell boundaries per axis (X + 1, Y + 1
+    and Z + 1 values). Every boundary face is a whole grid face, so neighbouring quads share whole
+    edges (no T-junctions) and the surface is closed. Quads face out of the occupied cells, each as two
+    consecutive triangles. Quads with the same facing share vertices, so normals stay flat; UVs
+    project each face onto its own plane, divided by the largest extent of the grid.
+    """
+    padded = np.pad(occupied, 1)  # a border of empty cells closes the outside
+    points = tuple(len(e) for e in edges)
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])  # counter-clockwise seen from +axis
+    keys = []
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        cells = np.transpose(padded, (a, b, c))[:, 1:-1, 1:-1]
+        below, above = cells[:-1], cells[1:]  # the two cells on either side of lattice plane p
+        for negative, mask, order in ((0, below & ~above, square), (1, ~below & above, square[::-1])):
+            p, j, k = np.nonzero(mask)
+            lattice = np.empty((len(p), 4, 3), dtype=np.int64)
+            lattice[..., a] = p[:, None]
+            lattice[..., b] = j[:, None] + order[:, 0]
+            lattice[..., c] = k[:, None] + order[:, 1]
+            flat = np.ravel_multi_index((lattice[..., 0], lattice[..., 1], lattice[..., 2]), points)
+            keys.append((2 * a + negative) * int(np.prod(points)) + flat)  # facing id, then lattice point
+    unique, corners = np.unique(np.concatenate(keys), return_inverse=True)
+    corners = corners.reshape(-1, 4)
+    facing, flat = np.divmod(unique, int(np.prod(points)))
+    index = np.unravel_index(flat, points)
+    vertices = np.stack([edges[k][index[k]] for k in range(3)], axis=1)
+    axis = facing // 2
+    normals = np.zeros_like(vertices)
+    normals[np.arange(len(vertices)), axis] = np.where(facing % 2 == 0, 1.0, -1.0)
+    low = np.array([e[0] for e in edges])
+    extent = max(e[-1] - e[0] for e in edges)
+    projected = (vertices - low) / extent
+    rows = np.arange(len(vertices))
+    uvs = np.stack([projected[rows, (axis + 1) % 3], projected[rows, (axis + 2) % 3]], axis=1)
+    faces = np.stack([corners[:, [0, 1, 2]], corners[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+    return MeshData(vertices, faces, normals, uvs)
+
+
+def interval_labels(values: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Per value, the index of the (disjoint) interval (low, high) that contains it, else -1."""
+    inside = (values[:, None] > low[None]) & (values[:, None] < high[None])
+    return np.where(inside.any(axis=1), inside.argmax(axis=1), -1)
 
 
 # --------------------------------------------------------------------------- generators
@@ -363,3 +421,187 @@ def fur(p: FurParams) -> MeshData:
     radii = p.radius * np.broadcast_to(np.linspace(1.0, p.tip_ratio, k)[None], (n, k))
     base = ground_plane(GroundPlaneParams(size=p.size))
     return merge([base, tubes(centers, radii, p.sides)])
+
+
+def resting_center(center: tuple[float, float, float] | None, height: float) -> np.ndarray:
+    """`center`, or by default the point that puts an object of `height` on the y = 0 plane at the origin."""
+    return np.array(center if center is not None else (0.0, height / 2.0, 0.0), dtype=np.float64)
+
+
+class MengerSpongeParams(Params):
+    level: Annotated[int, Field(ge=0, le=5, description="recursion depth; 0 is a plain cube")] = 3
+    size: PositiveFloat = Field(default=1.0, description="edge length")
+    center: Vec3 | None = Field(default=None, description="default (0, size / 2, 0): resting on y = 0")
+
+
+@generator(MengerSpongeParams)
+def menger_sponge(p: MengerSpongeParams) -> MeshData:
+    """A Menger sponge: the cells of a 3^level grid with no base-3 place where two coordinates have a 1.
+
+    The surface is the union of the kept cubes with every face between two kept cubes dropped: one
+    closed, watertight, outward-facing surface of unit-cell squares (no T-junctions), flat normals.
+    Squares per level follow Q(0) = 6, Q(n + 1) = 20 Q(n) - 48 * 8^n; triangles = 2 Q:
+    level 1: 144, level 2: 2,112, level 3: 36,096, level 4: 672,768 (builds in about 0.5 s),
+    level 5: 13,062,144 (about 15 s and 3 GB to build, more to compile: a stress asset only).
+    """
+    n = 3**p.level
+    ones = (np.arange(n)[:, None] // 3 ** np.arange(p.level)) % 3 == 1  # (n, level) digit is 1
+    count = ones[:, None, None, :].astype(np.uint8) + ones[None, :, None, :] + ones[None, None, :, :]
+    occupied = ~(count >= 2).any(axis=-1)
+    del count
+    center = resting_center(p.center, p.size)
+    steps = p.size * np.arange(n + 1) / n - p.size / 2.0
+    return grid_surface(occupied, (center[0] + steps, center[1] + steps, center[2] + steps))
+
+
+class HollowBoxParams(Params):
+    size: PositiveFloat = Field(default=1.0, description="outer edge length")
+    thickness: PositiveFloat = Field(default=0.01, description="wall thickness, less than size / 2")
+    center: Vec3 | None = Field(default=None, description="default (0, size / 2, 0): resting on y = 0")
+
+    @field_validator("thickness")
+    @classmethod
+    def _leaves_a_cavity(cls, thickness: float, info: ValidationInfo) -> float:
+        size = info.data.get("size")
+        if size is not None and thickness >= size / 2.0:
+            raise ValueError(f"must be less than size / 2 = {size / 2.0:g} to leave a cavity")
+        return thickness
+
+
+@generator(HollowBoxParams)
+def hollow_box(p: HollowBoxParams) -> MeshData:
+    """A sealed thin-walled cube: a closed outward cube of edge `size` around a closed inward-facing cube.
+
+    24 triangles. The cavity (edge `size - 2 thickness`) has no opening at all, so no light can reach
+    it: any light seen from inside is a leak (Weier et al.'s closed-box test).
+    """
+    center = resting_center(p.center, p.size)
+    unit = box()  # the cube [-1, 1]^3, outward
+    outer = MeshData(unit.vertices * (p.size / 2.0) + center, unit.faces, unit.normals, unit.uvs)
+    inner = MeshData(
+        unit.vertices * (p.size / 2.0 - p.thickness) + center,
+        unit.faces[:, ::-1].copy(),  # reversed winding: the inner surface faces into the cavity
+        -unit.normals,
+        unit.uvs,
+    )
+    return merge([outer, inner])
+
+
+class ThinWallRoomsParams(Params):
+    seed: Seed = 0
+    cells_x: Annotated[int, Field(ge=1, le=6, description="rooms along x")] = 3
+    cells_y: Annotated[int, Field(ge=1, le=6, description="storeys")] = 2
+    cells_z: Annotated[int, Field(ge=1, le=6, description="rooms along z")] = 3
+    size: PositiveFloat = Field(default=2.0, description="footprint edge length along x and z")
+    storey_height: PositiveFloat = 0.5
+    thickness: PositiveFloat = Field(
+        default=0.02, description="wall, floor and roof thickness; at most a tenth of a room or storey"
+    )
+    windows: Annotated[
+        FiniteFloat,
+        Field(ge=0, le=1, description="chance that an outer wall panel (room x storey) has a window"),
+    ] = 0.75
+    doors: Annotated[
+        FiniteFloat, Field(ge=0, le=1, description="chance that an inner wall panel has a doorway")
+    ] = 0.5
+    jitter: Annotated[
+        FiniteFloat, Field(ge=0, le=0.2, description="random inner wall offsets, as a fraction of a room")
+    ] = 0.1
+
+    @field_validator("thickness")
+    @classmethod
+    def _thin(cls, thickness: float, info: ValidationInfo) -> float:
+        d = info.data
+        if {"cells_x", "cells_z", "size", "storey_height"} <= d.keys():
+            room = d["size"] / max(d["cells_x"], d["cells_z"])
+            limit = 0.1 * min(room, d["storey_height"])
+            if thickness > limit:
+                raise ValueError(f"must be at most a tenth of a room or storey ({limit:g})")
+        return thickness
+
+
+WINDOW_WIDTH, WINDOW_SILL, WINDOW_TOP = 0.5, 0.3, 0.75  # of the room width; of the storey height
+DOOR_WIDTH, DOOR_TOP = 0.3, 0.7
+
+
+@generator(ThinWallRoomsParams)
+def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
+    """A building shell of cells_x x cells_z rooms on cells_y storeys, all thin axis-aligned slabs.
+
+    Outer walls, inner walls, floors and a flat roof are slabs `thickness` thick (a hundredth of the
+    default 2.0 footprint); it stands on y = 0, centred on the y axis, `size` wide and
+    `cells_y * storey_height` tall. The seed jitters the inner walls and picks which outer wall
+    panels get a window (an opening through the wall) and which inner wall panels a doorway.
+    Slabs that meet are merged: the whole shell is one closed, watertight surface built on a
+    rectilinear grid (`grid_surface`), so every slab is a closed solid and no faces hide inside
+    a wall. Defaults give 7,776 triangles (seed 0); the largest grid (6 x 6 x 6) about 71k.
+    """
+    rng = np.random.default_rng(p.seed)
+    t, h = p.thickness, p.storey_height
+
+    def walls(rooms: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Wall slab bounds and room centres/widths along one horizontal axis."""
+        lines = np.arange(rooms + 1, dtype=np.float64)
+        lines[1:-1] += rng.uniform(-p.jitter, p.jitter, rooms - 1)
+        lines = lines * (p.size / rooms) - p.size / 2.0
+        low, high = lines - t / 2.0, lines + t / 2.0
+        low[0], high[0], low[-1], high[-1] = lines[0], lines[0] + t, lines[-1] - t, lines[-1]
+        return low, high, (lines[:-1] + lines[1:]) / 2.0, np.diff(lines)
+
+    x_low, x_high, x_mid, x_width = walls(p.cells_x)
+    z_low, z_high, z_mid, z_width = walls(p.cells_z)
+    levels = h * np.arange(p.cells_y + 1, dtype=np.float64)
+    y_low, y_high = levels - t / 2.0, levels + t / 2.0
+    y_low[0], y_high[0], y_low[-1], y_high[-1] = 0.0, t, levels[-1] - t, levels[-1]
+    storey = levels[:-1]
+    sill, window_top = storey + WINDOW_SILL * h, storey + WINDOW_TOP * h
+    door_bottom, door_top = y_high[:-1], storey + DOOR_TOP * h
+
+    def bands(mid: np.ndarray, width: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+        return mid - fraction * width / 2.0, mid + fraction * width / 2.0
+
+    x_window, x_door = bands(x_mid, x_width, WINDOW_WIDTH), bands(x_mid, x_width, DOOR_WIDTH)
+    z_window, z_door = bands(z_mid, z_width, WINDOW_WIDTH), bands(z_mid, z_width, DOOR_WIDTH)
+    edges = (
+        np.unique(np.concatenate([x_low, x_high, *x_window, *x_door])),
+        np.unique(np.concatenate([y_low, y_high, sill, window_top, door_top])),
+        np.unique(np.concatenate([z_low, z_high, *z_window, *z_door])),
+    )
+    mx, my, mz = ((e[:-1] + e[1:]) / 2.0 for e in edges)
+
+    # which panels are open: tables over (wall, storey, room along the wall), drawn in full for any odds
+    def panels(rooms_across: int, rooms_along: int, odds: float, outer: bool) -> np.ndarray:
+        draw = rng.uniform(size=(rooms_across + 1, p.cells_y, rooms_along)) < odds
+        wall = np.arange(rooms_across + 1)
+        is_outer = (wall == 0) | (wall == rooms_across)
+        return draw & (is_outer if outer else ~is_outer)[:, None, None]
+
+    window_x = panels(p.cells_x, p.cells_z, p.windows, outer=True)  # walls across x, windows along z
+    window_z = panels(p.cells_z, p.cells_x, p.windows, outer=True)
+    door_x = panels(p.cells_x, p.cells_z, p.doors, outer=False)
+    door_z = panels(p.cells_z, p.cells_x, p.doors, outer=False)
+
+    wall_x = interval_labels(mx, x_low, x_high)
+    wall_z = interval_labels(mz, z_low, z_high)
+    floor = interval_labels(my, y_low, y_high)
+    occupied = (wall_x >= 0)[:, None, None] | (floor >= 0)[None, :, None] | (wall_z >= 0)[None, None, :]
+
+    def openings(table, wall, along, up, wall_axis):
+        """Cells of a wall that a table's open panels remove; `along` and `up` label the panel bands."""
+        labels = [wall, up, along]
+        shapes = [(-1, 1, 1), (1, -1, 1), (1, 1, -1)]
+        axes = [wall_axis, 1, 2 - wall_axis]  # grid axis of the wall index, storey and room along
+        valid = np.ones((1, 1, 1), dtype=bool)
+        index = []
+        for label, axis in zip(labels, axes, strict=True):
+            valid = valid & (label >= 0).reshape(shapes[axis])
+            index.append(np.maximum(label, 0).reshape(shapes[axis]))
+        return valid & table[index[0], index[1], index[2]]
+
+    y_window = interval_labels(my, sill, window_top)
+    y_door = interval_labels(my, door_bottom, door_top)
+    occupied &= ~openings(window_x, wall_x, interval_labels(mz, *z_window), y_window, 0)
+    occupied &= ~openings(door_x, wall_x, interval_labels(mz, *z_door), y_door, 0)
+    occupied &= ~openings(window_z, wall_z, interval_labels(mx, *x_window), y_window, 2)
+    occupied &= ~openings(door_z, wall_z, interval_labels(mx, *x_door), y_door, 2)
+    return grid_surface(occupied, edges)
