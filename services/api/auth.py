@@ -81,6 +81,20 @@ def store_tokens(db: Database, tokens: dict[str, str]) -> None:
         session.add_all(ApiToken(token_hash=token_hash(t), scope=scope) for t, scope in tokens.items())
 
 
+def authorize(db: Database, token: str | None, scope: str, missing: str) -> str:
+    """The token's scope if it holds `scope` (or a wider one); Unauthorized / Forbidden otherwise. Both APIs
+    check tokens here so they agree on every answer; `missing` tells how that API expects the token."""
+    if token is None:
+        raise Unauthorized(missing)
+    with db.reading() as session:
+        stored = session.get(ApiToken, token_hash(token))
+    if stored is None:
+        raise Unauthorized("unknown token")
+    if SCOPES.index(stored.scope) < SCOPES.index(scope):
+        raise Forbidden(f"this token has scope {stored.scope!r}; this needs {scope!r}")
+    return stored.scope
+
+
 _bearer = HTTPBearer(
     auto_error=False, description="A token from NBAKE_TOKENS or the generated admin-token file."
 )
@@ -88,20 +102,12 @@ _bearer = HTTPBearer(
 
 def require(scope: str):
     """A dependency that lets a request through only with a token holding `scope` (or a wider one)."""
-    needed = SCOPES.index(scope)
 
     def check(
         request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
     ) -> str:
-        if credentials is None:
-            raise Unauthorized("send `Authorization: Bearer <token>`")
+        token = None if credentials is None else credentials.credentials
         db: Database = request.app.state.services.db
-        with db.reading() as session:
-            stored = session.get(ApiToken, token_hash(credentials.credentials))
-        if stored is None:
-            raise Unauthorized("unknown token")
-        if SCOPES.index(stored.scope) < needed:
-            raise Forbidden(f"this token has scope {stored.scope!r}; this needs {scope!r}")
-        return stored.scope
+        return authorize(db, token, scope, "send `Authorization: Bearer <token>`")
 
     return check

@@ -1,6 +1,6 @@
 """`InferenceService` over gRPC, beside the REST app on its own port: the same service core (cache,
-batching, limits), the same tokens (checked with `services.api.grpc.auth.authorize`) and the same
-error statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRPC API."""
+batching, limits), the same token check (`services.api.grpc.auth.TokenAuth`) and the same error
+statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRPC API."""
 
 from __future__ import annotations
 
@@ -13,41 +13,23 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
 
-from services.api.grpc.auth import authorize, bearer_token
+from services.api.grpc.auth import TokenAuth
 from services.api.grpc.errors import ErrorMapping
-from services.api.grpc.handlers import Behaviour, rewrap
 from services.api.grpc.server import GrpcServer
 from services.inference import images
 from services.inference.errors import MalformedBody
 from services.inference.service import ModelInfo
 from services.inference.state import InferenceState
 from services.inference.wire import ArrayHeader, array_bytes, decode_array
-from services.jobs.db import Database
 from workers.models.registry import QUERY, RENDER
 
 SERVICE = inference_pb2.DESCRIPTOR.services_by_name["InferenceService"].full_name
 MAX_WORKERS = 96  # calls block while their batch runs: enough threads for many concurrent clients
 
 
-class InferenceAuth(grpc.ServerInterceptor):
+def needed_scope(method: str) -> str | None:
     """Every InferenceService call needs scope `read`; health and reflection stay open."""
-
-    def __init__(self, db: Database):
-        self.db = db
-
-    def intercept_service(self, continuation, handler_call_details):
-        handler = continuation(handler_call_details)
-        if handler is None or not handler_call_details.method.startswith(f"/{SERVICE}/"):
-            return handler
-
-        def around(behaviour: Behaviour, streaming: bool) -> Behaviour:
-            def checked(request, context):
-                authorize(self.db, bearer_token(context), "read")
-                return behaviour(request, context)
-
-            return checked
-
-        return rewrap(handler, around)
+    return "read" if method.startswith(f"/{SERVICE}/") else None
 
 
 def _model(info: ModelInfo) -> inference_pb2.Model:
@@ -109,7 +91,7 @@ def start_grpc_inference(state: InferenceState, host: str, port: int, max_messag
     """Serve InferenceService on `host:port` (0: any free port; `.port` says which)."""
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-inference-grpc"),
-        interceptors=[ErrorMapping(), InferenceAuth(state.db)],
+        interceptors=[ErrorMapping(), TokenAuth(state.db, needed_scope)],
         options=[
             ("grpc.max_receive_message_length", max_message_bytes),
             ("grpc.max_send_message_length", max_message_bytes),
