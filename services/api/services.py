@@ -16,7 +16,8 @@ from services.jobs.metrics import ServiceMetrics
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.scheduler import Scheduler, SchedulerSettings
-from services.jobs.submission import Submitter
+from services.jobs.submission import JobRequest, Submitter
+from services.jobs.tables import Job
 
 
 @dataclass
@@ -68,3 +69,17 @@ class Services:
     def stop(self) -> None:
         self.scheduler.stop()
         self.db.dispose()
+
+    def submit(self, request: JobRequest, idempotency_key: str | None = None) -> tuple[Job, bool]:
+        """`Submitter.submit`, counted; a new job wakes the scheduler rather than waiting for its tick."""
+        job, created = self.submitter.submit(request, idempotency_key)
+        self.metrics.submissions.labels(str(created).lower()).inc()
+        if created:
+            self.scheduler.wake()
+        return job, created
+
+    def cancel(self, job_id: str) -> Job:
+        """Request the cancellation and wake the scheduler, which stops a running job's driver."""
+        job = self.jobs.request_cancel(job_id)
+        self.scheduler.wake()
+        return job

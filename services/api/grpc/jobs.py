@@ -1,4 +1,4 @@
-"""`neuralbake.v1.JobService`: a thin adapter over the job service's submitter, repository and scheduler."""
+"""`neuralbake.v1.JobService`: a thin adapter over `Services` (submit, cancel) and the job repository."""
 
 from __future__ import annotations
 
@@ -27,10 +27,7 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
 
     def SubmitJob(self, request, context):
         body = JobRequest.model_validate(submit_fields(request))
-        job, created = self.svc.submitter.submit(body, idempotency_key(context))
-        self.svc.metrics.submissions.labels(str(created).lower()).inc()
-        if created:
-            self.svc.scheduler.wake()
+        job, created = self.svc.submit(body, idempotency_key(context))
         return jobs_pb2.SubmitJobResponse(job=job_message(job), created=created)
 
     def GetJob(self, request, context):
@@ -48,9 +45,7 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
         return jobs_pb2.ListJobsResponse(jobs=[job_message(j) for j in jobs], next_page_token=cursor or "")
 
     def CancelJob(self, request, context):
-        job = self.svc.jobs.request_cancel(request.job_id)
-        self.svc.scheduler.wake()
-        return jobs_pb2.CancelJobResponse(job=job_message(job))
+        return jobs_pb2.CancelJobResponse(job=job_message(self.svc.cancel(request.job_id)))
 
     def WatchJob(self, request, context) -> Iterator[jobs_pb2.WatchJobResponse]:
         """Events in order from the database (any replica serves any job) until the final state."""

@@ -33,11 +33,8 @@ def submit_job(
     idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
 ) -> JobView:
     """Queue a job (201), or return the existing identical one (200) unless `force` is set."""
-    job, created = svc.submitter.submit(body, idempotency_key)
-    svc.metrics.submissions.labels(str(created).lower()).inc()
-    if created:
-        svc.scheduler.wake()
-    else:
+    job, created = svc.submit(body, idempotency_key)
+    if not created:
         response.status_code = 200
     response.headers["Location"] = f"/v1/jobs/{job.id}"
     return JobView.of(job)
@@ -83,10 +80,9 @@ def get_job(job_id: str, svc: ServicesDep) -> JobView:
 )
 def cancel_job(job_id: str, response: Response, svc: ServicesDep) -> JobView:
     """A queued job is cancelled at once (200); a running one stops within seconds (202)."""
-    job = svc.jobs.request_cancel(job_id)
+    job = svc.cancel(job_id)
     if job.state == JobState.CANCELLED:
         response.status_code = 200
-    svc.scheduler.wake()
     return JobView.of(job)
 
 
