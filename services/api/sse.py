@@ -1,4 +1,4 @@
-"""A job's events as Server-Sent Events, read from the database (so every replica can serve any job).
+"""A job's events as Server-Sent Events, by the loop `services.jobs.following` shares with gRPC WatchJob.
 
 The stream resumes after `Last-Event-ID` (the per-job event sequence number) and ends after the job's
 final state event; comments keep idle connections open through proxies.
@@ -12,13 +12,12 @@ import time
 from collections.abc import AsyncIterator
 
 from fastapi import Request
-from starlette.concurrency import run_in_threadpool
+from starlette.concurrency import iterate_in_threadpool
 
 from services.api.schemas import EventView
+from services.jobs.following import POLL_S, follow
 from services.jobs.repository import JobRepository
-from services.jobs.states import TERMINAL
 
-POLL_S = 0.2
 KEEPALIVE_S = 15.0
 
 
@@ -29,20 +28,13 @@ def format_event(view: EventView) -> str:
 async def event_stream(request: Request, jobs: JobRepository, job_id: str, after: int) -> AsyncIterator[str]:
     last_sent = time.monotonic()
     yield "retry: 1000\n\n"
-    while True:
-        events = await run_in_threadpool(jobs.events_after, job_id, after)
+    async for events in iterate_in_threadpool(follow(jobs, job_id, after)):  # database reads off the loop
         for event in events:
             view = EventView(job_id=job_id, seq=event.seq, type=event.type, time=event.time, data=event.data)
             yield format_event(view)
-            after = event.seq
-            if event.type == "state" and event.data.get("state") in TERMINAL:
-                return
         if events:
             last_sent = time.monotonic()
             continue
-        job = await run_in_threadpool(jobs.get, job_id)
-        if job.state in TERMINAL and job.last_event_seq <= after:
-            return  # resumed after the final event: nothing more will come
         if await request.is_disconnected():
             return
         if time.monotonic() - last_sent > KEEPALIVE_S:

@@ -11,7 +11,7 @@ from services.api.grpc.messages import STATE_NAMES, event_message, job_message, 
 from services.api.grpc.streams import StreamTracker, pause
 from services.api.services import Services
 from services.jobs.errors import InvalidInput
-from services.jobs.states import TERMINAL, JobState
+from services.jobs.following import follow
 from services.jobs.submission import JobRequest
 
 DEFAULT_PAGE, MAX_PAGE = 50, 200
@@ -48,21 +48,11 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
         return jobs_pb2.CancelJobResponse(job=job_message(self.svc.cancel(request.job_id)))
 
     def WatchJob(self, request, context) -> Iterator[jobs_pb2.WatchJobResponse]:
-        """Events in order from the database (any replica serves any job) until the final state."""
-        jobs, job_id, after = self.svc.jobs, request.job_id, request.after_seq
-        jobs.get(job_id)  # NOT_FOUND before anything is sent
+        """Events in order until the final state, by the loop `services.jobs.following` shares with SSE."""
+        self.svc.jobs.get(request.job_id)  # NOT_FOUND before anything is sent
         with self.streams.track("WatchJob"):
-            while context.is_active():
-                events = jobs.events_after(job_id, after)
+            for events in follow(self.svc.jobs, request.job_id, request.after_seq):
                 for event in events:
                     yield jobs_pb2.WatchJobResponse(event=event_message(event))
-                    after = event.seq
-                    if event.type == "state" and event.data.get("state") in TERMINAL:
-                        return
-                if events:
-                    continue
-                job = jobs.get(job_id)
-                if JobState(job.state).terminal and job.last_event_seq <= after:
-                    return  # resumed after the final event: nothing more will come
-                if not pause(context):
+                if not events and not pause(context):
                     return

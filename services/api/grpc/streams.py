@@ -12,7 +12,7 @@ from contextlib import contextmanager
 import grpc
 from prometheus_client import CollectorRegistry, Gauge
 
-POLL_S = 0.2  # how often a stream waiting for news looks again (and notices a cancelled call)
+from services.jobs.following import POLL_S
 
 
 class StreamTracker:
