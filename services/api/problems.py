@@ -1,5 +1,6 @@
 """Every error answer is `application/problem+json` (RFC 9457) with a `detail` a person can act on and,
-for bad input, the `field` at fault. Bad input is always a 4xx; only a real bug is a 500.
+for bad input, the `field` at fault. Bad input is always a 4xx; only a real bug is a 500. The service's own
+errors go through the table gRPC shares (`services.api.errors`); FastAPI's own errors are mapped here.
 """
 
 from __future__ import annotations
@@ -13,12 +14,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from services.artifacts.artifacts import ArtifactNotFound, FileNotFoundInArtifact
-from services.artifacts.assets import AssetNotFound
-from services.artifacts.staging import UploadError
-from services.jobs.errors import JobServiceError
-from services.jobs.states import InvalidTransition
-from workers.scene.errors import SceneError
+from services.api.errors import ACTIONABLE, ProblemInfo, internal_problem, problem_for
 from workers.scene.io import dotted_path
 
 PROBLEM_JSON = "application/problem+json"
@@ -57,31 +53,18 @@ PROBLEM_RESPONSES = {
 }
 
 
+def _document(request: Request, info: ProblemInfo) -> JSONResponse:
+    return problem(request, info.status, info.title, info.detail, info.field, info.headers)
+
+
 def install(app: FastAPI) -> None:
     """Register the handlers that turn every error into a problem document."""
 
-    @app.exception_handler(JobServiceError)
-    async def _service_error(request: Request, error: JobServiceError):
-        return problem(request, error.status, error.title, error.detail, error.field, error.headers)
+    async def _actionable(request: Request, error: Exception):
+        return _document(request, problem_for(error))
 
-    @app.exception_handler(InvalidTransition)
-    async def _transition(request: Request, error: InvalidTransition):
-        return problem(request, 409, "Conflict", str(error))
-
-    @app.exception_handler(UploadError)
-    async def _upload(request: Request, error: UploadError):
-        title = "Upload too large" if error.status == 413 else "Unusable upload"
-        return problem(request, error.status, title, error.problem, error.field)
-
-    @app.exception_handler(SceneError)
-    async def _scene(request: Request, error: SceneError):
-        return problem(request, 422, "Invalid scene", error.problem, error.field)
-
-    @app.exception_handler(AssetNotFound)
-    @app.exception_handler(ArtifactNotFound)
-    @app.exception_handler(FileNotFoundInArtifact)
-    async def _not_found(request: Request, error: LookupError):
-        return problem(request, 404, "Not found", str(error))
+    for error_type in ACTIONABLE:
+        app.add_exception_handler(error_type, _actionable)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, error: RequestValidationError):
@@ -102,7 +85,7 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(Exception)
     async def _bug(request: Request, error: Exception):
         log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return problem(request, 500, "Internal server error", f"{type(error).__name__}: the server failed")
+        return _document(request, internal_problem(error))
 
 
 def validation_problem(request: Request, error: RequestValidationError) -> JSONResponse:

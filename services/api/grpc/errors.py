@@ -1,13 +1,12 @@
-"""The job service's errors as gRPC statuses: the same problem (status, title, detail, field) the REST API
-answers with, carried as a status code, a message and rich details (`google.rpc.ErrorInfo` with the
-problem, `google.rpc.BadRequest` naming the field), so a client can act on it exactly as over HTTP.
+"""The job service's errors as gRPC statuses: the problem `services.api.errors` gives REST too (status,
+title, detail, field), carried as a status code, a message and rich details (`google.rpc.ErrorInfo` with
+the problem, `google.rpc.BadRequest` naming the field), so a client can act on it exactly as over HTTP.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 import grpc
 from google.protobuf import any_pb2
@@ -15,13 +14,8 @@ from google.rpc import error_details_pb2, status_pb2
 from grpc_status import rpc_status
 from pydantic import ValidationError
 
+from services.api.errors import ProblemInfo, internal_problem, problem_for
 from services.api.grpc.handlers import Behaviour, rewrap
-from services.artifacts.artifacts import ArtifactNotFound, FileNotFoundInArtifact
-from services.artifacts.assets import AssetNotFound
-from services.artifacts.staging import UploadError
-from services.jobs.errors import JobServiceError
-from services.jobs.states import InvalidTransition
-from workers.scene.errors import SceneError
 from workers.scene.io import dotted_path
 
 DOMAIN = "neuralbake"
@@ -39,36 +33,17 @@ CODES = {
 }
 
 
-@dataclass(frozen=True)
-class Problem:
-    status: int
-    title: str
-    detail: str
-    field: str | None = None
+def problem_of(error: Exception) -> ProblemInfo | None:
+    """The problem an error stands for, or None for a bug. A request message that fails its model (as
+    `JobRequest`) is this adapter's own bad input, like a REST body failing validation."""
+    if isinstance(error, ValidationError):
+        first = error.errors()[0]
+        field = dotted_path(first["loc"], None) or "request"
+        return ProblemInfo(422, "Invalid input", f"{field}: {first['msg']}", field)
+    return problem_for(error)
 
 
-def problem_of(error: Exception) -> Problem | None:
-    """The problem an error stands for, or None for a bug."""
-    match error:
-        case JobServiceError():
-            return Problem(error.status, error.title, error.detail, error.field)
-        case InvalidTransition():
-            return Problem(409, "Conflict", str(error))
-        case UploadError():
-            title = "Upload too large" if error.status == 413 else "Unusable upload"
-            return Problem(error.status, title, error.problem, error.field)
-        case SceneError():
-            return Problem(422, "Invalid scene", error.problem, error.field)
-        case AssetNotFound() | ArtifactNotFound() | FileNotFoundInArtifact():
-            return Problem(404, "Not found", str(error))
-        case ValidationError():
-            first = error.errors()[0]
-            field = dotted_path(first["loc"], None) or "request"
-            return Problem(422, "Invalid input", f"{field}: {first['msg']}", field)
-    return None
-
-
-def to_status(problem: Problem) -> grpc.Status:
+def to_status(problem: ProblemInfo) -> grpc.Status:
     info = error_details_pb2.ErrorInfo(
         reason=problem.title.upper().replace(" ", "_"),
         domain=DOMAIN,
@@ -98,8 +73,7 @@ def abort(context: grpc.ServicerContext, error: Exception):
     problem = problem_of(error)
     if problem is None:
         log.error("unhandled error in a gRPC call", exc_info=error)
-        problem = Problem(500, "Internal server error", f"{type(error).__name__}: the server failed")
-        context.abort(grpc.StatusCode.INTERNAL, problem.detail)
+        context.abort(grpc.StatusCode.INTERNAL, internal_problem(error).detail)
     context.abort_with_status(to_status(problem))
 
 
