@@ -73,3 +73,27 @@ class RayScene:
             query="OCCLUDED",
         )
         return out != -1
+
+
+class SubsetRayScene:
+    """Embree over some of a scene's triangles (`triangle_ids` into its positions), answering with the
+    scene's own triangle indices, so a `PathTracer` over the whole scene can trace just these. An empty
+    subset is answered without Embree: every ray escapes."""
+
+    def __init__(self, positions: np.ndarray, triangle_ids: np.ndarray, robust: bool = True):
+        self.triangle_ids = np.asarray(triangle_ids, np.int64)
+        self._scene = RayScene(positions[self.triangle_ids], robust) if len(self.triangle_ids) else None
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+        if self._scene is None:
+            n = len(origins)
+            return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+        hits = self._scene.intersect(origins, directions)
+        found = hits.prim >= 0
+        hits.prim = np.where(found, self.triangle_ids[np.where(found, hits.prim, 0)], -1)
+        return hits
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        if self._scene is None:
+            return np.zeros(len(origins), bool)
+        return self._scene.occluded(origins, directions, t_max)

@@ -9,12 +9,13 @@ given rays, `first_hits` for surface records, `occluded` for visibility.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 import numpy as np
 
-from workers.render.bsdf import Kind, eval_bsdf, sample_bsdf
+from workers.render.aggregate import Aggregate, AggregateEvents
+from workers.render.bsdf import Kind, SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import Hits, RayScene
 from workers.render.lights import LightSampler
 from workers.render.materials import MaterialTable
@@ -26,12 +27,14 @@ from workers.render.sampling import (
     power_heuristic,
     select_where,
     selection_size,
+    square_to_uniform_sphere,
     to_local,
     to_world,
 )
 from workers.scene.compile import CompiledScene
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
+UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
 
 
 class Intersector(Protocol):
@@ -80,6 +83,55 @@ class SurfaceRecords:
 
 
 @dataclass
+class _Paths:
+    """The live paths of a wavefront: pixel index, current ray, throughput and the last scattering's pdf.
+
+    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0)."""
+
+    idx: np.ndarray
+    o: np.ndarray
+    d: np.ndarray
+    beta: np.ndarray
+    prev_pdf: np.ndarray
+    prev_delta: np.ndarray
+    t_min: np.ndarray
+
+    def take(self, rows: np.ndarray) -> _Paths:
+        return _Paths(*(getattr(self, f.name)[rows] for f in fields(self)))
+
+    @staticmethod
+    def concatenate(a: _Paths, b: _Paths) -> _Paths:
+        return _Paths(*(np.concatenate([getattr(a, f.name), getattr(b, f.name)]) for f in fields(a)))
+
+
+@dataclass
+class _Scattered:
+    paths: _Paths
+    rays_traced: int
+
+
+@dataclass
+class Shading:
+    """Surface points ready for BSDF queries: materials, and a frame whose normal faces the viewer (except
+    on refractive surfaces); `wo_local` is the direction back along the arriving ray in that frame."""
+
+    position: np.ndarray
+    ng: np.ndarray
+    scale: np.ndarray  # coordinate magnitude for `PathTracer.offset`
+    surf: SurfaceBatch
+    fs: np.ndarray
+    ft: np.ndarray
+    ns: np.ndarray
+    wo_local: np.ndarray
+
+    def to_world(self, v: np.ndarray) -> np.ndarray:
+        return to_world(v, self.fs, self.ft, self.ns)
+
+    def to_local(self, v: np.ndarray) -> np.ndarray:
+        return to_local(v, self.fs, self.ft, self.ns)
+
+
+@dataclass
 class _Interaction:
     position: np.ndarray
     ng: np.ndarray
@@ -97,12 +149,17 @@ class PathTracer:
         robust: bool = True,
         intersector: Intersector | None = None,
         primary: Intersector | None = None,
+        aggregate: Aggregate | None = None,
+        aggregate_next_event: bool = True,
     ):
         """`intersector` answers closest-hit and occlusion queries in place of an Embree scene over every
         triangle (e.g. neural objects beside Embree); it must index hits by the scene's triangles.
         `primary` (default: the same) answers the first segment of paths and `first_hits`, as a
-        rasteriser would for camera rays."""
+        rasteriser would for camera rays. `aggregate` scatters light in voxels beside the surfaces
+        (`workers.render.aggregate`); `aggregate_next_event` samples lights from its scattering voxels."""
         self.scene = scene
+        self.aggregate = aggregate
+        self.aggregate_next_event = aggregate_next_event
         self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)
         self.primary = primary if primary is not None else self.rays
         self.lights = LightSampler(scene)
@@ -166,7 +223,7 @@ class PathTracer:
         return position + ng * (side * eps)[:, None]
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-        return self.rays.occluded(origins, directions, t_max)
+        return self._occluded(origins, directions, t_max)
 
     # ------------------------------------------------------------------ first hits
 
@@ -251,87 +308,169 @@ class PathTracer:
         radiance = np.zeros((n, 3))
         bounces = np.zeros(n, np.int64)
         rays_traced = 0
-        idx = np.arange(n)
-        o = np.asarray(origins, dtype=np.float64)
-        d = np.asarray(directions, dtype=np.float64)
-        beta = np.ones((n, 3))
-        prev_pdf = np.zeros(n)
-        prev_delta = np.ones(n, bool)  # the camera ray: emitters it sees count fully
+        paths = _Paths(
+            idx=np.arange(n),
+            o=np.asarray(origins, dtype=np.float64),
+            d=np.asarray(directions, dtype=np.float64),
+            beta=np.ones((n, 3)),
+            prev_pdf=np.zeros(n),
+            prev_delta=np.ones(n, bool),  # the camera ray: emitters it sees count fully
+            t_min=np.zeros(n),
+        )
         env = self.lights.environment
         for segment in range(1, max_depth + 1):
-            if len(idx) == 0:
+            if len(paths.idx) == 0:
                 break
-            hits = (self.primary if segment == 1 else self.rays).intersect(o, d)
-            rays_traced += len(idx)
-            bounces[idx] = segment
+            hits = (self.primary if segment == 1 else self.rays).intersect(paths.o, paths.d)
+            rays_traced += len(paths.idx)
+            bounces[paths.idx] = segment
             found = hits.found
+            events = None
+            if self.aggregate is not None:
+                t_surface = np.where(found, hits.t, np.inf)
+                events = self.aggregate.first_events(paths.o, paths.d, paths.t_min, t_surface, rng)
+                paths.beta = paths.beta * events.weight[:, None]
+                found = found & ~events.found
 
-            miss = np.flatnonzero(~found)
+            miss = np.flatnonzero(~found if events is None else ~found & ~events.found)
             if env is not None and len(miss):
-                dm = d[miss]
+                dm = paths.d[miss]
                 weight = np.where(
-                    prev_delta[miss], 1.0, power_heuristic(prev_pdf[miss], self.lights.pdf_environment(dm))
+                    paths.prev_delta[miss],
+                    1.0,
+                    power_heuristic(paths.prev_pdf[miss], self.lights.pdf_environment(dm)),
                 )
-                radiance[idx[miss]] += beta[miss] * env.radiance(dm) * weight[:, None]
+                radiance[paths.idx[miss]] += paths.beta[miss] * env.radiance(dm) * weight[:, None]
 
-            if len(miss):
+            scattered = None
+            if events is not None:
+                at = np.flatnonzero(events.found)
+                scattered = self._scatter_in_aggregate(
+                    paths.take(at), events.take(at), segment, max_depth, rng, radiance
+                )
+                rays_traced += scattered.rays_traced
+            if len(miss) or events is not None:
                 keep = np.flatnonzero(found)
-                idx, o, d, beta = idx[keep], o[keep], d[keep], beta[keep]
-                prev_pdf, prev_delta = prev_pdf[keep], prev_delta[keep]
+                paths = paths.take(keep)
                 hits = hits.take(keep)
-            if len(idx) == 0:
-                break
-            it = self._interaction(hits, o, d, self._needs_uv)
-            prim = hits.prim
-            wo = -d
-
-            if self._has_emitters:
-                emitted = self._emitted(prim, wo, it.ng)
-                lit = np.flatnonzero(max3(emitted) > 0)
-                if len(lit):
-                    pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
-                    weight = np.where(prev_delta[lit], 1.0, power_heuristic(prev_pdf[lit], pdf_light))
-                    radiance[idx[lit]] += beta[lit] * emitted[lit] * weight[:, None]
-
-            if segment == max_depth:
-                break
-
-            surf = self._surfaces(hits, self._material_ids(hits), it.uv)
-            ns = it.ns
-            flip = (dot(wo, ns) < 0) & (surf.kind != Kind.DIELECTRIC)
-            ns = np.where(flip[:, None], -ns, ns)
-            fs, ft = coordinate_frame(ns)
-            wo_local = to_local(wo, fs, ft, ns)
-            u = rng.random((len(idx), 6))
-
-            rays_traced += self._next_event(idx, it, surf, fs, ft, ns, wo_local, beta, u, radiance)
-
-            wi_local, weight, pdf, delta = sample_bsdf(surf, wo_local, u[:, 3:5], u[:, 5])
-            wi = to_world(wi_local, fs, ft, ns)
-            beta = beta * weight
-            if segment >= rr_depth:
-                q = np.minimum(max3(beta), 0.95)
-                survive = rng.random(len(idx)) < q
-                beta = beta / np.maximum(q, 1e-300)[:, None] * survive[:, None]
-            alive = np.flatnonzero(max3(beta) > 0)
-            idx, beta, prev_pdf, prev_delta = idx[alive], beta[alive], pdf[alive], delta[alive]
-            d = wi[alive]
-            o = self.offset(it.position[alive], it.ng[alive], d, it.scale[alive])
+            paths, shadow_rays = self._scatter_at_surfaces(paths, hits, segment, max_depth, rng, radiance)
+            rays_traced += shadow_rays
+            if scattered is not None:
+                paths = _Paths.concatenate(paths, scattered.paths)
+            if segment >= rr_depth and len(paths.idx):
+                q = np.minimum(max3(paths.beta), 0.95)
+                survive = rng.random(len(paths.idx)) < q
+                paths.beta = paths.beta / np.maximum(q, 1e-300)[:, None] * survive[:, None]
+            paths = paths.take(np.flatnonzero(max3(paths.beta) > 0))
         np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return TraceResult(radiance, bounces, rays_traced)
 
-    def _next_event(self, idx, it, surf, fs, ft, ns, wo_local, beta, u, radiance) -> int:
+    def _scatter_at_surfaces(
+        self, paths: _Paths, hits: Hits, segment: int, max_depth: int, rng, radiance: np.ndarray
+    ) -> tuple[_Paths, int]:
+        """Emission, next-event estimation and BSDF sampling at surface hits: the continuing paths."""
+        if len(paths.idx) == 0:
+            return paths, 0
+        idx, d, beta = paths.idx, paths.d, paths.beta
+        it = self._interaction(hits, paths.o, d, self._needs_uv)
+        prim = hits.prim
+        wo = -d
+
+        if self._has_emitters:
+            emitted = self._emitted(prim, wo, it.ng)
+            lit = np.flatnonzero(max3(emitted) > 0)
+            if len(lit):
+                pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
+                weight = np.where(paths.prev_delta[lit], 1.0, power_heuristic(paths.prev_pdf[lit], pdf_light))
+                radiance[idx[lit]] += beta[lit] * emitted[lit] * weight[:, None]
+
+        if segment == max_depth:
+            return paths.take(np.zeros(0, np.int64)), 0
+
+        sh = self._shade(it, hits, wo)
+        u = rng.random((len(idx), 6))
+
+        shadow_rays = self._next_event(idx, sh, beta, u, radiance)
+
+        wi_local, weight, pdf, delta = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
+        wi = sh.to_world(wi_local)
+        o = self.offset(sh.position, sh.ng, wi, sh.scale)
+        return _Paths(idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx))), shadow_rays
+
+    def _scatter_in_aggregate(
+        self, paths: _Paths, events: AggregateEvents, segment: int, max_depth: int, rng, radiance: np.ndarray
+    ) -> _Scattered:
+        """At voxels the aggregate scatters in: light sampling weighted by the voxel's throughput (MIS with
+        the uniform direction sampling below; beyond Weier et al., switchable), then a uniform direction
+        with weight throughput / pdf. The continuing ray starts at the voxel's entry point."""
+        n = len(paths.idx)
+        if segment == max_depth or n == 0:
+            return _Scattered(paths.take(np.zeros(0, np.int64)), 0)
+        position = paths.o + events.t[:, None] * paths.d
+        wo = -paths.d
+        u = rng.random((n, 5))
+        shadow_rays = 0
+        if self.aggregate_next_event and self.lights.count:
+            shadow_rays = self._next_event_in_aggregate(paths, events, position, wo, u, radiance)
+        wi = square_to_uniform_sphere(u[:, 3:5])
+        phi = self.aggregate.throughput(events.voxel, wo, wi)
+        t_min = self.aggregate.exit_distance(events.voxel, position, wi)
+        pdf = np.full(n, UNIFORM_SPHERE_PDF)
+        beta = paths.beta * phi / UNIFORM_SPHERE_PDF
+        return _Scattered(_Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min), shadow_rays)
+
+    def _next_event_in_aggregate(
+        self, paths: _Paths, events: AggregateEvents, position, wo, u, radiance
+    ) -> int:
+        ls = self.lights.sample(position, u[:, 0], u[:, 1:3])
+        phi = self.aggregate.throughput(events.voxel, wo, ls.direction)
+        mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, np.full(len(ls.pdf), UNIFORM_SPHERE_PDF)))
+        scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
+        contribution = paths.beta * phi * ls.radiance * scale[:, None]
+        live = np.flatnonzero(max3(contribution) > 0)
+        if len(live) == 0:
+            return 0
+        origin, direction, distance = position[live], ls.direction[live], ls.distance[live]
+        margin = 2 * RAY_OFFSET * np.maximum(max3(np.abs(origin)), 1e-30)
+        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - margin, np.inf)
+        t_min = self.aggregate.exit_distance(events.voxel[live], origin, direction)
+        blocked = self.rays.occluded(origin, direction, t_max)
+        blocked |= self.aggregate.occluded(origin, direction, t_min, t_max)
+        radiance[paths.idx[live]] += contribution[live] * ~blocked[:, None]
+        return len(live)
+
+    def _occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        """Shadow rays from surfaces: blocked by a surface or, when there is one, by the aggregate."""
+        blocked = self.rays.occluded(origins, directions, t_max)
+        if self.aggregate is not None:
+            blocked |= self.aggregate.occluded(origins, directions, np.zeros(len(origins)), t_max)
+        return blocked
+
+    def shade(self, hits: Hits, origins: np.ndarray, directions: np.ndarray) -> Shading:
+        """Surface points of `hits` ready for BSDF queries (for samplers that walk paths themselves)."""
+        it = self._interaction(hits, origins, directions, self._needs_uv)
+        return self._shade(it, hits, -directions)
+
+    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray) -> Shading:
+        surf = self._surfaces(hits, self._material_ids(hits), it.uv)
+        ns = it.ns
+        flip = (dot(wo, ns) < 0) & (surf.kind != Kind.DIELECTRIC)
+        ns = np.where(flip[:, None], -ns, ns)
+        fs, ft = coordinate_frame(ns)
+        return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, to_local(wo, fs, ft, ns))
+
+    def _next_event(self, idx, sh: Shading, beta, u, radiance) -> int:
         """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
         if self.lights.count == 0:
             return 0
         n = len(idx)
-        sel = select_where(~surf.is_delta)
+        sel = select_where(~sh.surf.is_delta)
         if selection_size(sel, n) == 0:
             return 0
-        ls = self.lights.sample(it.position[sel], u[sel, 0], u[sel, 1:3])
-        wi_local = to_local(ls.direction, fs[sel], ft[sel], ns[sel])
+        ls = self.lights.sample(sh.position[sel], u[sel, 0], u[sel, 1:3])
+        wi_local = to_local(ls.direction, sh.fs[sel], sh.ft[sel], sh.ns[sel])
         f_cos, bsdf_pdf = eval_bsdf(
-            surf if isinstance(sel, slice) else surf.take(sel), wo_local[sel], wi_local
+            sh.surf if isinstance(sel, slice) else sh.surf.take(sel), sh.wo_local[sel], wi_local
         )
         mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, bsdf_pdf))
         scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
@@ -341,9 +480,9 @@ class PathTracer:
             return 0
         at = live if isinstance(sel, slice) else sel[live]
         direction = ls.direction[live]
-        origin = self.offset(it.position[at], it.ng[at], direction, it.scale[at])
+        origin = self.offset(sh.position[at], sh.ng[at], direction, sh.scale[at])
         distance = ls.distance[live]
-        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * it.scale[at], np.inf)
-        blocked = self.rays.occluded(origin, direction, t_max)
+        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * sh.scale[at], np.inf)
+        blocked = self._occluded(origin, direction, t_max)
         radiance[idx[at]] += contribution[live] * ~blocked[:, None]
         return len(live)

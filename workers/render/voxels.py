@@ -258,3 +258,57 @@ def _record(out: BoundaryPoints, rows, mask, o, d, t) -> None:
     out.points[target, slot] = o[sel] + t[sel, None] * d[sel]
     out.t[target, slot] = t[sel]
     out.count[target] += 1
+
+
+def coarsen(occupied: np.ndarray) -> np.ndarray:
+    """The occupancy one level coarser (R/2 per side, R even): a voxel is occupied when any child is."""
+    r = occupied.shape[0]
+    if r % 2 or occupied.shape != (r, r, r):
+        raise ValueError(f"only a cubic grid of even resolution can be coarsened, got {occupied.shape}")
+    return occupied.reshape(r // 2, 2, r // 2, 2, r // 2, 2).any(axis=(1, 3, 5))
+
+
+@dataclass
+class OccupiedVoxels:
+    """The first occupied voxel each ray enters for a positive length within its segment [t_min, t_max]."""
+
+    found: np.ndarray  # (N,) bool
+    cell: np.ndarray  # (N, 3) int64 voxel index where found
+    t_enter: np.ndarray  # (N,) where the ray enters it (t_min when it starts inside); inf where not found
+    t_exit: np.ndarray  # (N,) where the ray leaves it (or t_max)
+
+
+def first_occupied(
+    grid: VoxelGrid, origins: np.ndarray, directions: np.ndarray, t_min: np.ndarray, t_max: np.ndarray
+) -> OccupiedVoxels:
+    """Walk every ray (Amanatides-Woo, same planes and start-cell rule as `boundary_points`) from t_min
+    until it enters an occupied voxel; vectorised over rays, finished rays drop out of the loop."""
+    n, r = len(origins), grid.resolution
+    out = OccupiedVoxels(
+        np.zeros(n, bool), np.zeros((n, 3), np.int64), np.full(n, np.inf), np.full(n, np.inf)
+    )
+    t_near, t_far = clip_to_box(grid, origins, directions, t_max)
+    t_near = np.maximum(t_near, t_min)
+    rows = np.flatnonzero(t_far > t_near)
+    o, d = origins[rows], directions[rows]
+    t_cur, t_end = t_near[rows], t_far[rows]
+    step = np.where(d > 0, 1, -1).astype(np.int64)
+    start = o + t_cur[:, None] * d
+    cell = np.clip(np.floor((start - grid.lo) / grid.size).astype(np.int64), 0, r - 1)
+    on_lower_plane = (grid.plane(cell) == start) & (d < 0)
+    cell = np.where(on_lower_plane & (cell > 0), cell - 1, cell)
+    safe_d = np.where(d != 0, d, 1.0)
+    while len(rows):
+        t_axis = np.where(d != 0, (grid.plane(cell + (step > 0)) - o) / safe_d, np.inf)
+        t_next = np.minimum(t_axis.min(1), t_end)
+        hit = (t_next > t_cur) & grid.occupied[cell[:, 0], cell[:, 1], cell[:, 2]]
+        if hit.any():
+            at = rows[hit]
+            out.found[at], out.cell[at] = True, cell[hit]
+            out.t_enter[at], out.t_exit[at] = t_cur[hit], t_next[hit]
+        t_cur = t_next
+        cell = cell + step * (t_axis <= t_next[:, None])
+        keep = ~hit & (t_cur < t_end) & np.all((cell >= 0) & (cell < r), axis=1)
+        rows, o, d, t_cur, t_end = rows[keep], o[keep], d[keep], t_cur[keep], t_end[keep]
+        step, cell, safe_d = step[keep], cell[keep], safe_d[keep]
+    return out

@@ -62,7 +62,7 @@ def outer_combine(pairs: Tensor, op: Callable[[Tensor, Tensor], Tensor]) -> Tens
     """Combine per-dimension pairs [N, d, 2] into all 2^d corners [N, 2^d]; dimension 0 is the slowest."""
     out = pairs[:, 0]
     for dim in range(1, pairs.shape[1]):
-        out = op(out[:, :, None], pairs[:, dim, None, :]).view(pairs.shape[0], -1)
+        out = op(out[:, :, None], pairs[:, dim, None, :]).flatten(1)
     return out
 
 
@@ -138,7 +138,7 @@ class _GridInterpolation(torch.autograd.Function):
             )
         ctx.save_for_backward(x, table)
         ctx.geometry, ctx.blocks, ctx.lookup = geometry, blocks, lookup
-        return out.view(n_points, -1)
+        return out.flatten(1)
 
     @staticmethod
     @once_differentiable
