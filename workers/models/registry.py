@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 # One line per kind: a module exposing `KIND`, an object satisfying `ModelKind`.
-KIND_MODULES = ("workers.models.render", "workers.models.lsnif")
+KIND_MODULES = ("workers.models.render", "workers.models.lsnif", "workers.models.lod")
 PRESET_NAMES = ("quick", "default", "paper")
 
 

@@ -61,18 +61,24 @@ def dssim(a: ImageLike, b: ImageLike, tonemap: str = "srgb") -> float:
     return (1 - ssim(a, b, tonemap)) / 2
 
 
-def flip(reference: ImageLike, test: ImageLike, hdr: bool = True) -> float:
-    """Mean FLIP error (Andersson et al. 2020; the `flip-evaluator` package), 0 for identical images.
+def flip(reference: ImageLike, test: ImageLike, hdr: bool = True, mask: np.ndarray | None = None) -> float:
+    """Mean FLIP error (Andersson et al. 2020; the `flip-evaluator` package), 0 for identical images;
+    with `mask` (H, W) the mean over the masked pixels only (e.g. excluding empty background).
 
     HDR mode takes the linear images (negatives clamped to 0) and lets FLIP choose its exposure range; LDR
     mode takes them clamped to [0, 1] as linear values (FLIP applies no sRGB decoding).
     """
     ref, tst = _pair(reference, test)
     ref, tst = (x.clamp(min=0.0) if hdr else x.clamp(0.0, 1.0) for x in (ref, tst))
-    _, mean_error, _ = flip_evaluator.evaluate(
+    error_map, mean_error, _ = flip_evaluator.evaluate(
         ref.float().numpy(), tst.float().numpy(), "HDR" if hdr else "LDR", inputsRGB=False, applyMagma=False
     )
-    return float(mean_error)
+    if mask is None:
+        return float(mean_error)
+    mask = np.asarray(mask, bool)
+    if mask.shape != ref.shape[:2]:
+        raise ValueError(f"mask shape {mask.shape} does not match the images' {tuple(ref.shape[:2])}")
+    return float(np.asarray(error_map).reshape(mask.shape)[mask].mean()) if mask.any() else 0.0
 
 
 def mape(reference: ImageLike, test: ImageLike, eps: float = 1e-2) -> float:

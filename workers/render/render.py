@@ -23,8 +23,10 @@ from workers.render.integrator import PathTracer
 from workers.scene.compile import CompiledScene
 
 MAX_PATHS_PER_ITEM = 1 << 16
-AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission")
-SCALAR_AOVS = frozenset({"roughness", "depth"})  # stored three times in `aovs`, written as one channel
+AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission", "path_length")
+SCALAR_AOVS = frozenset(
+    {"roughness", "depth", "path_length"}
+)  # stored three times in `aovs`, written as one channel
 
 
 class RenderSettings(BaseModel):
@@ -200,6 +202,7 @@ def _render_tile(
             "roughness": np.repeat(rec.roughness[:, None], 3, axis=1),
             "depth": np.repeat(depth[:, None], 3, axis=1),
             "emission": rec.emission,
+            "path_length": np.repeat(result.bounces[:, None].astype(np.float64), 3, axis=1),
         }
         aovs = {k: v.reshape(h, w, spp, 3).sum(axis=2) for k, v in per_sample.items()}
     return TileResult(radiance, aovs, rays)

@@ -1,0 +1,127 @@
+"""The `lod` kind's config and presets: the paper's sizes (`paper`) and sizes this 2-core CPU trains.
+
+`paper` is Weier et al. 2023: LoD 0 at 512^3 down to 8^3, hash tables of 2^19 rows, two 4x128 MLPs,
+1000 threshold samples per voxel, Adam at 0.005. `default` and `quick` shrink the finest level, the
+tables and the step count, not the method.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from workers.runtime.training import Schedule, TrainConfig
+
+
+class NetworkSize(BaseModel):
+    """A hash grid (one level per LoD, base = the coarsest resolution, scale 2) and a ReLU MLP."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    features_per_level: Literal[2, 4, 8] = 4
+    log2_table_size: int = Field(19, ge=8, le=24)
+    width: int = Field(128, ge=8, le=1024)
+    depth: int = Field(4, ge=1, le=8)
+    extra_levels: int = Field(
+        0, ge=0, le=2, description="hash-grid levels finer than LoD 0 (resolution doubling each)"
+    )
+
+
+def _power_of_two(value: int) -> int:
+    if value & (value - 1):
+        raise ValueError(f"must be a power of two, got {value}")
+    return value
+
+
+class LodConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    objects: list[str] | None = Field(
+        None, description="names of the objects to prefilter; default: non-emitting objects >= min_triangles"
+    )
+    min_triangles: int = Field(1000, ge=0)
+    finest_resolution: int = Field(128, ge=16, le=1024, description="voxels per side at LoD 0 (power of 2)")
+    coarsest_resolution: int = Field(8, ge=1, le=512, description="voxels per side at the coarsest LoD")
+    view_distances: list[float] = Field(
+        [],
+        description="camera distances the asset will be seen from (scene camera's fov and width); the plan "
+        "builds only the LoDs whose voxels match a pixel at one of them. Empty: every LoD.",
+    )
+    appearance: NetworkSize = NetworkSize(features_per_level=4)
+    visibility: NetworkSize = NetworkSize(features_per_level=4)
+    sh_degree: int = Field(8, ge=1, le=8)
+    appearance_output: Literal["linear", "log"] = Field(
+        "linear", description="linear: phi = network output; log: phi = exp(output) (always positive)"
+    )
+    batch_size: int = Field(1 << 13, ge=64, description="voxel samples per step (pairs of boundary points)")
+    domain_extrusion: float = Field(0.005, ge=0, le=0.1, description="learned domain grown by this x voxel")
+    max_voxel_bounces: int = Field(64, ge=1, le=1024, description="cap on a training path inside a voxel")
+    train: TrainConfig = TrainConfig(
+        steps=1500, schedule=Schedule(lr=0.005), checkpoint_every=250, progress_every=10
+    )
+    threshold_samples: int = Field(1000, ge=16, le=100_000, description="fresh visibility samples per voxel")
+    threshold_candidates: int = Field(100, ge=2, le=10_000)
+    stochastic_traversal: bool = True
+    survival_floor_at_512: float = Field(
+        0.9925, gt=0, le=1, description="lowest survival per voxel at 512^3; scaled to keep the diagonal's"
+    )
+    evaluation_spp: int = Field(64, ge=1, le=65536)
+    reference_spp: int = Field(512, ge=1, le=1 << 20)
+    evaluation_max_width: int = Field(192, ge=8, le=4096)
+    samplers: int = Field(1, ge=0, le=64, description="Ray actors generating training batches")
+    num_gpus: float = Field(0, ge=0)
+
+    _power_of_two = field_validator("finest_resolution", "coarsest_resolution")(_power_of_two)
+
+    @model_validator(mode="after")
+    def _levels(self) -> LodConfig:
+        if self.coarsest_resolution > self.finest_resolution:
+            raise ValueError(
+                f"coarsest_resolution ({self.coarsest_resolution}) must not exceed finest_resolution "
+                f"({self.finest_resolution})"
+            )
+        return self
+
+    @property
+    def resolutions(self) -> list[int]:
+        """Voxels per side of every LoD the config allows, LoD 0 (finest) first."""
+        out, r = [], self.finest_resolution
+        while r >= self.coarsest_resolution:
+            out.append(r)
+            r //= 2
+        return out
+
+
+PRESETS: dict[str, dict] = {
+    "quick": {
+        "finest_resolution": 32,
+        "appearance": {"features_per_level": 2, "log2_table_size": 14, "width": 64, "depth": 2},
+        "visibility": {"features_per_level": 2, "log2_table_size": 14, "width": 64, "depth": 2},
+        "sh_degree": 4,
+        "batch_size": 2048,
+        "train": {"steps": 60, "schedule": {"lr": 0.005}, "checkpoint_every": 30, "progress_every": 10},
+        "threshold_samples": 64,
+        "evaluation_spp": 4,
+        "reference_spp": 16,
+        "evaluation_max_width": 48,
+    },
+    "default": {
+        "appearance": {"features_per_level": 4, "log2_table_size": 17},
+        "visibility": {"features_per_level": 4, "log2_table_size": 17},
+        "threshold_samples": 256,
+    },
+    "paper": {
+        "finest_resolution": 512,
+        "appearance": {"features_per_level": 4, "log2_table_size": 19},
+        "visibility": {"features_per_level": 8, "log2_table_size": 19},
+        "batch_size": 1 << 16,
+        "train": {"steps": 10000, "schedule": {"lr": 0.005}, "checkpoint_every": 500, "progress_every": 50},
+        "threshold_samples": 1000,
+        "evaluation_spp": 1024,
+        "reference_spp": 4096,
+        "evaluation_max_width": 512,
+        "samplers": 4,
+        "num_gpus": 1,
+    },
+}

@@ -1,0 +1,140 @@
+"""Running a `lod` job: voxelise the asset, train both networks on batches path-traced by sampler actors,
+optimise the per-voxel thresholds, export the artifact, and measure every LoD against path tracing.
+
+Training checkpoints into the job's store, so a restarted job resumes its steps; the grid and the
+thresholds are rebuilt deterministically from the scene and the seed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+import torch
+
+from workers.models.lod import artifact
+from workers.models.lod.artifact import LodAsset, build_networks, round_to_storage
+from workers.models.lod.config import LodConfig
+from workers.models.lod.evaluate import evaluate_levels, timed_render
+from workers.models.lod.grid import LodGrid
+from workers.models.lod.plan import choose_asset, choose_resolutions, cube_extent
+from workers.models.lod.sampling import LodSource, LodSourceConfig, asset_tracer, asset_triangles
+from workers.models.lod.thresholds import optimise_thresholds
+from workers.models.lod.train import lod_loss, per_network_step_seconds
+from workers.models.registry import JobContext, RunOutput
+from workers.render.image_io import write_png
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings
+from workers.runtime.report import TimedImage, build_report
+from workers.runtime.samplers import InProcessBatches, SamplerPool
+from workers.runtime.sources import SourceSpec
+from workers.runtime.training import train
+from workers.scene.compile import compile_scene
+
+PATH_TRACING_SPP = (1, 4, 16, 64, 256)
+
+
+def run(ctx: JobContext) -> RunOutput:
+    config: LodConfig = ctx.config
+    scene = compile_scene(ctx.scene, ctx.scene_dir)
+    chosen = choose_asset(ctx.scene, config, ctx.scene_dir)
+    extent = cube_extent(chosen.bounds, config.finest_resolution)
+    resolutions = [r for r, _ in choose_resolutions(ctx.scene, config, extent)]
+    triangles = scene.positions[asset_triangles(scene, chosen.names)].astype(np.float64)
+    ctx.log(f"voxelising {len(triangles):,} triangles of {', '.join(chosen.names)} at {resolutions}")
+    grid = LodGrid.build(triangles, resolutions)
+    ctx.log(
+        "occupied voxels per LoD: "
+        + ", ".join(f"{r}^3: {len(k):,}" for r, k in zip(resolutions, grid.keys, strict=True))
+    )
+
+    torch.manual_seed(ctx.seed)
+    networks = build_networks(config, grid)
+    scene_dir = None if ctx.scene_dir is None else str(ctx.scene_dir)
+    spec = SourceSpec(
+        LodSource,
+        LodSourceConfig(ctx.scene.model_dump(mode="json"), scene_dir, chosen.names, config, grid.arrays()),
+        ctx.seed,
+    )
+
+    def progress(p):
+        ctx.raise_if_cancelled()
+        ctx.progress(p.step, p.total_steps, loss=p.loss, samples_per_s=p.samples_per_s, eta_s=p.eta_s)
+
+    with ctx.reserve_samplers(config.samplers) as slots:
+        ctx.log(f"training on {slots.count or 'no'} sampler actor(s)")
+        with _batches(spec, slots) as batches:
+            training = train(networks, lod_loss, batches, config.train, ctx.checkpoints, progress)
+            step_seconds = per_network_step_seconds(networks, {k: v for k, v in next(batches).items()})
+    round_to_storage(networks)
+    networks.eval()
+
+    ctx.log(f"optimising thresholds with {config.threshold_samples} samples per voxel")
+    gains = optimise_thresholds(
+        grid, networks.visibility, asset_tracer(scene, chosen.names), config.threshold_samples,
+        config.threshold_candidates, np.random.default_rng([ctx.seed, 1]),
+        on_level=lambda level: (ctx.raise_if_cancelled(), ctx.log(f"thresholds of LoD {level} done")),
+    )  # fmt: skip
+    asset = LodAsset(config, chosen.names, grid, networks)
+    files = artifact.save(ctx.output_dir, asset)
+
+    ctx.log("measuring every LoD against path tracing")
+    figures, images = evaluate_levels(
+        scene, asset, on_level=lambda level: (ctx.raise_if_cancelled(), ctx.log(f"LoD {level} measured"))
+    )
+    reference, lod_frame = images["reference"].image, images["lod"]
+    height, width = reference.shape[:2]
+    traced = [
+        TimedImage(f"{spp} spp", result.image, result.seconds)
+        for spp in PATH_TRACING_SPP
+        for result in [
+            timed_render(PathTracer(scene), RenderSettings(spp=spp, width=width, height=height, max_depth=64))
+        ]
+    ]
+    equal_time = min(traced, key=lambda f: abs(np.log(f.seconds / max(lod_frame.seconds, 1e-9))))
+    storage = {
+        "network_bytes": float(asset.network_bytes()),
+        "grid_bytes": float(grid.storage_bytes()),
+        "asset_mesh_bytes": float(chosen.mesh_bytes),
+    }
+    storage["storage_saving"] = 1 - (storage["network_bytes"] + storage["grid_bytes"]) / max(
+        chosen.mesh_bytes, 1
+    )
+    method_metrics = {
+        **storage,
+        **gains,
+        "training_seconds_visibility": step_seconds["visibility"] * training.steps,
+        "training_seconds_appearance": step_seconds["appearance"] * training.steps,
+    }
+    for f in figures:
+        for name, value in f.model_dump().items():
+            if name != "level":
+                method_metrics[f"lod{f.level}.{name}"] = float(value)
+    report = build_report(
+        "lod", training, networks, lod_frame, equal_time, traced, reference, method_metrics=method_metrics
+    )
+    report.write(str(ctx.output_dir))
+    write_png(ctx.output_dir / "preview.png", np.concatenate([reference, lod_frame.image], 1))
+    for name, media in (
+        ("report.json", "application/json"),
+        ("speed_error.png", "image/png"),
+        ("preview.png", "image/png"),
+    ):
+        files[name] = (str(ctx.output_dir / name), media)
+    metrics = {
+        "flip": figures[0].flip,
+        "flip_coarsest": figures[-1].flip,
+        "speedup_coarsest": figures[-1].speedup_over_lod0,
+        "storage_saving": storage["storage_saving"],
+        "levels": float(grid.levels),
+    }
+    return RunOutput(files=files, metrics=metrics)
+
+
+@contextlib.contextmanager
+def _batches(spec: SourceSpec, slots):
+    if slots.count == 0:
+        yield InProcessBatches(spec)
+        return
+    with SamplerPool(spec, actors=slots.count, actor_options=slots.actor_options) as pool:
+        yield pool

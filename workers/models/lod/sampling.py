@@ -1,0 +1,191 @@
+"""Training data generated on the fly (Weier et al. 2023, Sec. 5).
+
+A sample picks an occupied LoD-0 voxel and a LoD uniformly and takes the voxel's ancestor at that LoD, so
+coarse voxels get samples in proportion to the fine voxels they hold. In it: w_o uniform on the sphere, a
+face by projected area (|n . w_o|), p_o uniform on that face and p_i where the ray from p_o along -w_o
+leaves the voxel: segment densities are then uniform inside the voxel (Fig. 12). The box is grown by
+`domain_extrusion` of the voxel size so geometry lying on a voxel face is learned robustly (Fig. 13).
+
+Every pair is a visibility sample (Embree over the asset's triangles). Occluded pairs, whose segment meets
+the asset inside the voxel, are appearance samples: a path traced from p_o along -w_o and confined to the
+voxel, with a shadow ray towards w_i (uniform) to the voxel's boundary at every vertex, BSDF importance
+sampling and albedo-based Russian roulette, estimates phi_V(w_o, w_i) of Eq. 3 without bias (Sec. 5.2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+
+from workers.models.lod.config import LodConfig
+from workers.models.lod.grid import LodGrid
+from workers.render.bsdf import eval_bsdf, sample_bsdf
+from workers.render.embree import Hits, SubsetRayScene
+from workers.render.integrator import PathTracer
+from workers.render.sampling import max3, square_to_uniform_sphere
+from workers.runtime.sources import Batch, batch_rng
+from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.spec import SceneSpec
+
+RR_MAX_SURVIVAL = 0.95
+
+
+def asset_triangles(scene: CompiledScene, names: list[str]) -> np.ndarray:
+    """Indices of the triangles of the objects `names` (every instance) in the compiled scene."""
+    ids = [np.arange(lo, hi) for obj in scene.objects if obj.name in names for lo, hi in obj.triangle_ranges]
+    return np.concatenate(ids) if ids else np.zeros(0, np.int64)
+
+
+def asset_tracer(scene: CompiledScene, names: list[str]) -> PathTracer:
+    """A path tracer that sees only the asset's triangles (materials and lights of the whole scene)."""
+    return PathTracer(scene, intersector=SubsetRayScene(scene.positions, asset_triangles(scene, names)))
+
+
+def box_exit(lo: np.ndarray, hi: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Distance at which rays starting inside (or on) boxes (N, 3) leave them (>= 0)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(directions > 0, (hi - origins) / directions, (lo - origins) / directions)
+    t = np.where(directions != 0, t, np.inf)
+    return np.maximum(t.min(1), 0.0)
+
+
+@dataclass
+class BoundaryPairs:
+    """Segments through voxels: entry p_o, exit p_i along -w_o, and the (grown) voxel boxes."""
+
+    p_o: np.ndarray
+    p_i: np.ndarray
+    wo: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    length: np.ndarray  # |p_i - p_o|
+
+    def take(self, rows: np.ndarray) -> BoundaryPairs:
+        return BoundaryPairs(*(getattr(self, f.name)[rows] for f in fields(self)))
+
+
+def boundary_pairs(
+    grid: LodGrid,
+    level: np.ndarray,
+    cells: np.ndarray,
+    rng: np.random.Generator,
+    grow: float,
+    wo: np.ndarray | None = None,
+) -> BoundaryPairs:
+    """One segment per voxel (level, cell) with the density of Sec. 5.1 (module docstring); `wo` fixes
+    the directions instead of drawing them."""
+    n = len(cells)
+    size = grid.extent / np.asarray(grid.resolutions)[level]
+    lo = grid.lo + cells * size[:, None] - grow * size[:, None]
+    hi = lo + (1 + 2 * grow) * size[:, None]
+    if wo is None:
+        wo = square_to_uniform_sphere(rng.random((n, 2)))
+    weights = np.abs(wo)
+    cumulative = np.cumsum(weights / weights.sum(1, keepdims=True), axis=1)
+    axis = np.minimum((rng.random((n, 1)) > cumulative).sum(1), 2)
+    p_o = lo + rng.random((n, 3)) * (hi - lo)
+    rows = np.arange(n)
+    p_o[rows, axis] = np.where(wo[rows, axis] > 0, hi[rows, axis], lo[rows, axis])
+    length = box_exit(lo, hi, p_o, -wo)
+    return BoundaryPairs(p_o, p_o - length[:, None] * wo, wo, lo, hi, length)
+
+
+def sample_voxels(grid: LodGrid, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(level, cell) of n voxels: an occupied LoD-0 voxel and a LoD uniformly, then its ancestor."""
+    fine = grid.cells(0, grid.keys[0][rng.integers(len(grid.keys[0]), size=n)])
+    level = rng.integers(grid.levels, size=n)
+    return level, fine >> grid.shifts[level, None]
+
+
+def first_asset_hits(tracer: PathTracer, pairs: BoundaryPairs) -> tuple[np.ndarray, Hits]:
+    """Whether each segment meets the asset (the visibility label's complement), and the hits."""
+    hits = tracer.rays.intersect(pairs.p_o, -pairs.wo)
+    return hits.found & (hits.t < pairs.length), hits
+
+
+def throughput_estimates(
+    tracer: PathTracer,
+    pairs: BoundaryPairs,
+    hits: Hits,
+    wi: np.ndarray,
+    rng: np.random.Generator,
+    max_bounces: int,
+) -> np.ndarray:
+    """(N, 3) one-sample estimates of phi_V(w_o, w_i) for segments that met the asset at `hits`."""
+    n = len(wi)
+    value = np.zeros((n, 3))
+    live = np.arange(n)
+    o, d, beta, lo, hi = pairs.p_o, -pairs.wo, np.ones((n, 3)), pairs.lo, pairs.hi
+    for _ in range(max_bounces):
+        if len(live) == 0:
+            break
+        sh = tracer.shade(hits, o, d)
+        light = wi[live]
+        f_cos, _ = eval_bsdf(sh.surf, sh.wo_local, sh.to_local(light))
+        lit = np.flatnonzero(max3(f_cos) > 0)
+        if len(lit):
+            origin = tracer.offset(sh.position[lit], sh.ng[lit], light[lit], sh.scale[lit])
+            blocked = tracer.rays.occluded(origin, light[lit], box_exit(lo[lit], hi[lit], origin, light[lit]))
+            value[live[lit]] += beta[lit] * f_cos[lit] * ~blocked[:, None]
+        u = rng.random((len(live), 4))
+        sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
+        d = sh.to_world(sampled)
+        q = np.minimum(max3(weight), RR_MAX_SURVIVAL)  # albedo-based Russian roulette
+        beta = beta * weight / np.maximum(q, 1e-300)[:, None]
+        o = tracer.offset(sh.position, sh.ng, d, sh.scale)
+        hits = tracer.rays.intersect(o, d)
+        keep = np.flatnonzero(
+            (u[:, 3] < q) & hits.found & (hits.t < box_exit(lo, hi, o, d)) & (max3(beta) > 0)
+        )
+        live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
+        hits = hits.take(keep)
+    return np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+@dataclass(frozen=True)
+class LodSourceConfig:
+    """What a sampler process needs to rebuild the source: the scene, the asset and its LoD-0 voxels."""
+
+    scene: dict
+    scene_dir: str | None
+    objects: list[str]
+    lod: LodConfig
+    grid: dict[str, np.ndarray]  # LodGrid.arrays()
+
+
+class LodSource:
+    """Batches of visibility pairs and appearance estimates (a `SampleSource`)."""
+
+    def __init__(self, config: LodSourceConfig, seed: int) -> None:
+        self.config, self.seed = config, seed
+        scene = compile_scene(SceneSpec.model_validate(config.scene), config.scene_dir)
+        self.tracer = asset_tracer(scene, config.objects)
+        self.grid = LodGrid.from_arrays(config.grid)
+
+    def batch(self, index: int) -> Batch:
+        rng = batch_rng(self.seed, index)
+        lod = self.config.lod
+        level, cells = sample_voxels(self.grid, lod.batch_size, rng)
+        pairs = boundary_pairs(self.grid, level, cells, rng, lod.domain_extrusion)
+        occluded, hits = first_asset_hits(self.tracer, pairs)
+        rows = np.flatnonzero(occluded)
+        wi = square_to_uniform_sphere(rng.random((len(rows), 2)))
+        value = throughput_estimates(
+            self.tracer, pairs.take(rows), hits.take(rows), wi, rng, lod.max_voxel_bounces
+        )
+        centre = self.grid.centres(level[rows], cells[rows])
+        return {
+            "vis_p_o": _tensor(self.grid.normalize(pairs.p_o)),
+            "vis_p_i": _tensor(self.grid.normalize(pairs.p_i)),
+            "vis_label": _tensor(~occluded),
+            "app_centre": _tensor(centre),
+            "app_wo": _tensor(pairs.wo[rows]),
+            "app_wi": _tensor(wi),
+            "app_value": _tensor(value),
+        }
+
+
+def _tensor(array: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(array, np.float32))
