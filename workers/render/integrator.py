@@ -17,7 +17,7 @@ import numpy as np
 from workers.render.aggregate import Aggregate, AggregateEvents
 from workers.render.bsdf import Kind, SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import Hits, RayScene
-from workers.render.lights import LightSampler
+from workers.render.lights import LightSample, LightSampler
 from workers.render.materials import MaterialTable
 from workers.render.region_rays import rays_entering_box
 from workers.render.sampling import (
@@ -409,21 +409,29 @@ class PathTracer:
         position = paths.o + events.t[:, None] * paths.d
         wo = -paths.d
         u = rng.random((n, 5))
+        wi = square_to_uniform_sphere(u[:, 3:5])
         shadow_rays = 0
         if self.aggregate_next_event and self.lights.count:
-            shadow_rays = self._next_event_in_aggregate(paths, events, position, wo, u, radiance)
-        wi = square_to_uniform_sphere(u[:, 3:5])
-        phi = self.aggregate.throughput(events.voxel, wo, wi)
+            ls = self.lights.sample(position, u[:, 0], u[:, 1:3])
+            # One network query for both directions of every event.
+            both = self.aggregate.throughput(
+                np.concatenate([events.voxel, events.voxel]),
+                np.concatenate([wo, wo]),
+                np.concatenate([wi, ls.direction]),
+            )
+            phi = both[:n]
+            shadow_rays = self._next_event_in_aggregate(paths, events, position, ls, both[n:], radiance)
+        else:
+            phi = self.aggregate.throughput(events.voxel, wo, wi)
         t_min = self.aggregate.exit_distance(events.voxel, position, wi)
         pdf = np.full(n, UNIFORM_SPHERE_PDF)
         beta = paths.beta * phi / UNIFORM_SPHERE_PDF
         return _Scattered(_Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min), shadow_rays)
 
     def _next_event_in_aggregate(
-        self, paths: _Paths, events: AggregateEvents, position, wo, u, radiance
+        self, paths: _Paths, events: AggregateEvents, position, ls: LightSample, phi, radiance
     ) -> int:
-        ls = self.lights.sample(position, u[:, 0], u[:, 1:3])
-        phi = self.aggregate.throughput(events.voxel, wo, ls.direction)
+        """Light samples `ls` from scattering voxels, weighted by the throughput `phi` towards them."""
         mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, np.full(len(ls.pdf), UNIFORM_SPHERE_PDF)))
         scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
         contribution = paths.beta * phi * ls.radiance * scale[:, None]

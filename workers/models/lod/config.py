@@ -1,7 +1,8 @@
 """The `lod` kind's config and presets: the paper's sizes (`paper`) and sizes this 2-core CPU trains.
 
 `paper` is Weier et al. 2023: LoD 0 at 512^3 down to 8^3, hash tables of 2^19 rows, two 4x128 MLPs,
-1000 threshold samples per voxel, Adam at 0.005. `default` and `quick` shrink the finest level, the
+1000 threshold samples per voxel, Adam at 0.005. `default` (64^3 down to 8^3, tables of 2^17, 128
+threshold samples: about five minutes on an idle 2-core CPU) and `quick` shrink the finest level, the
 tables and the step count, not the method.
 """
 
@@ -41,7 +42,7 @@ class LodConfig(BaseModel):
         None, description="names of the objects to prefilter; default: non-emitting objects >= min_triangles"
     )
     min_triangles: int = Field(1000, ge=0)
-    finest_resolution: int = Field(128, ge=16, le=1024, description="voxels per side at LoD 0 (power of 2)")
+    finest_resolution: int = Field(64, ge=16, le=1024, description="voxels per side at LoD 0 (power of 2)")
     coarsest_resolution: int = Field(8, ge=1, le=512, description="voxels per side at the coarsest LoD")
     view_distances: list[float] = Field(
         [],
@@ -68,7 +69,9 @@ class LodConfig(BaseModel):
     )
     evaluation_spp: int = Field(64, ge=1, le=65536)
     reference_spp: int = Field(512, ge=1, le=1 << 20)
-    evaluation_max_width: int = Field(192, ge=8, le=4096)
+    evaluation_max_height: int = Field(
+        192, ge=8, le=4096, description="cap on the height of the images that measure each LoD"
+    )
     samplers: int = Field(1, ge=0, le=64, description="Ray actors generating training batches")
     num_gpus: float = Field(0, ge=0)
 
@@ -104,12 +107,12 @@ PRESETS: dict[str, dict] = {
         "threshold_samples": 64,
         "evaluation_spp": 4,
         "reference_spp": 16,
-        "evaluation_max_width": 48,
+        "evaluation_max_height": 48,
     },
     "default": {
         "appearance": {"features_per_level": 4, "log2_table_size": 17},
         "visibility": {"features_per_level": 4, "log2_table_size": 17},
-        "threshold_samples": 256,
+        "threshold_samples": 128,
     },
     "paper": {
         "finest_resolution": 512,
@@ -120,7 +123,7 @@ PRESETS: dict[str, dict] = {
         "threshold_samples": 1000,
         "evaluation_spp": 1024,
         "reference_spp": 4096,
-        "evaluation_max_width": 512,
+        "evaluation_max_height": 512,
         "samplers": 4,
         "num_gpus": 1,
     },

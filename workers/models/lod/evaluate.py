@@ -26,6 +26,7 @@ from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.report import TimedImage
+from workers.runtime.threads import torch_threads
 from workers.scene.compile import CompiledScene
 
 MIN_HEIGHT = 16
@@ -80,7 +81,8 @@ def lod_tracer(scene: CompiledScene, asset: LodAsset, level: int, **options) -> 
 
 
 def timed_render(tracer: PathTracer, settings: RenderSettings) -> RenderResult:
-    with torch.inference_mode():
+    """`render` with the networks in inference mode and one torch thread per render thread."""
+    with torch.inference_mode(), torch_threads(1):
         return render(tracer, settings)
 
 
@@ -92,7 +94,7 @@ def evaluate_levels(
     """Per-level figures (module docstring) and the images of LoD 0 for the report."""
     config = asset.config
     reference_tracer = PathTracer(scene)
-    common_w, common_h = matched_size(scene, asset, 0, config.evaluation_max_width)
+    common_w, common_h = matched_size(scene, asset, 0, config.evaluation_max_height)
     common = RenderSettings(
         spp=config.evaluation_spp, width=common_w, height=common_h, max_depth=MAX_DEPTH, aovs=True
     )
@@ -101,7 +103,7 @@ def evaluate_levels(
     traced_length = _masked_mean(traced.aovs["path_length"][..., 0], common_mask)
     figures, images = [], {}
     for level in range(asset.grid.levels):
-        w, h = matched_size(scene, asset, level, config.evaluation_max_width)
+        w, h = matched_size(scene, asset, level, config.evaluation_max_height)
         mask = asset_mask(scene, asset.objects, w, h)
         reference = timed_render(
             reference_tracer, RenderSettings(spp=config.reference_spp, width=w, height=h, max_depth=MAX_DEPTH)
@@ -109,7 +111,11 @@ def evaluate_levels(
         at_level = RenderSettings(spp=config.evaluation_spp, width=w, height=h, max_depth=MAX_DEPTH)
         with_nee = timed_render(lod_tracer(scene, asset, level), at_level)
         without_nee = timed_render(lod_tracer(scene, asset, level, light_sampling=False), at_level)
-        timing = timed_render(lod_tracer(scene, asset, level), common)
+        timing = (
+            with_nee
+            if (w, h) == (common_w, common_h)
+            else timed_render(lod_tracer(scene, asset, level), common)
+        )
         figures.append(
             LevelFigures(
                 level=level,

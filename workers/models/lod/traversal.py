@@ -116,5 +116,7 @@ class LodAggregate:
         return np.maximum(phi.double().cpu().numpy(), 0.0)
 
     def exit_distance(self, voxel: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        lo, hi = self.grid.boxes(self.level, voxel)
-        return box_exit(lo, hi, origins, directions)
+        # The walk's own planes (`VoxelGrid.plane`) and arithmetic: `first_occupied` started at this t
+        # leaves the voxel at exactly this t, so a continuing ray never re-enters it for a rounding-length
+        # segment (with `grid.boxes`' corners it did for about 6% of random rays).
+        return box_exit(self.voxels.plane(voxel), self.voxels.plane(voxel + 1), origins, directions)
