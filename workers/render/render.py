@@ -24,9 +24,8 @@ from workers.scene.compile import CompiledScene
 
 MAX_PATHS_PER_ITEM = 1 << 16
 AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission", "path_length")
-SCALAR_AOVS = frozenset(
-    {"roughness", "depth", "path_length"}
-)  # stored three times in `aovs`, written as one channel
+# Stored three times in `aovs`, written as one channel; path_length is the mean number of path segments.
+SCALAR_AOVS = frozenset({"roughness", "depth", "path_length"})
 
 
 class RenderSettings(BaseModel):

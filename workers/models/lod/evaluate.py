@@ -108,7 +108,7 @@ def evaluate_levels(
         reference = timed_render(
             reference_tracer, RenderSettings(spp=config.reference_spp, width=w, height=h, max_depth=MAX_DEPTH)
         ).image
-        at_level = RenderSettings(spp=config.evaluation_spp, width=w, height=h, max_depth=MAX_DEPTH)
+        at_level = common.model_copy(update={"width": w, "height": h})
         with_nee = timed_render(lod_tracer(scene, asset, level), at_level)
         without_nee = timed_render(lod_tracer(scene, asset, level, light_sampling=False), at_level)
         timing = (
