@@ -117,13 +117,16 @@ def choose_resolutions(scene: SceneSpec, config: LodConfig, extent: float) -> li
     ]
 
 
-def parameter_count(size: NetworkSize, octaves: int, coarsest: int, n_inputs: int, n_outputs: int) -> int:
-    """Trainable parameters of a hash grid (one level per octave) plus its MLP."""
+def parameter_count(
+    size: NetworkSize, octaves: int, coarsest: int, n_inputs: int, n_outputs: int, encoded_points: int = 1
+) -> int:
+    """Trainable parameters of a hash grid (one level per octave) plus its MLP, which sees `n_inputs`
+    other features and the grid's features of `encoded_points` points."""
     rows = sum(
         min(2**size.log2_table_size, (coarsest * 2**level + 1) ** 3)
         for level in range(octaves + size.extra_levels)
     )
-    n_in = n_inputs + (octaves + size.extra_levels) * size.features_per_level
+    n_in = n_inputs + encoded_points * (octaves + size.extra_levels) * size.features_per_level
     layers = [n_in] + [size.width] * size.depth + [n_outputs]
     mlp = sum((a + 1) * b for a, b in itertools.pairwise(layers))
     return rows * size.features_per_level + mlp
@@ -142,8 +145,7 @@ def plan(scene: SceneSpec, config: LodConfig) -> Plan:
     n_oct = octaves(resolutions)
     sh = (config.sh_degree + 1) ** 2
     appearance = parameter_count(config.appearance, n_oct, resolutions[-1], 2 * sh, 3)
-    visibility = parameter_count(config.visibility, n_oct, resolutions[-1], 0, 1)
-    visibility += (n_oct + config.visibility.extra_levels) * config.visibility.features_per_level  # 2 points
+    visibility = parameter_count(config.visibility, n_oct, resolutions[-1], 0, 1, encoded_points=2)
     items = [
         PlanItem(name=c.name, choice="prefilter" if c.prefiltered else "keep", reason=c.reason)
         for c in asset.choices
