@@ -38,8 +38,9 @@ class _Request:
     def rows(self) -> int:
         return len(next(iter(self.arrays.values()))) if self.arrays else 0
 
-    def key(self) -> tuple[str, str]:
-        return self.operation, self.params.model_dump_json()
+    def key(self) -> tuple[str, str, tuple[str, ...]]:
+        """Requests merge only with equal parameters and the same inputs (optional ones may be absent)."""
+        return self.operation, self.params.model_dump_json(), tuple(sorted(self.arrays))
 
 
 def _split(answer: Answer, counts: list[int]) -> list[Answer]:

@@ -20,6 +20,7 @@ class LodKind:
     name = "lod"
     config_model = LodConfig
     presets = PRESETS
+    infer_module = "workers.models.lod.infer"
 
     def resolve_config(self, preset: str, overrides: dict) -> LodConfig:
         return resolve_preset(LodConfig, PRESETS, preset, overrides)
