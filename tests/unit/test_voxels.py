@@ -12,7 +12,15 @@ import itertools
 import numpy as np
 import pytest
 
-from workers.render.voxels import VoxelGrid, boundary_points, clip_to_box, padded_bounds, voxelize
+from workers.render.voxels import (
+    VoxelGrid,
+    boundary_points,
+    clip_to_box,
+    coarsen,
+    first_occupied,
+    padded_bounds,
+    voxelize,
+)
 
 
 def clipped_polygon(polygon: list[np.ndarray], lo: np.ndarray, hi: np.ndarray, eps: float) -> bool:
@@ -207,3 +215,164 @@ def test_segment_limits_and_bad_rays(random_grid):
         boundary_points(random_grid, o, np.zeros((1, 3)), 8)
     with pytest.raises(ValueError, match="finite"):
         boundary_points(random_grid, np.array([[np.nan, 0, 0]]), d, 8)
+
+
+# --------------------------------------------------------------------------- first_occupied, coarsen
+
+
+def brute_force_first_occupied(grid: VoxelGrid, o, d, t_min: float, t_max: float):
+    """(cell, t_enter, t_exit) of the first occupied voxel on [t_min, t_max], or None: every plane
+    crossing of the clipped segment, sorted, and the voxel at each positive-length interval's midpoint."""
+    t_near, t_far = clip_to_box(grid, o[None], d[None], np.array([t_max]))
+    t0, t1 = max(float(t_near[0]), t_min), float(t_far[0])
+    if not t1 > t0:
+        return None
+    r = grid.resolution
+    cuts = {t0, t1}
+    for axis in range(3):
+        if d[axis] != 0:
+            for k in range(r + 1):
+                t = (grid.plane(np.full(3, k))[axis] - o[axis]) / d[axis]
+                if t0 < t < t1:
+                    cuts.add(t)
+    for a, b in itertools.pairwise(sorted(cuts)):
+        mid = o + 0.5 * (a + b) * d
+        cell = np.clip(np.floor((mid - grid.lo) / grid.size).astype(int), 0, r - 1)
+        if grid.occupied[tuple(cell)]:
+            return cell, a, b
+    return None
+
+
+def assert_first_occupied_matches(grid, origins, directions, t_min, t_max):
+    result = first_occupied(grid, origins, directions, t_min, t_max)
+    for i in range(len(origins)):
+        expected = brute_force_first_occupied(grid, origins[i], directions[i], t_min[i], t_max[i])
+        if expected is None:
+            assert not result.found[i], (i, origins[i], directions[i])
+            assert result.t_enter[i] == np.inf
+            continue
+        cell, t_enter, t_exit = expected
+        assert result.found[i], (i, origins[i], directions[i])
+        assert tuple(result.cell[i]) == tuple(cell), (i, origins[i], directions[i])
+        assert result.t_enter[i] == pytest.approx(t_enter, rel=0, abs=1e-12)
+        assert result.t_exit[i] == pytest.approx(t_exit, rel=0, abs=1e-12)
+    return result
+
+
+def test_first_occupied_matches_brute_force_on_random_rays_and_windows(random_grid):
+    rng = np.random.default_rng(5)
+    n = 400
+    origins = rng.uniform(-3, 3, (n, 3))
+    origins[:150] = rng.uniform(-0.99, 0.99, (150, 3))  # starting inside the box
+    directions = rng.normal(size=(n, 3))
+    directions[150:250] = rng.uniform(-1, 1, (100, 3)) - origins[150:250]  # from outside, aimed at the box
+    directions[250:300, 1] = 0.0  # axis-parallel in one or two components
+    directions[300:350, ::2] = 0.0
+    t_min = np.where(rng.random(n) < 0.5, 0.0, rng.uniform(0, 3, n))
+    t_max = np.where(rng.random(n) < 0.5, np.inf, t_min + rng.uniform(0, 3, n))
+    t_max[350:360] = t_min[350:360] - 0.1  # empty windows
+    result = assert_first_occupied_matches(random_grid, origins, directions, t_min, t_max)
+    assert 0.25 < result.found.mean() < 0.9  # both outcomes are exercised
+    assert not result.found[350:360].any()
+
+    # An independent check by dense point samples: nothing occupied before t_enter, the found cell between
+    # t_enter and t_exit (points exactly on planes have probability zero).
+    for i in np.flatnonzero(np.isfinite(t_max))[:100]:
+        ts = np.linspace(t_min[i], t_max[i], 2001)[1:-1]
+        points = origins[i] + ts[:, None] * directions[i]
+        inside = np.all((points > random_grid.lo) & (points < random_grid.hi), axis=1)
+        cells = np.floor((points[inside] - random_grid.lo) / random_grid.size).astype(int)
+        occupied, ts = random_grid.occupied[tuple(cells.T)], ts[inside]
+        before = ts < result.t_enter[i]
+        assert not occupied[before].any(), i
+        within = ~before & (ts < result.t_exit[i])
+        assert np.all(cells[within] == result.cell[i]), i
+
+
+def test_first_occupied_rays_in_planes_along_edges_and_axes(random_grid):
+    # Exactly representable coordinates: planes are multiples of 1/4, so ties are exact.
+    origins = np.array(
+        [
+            [-2.0, -2.0, -2.0],  # the main diagonal, through every voxel corner
+            [-2.0, -0.5, -0.25],  # along an edge (y, z on planes), x-parallel
+            [-0.5, -2.0, 0.0],  # in the plane z = 0, diagonal in x-y through corners
+            [-1.0, -1.0, -3.0],  # along the box's outer edge: grazing
+            [1.0, 0.3, -3.0],  # in the box's upper x face
+            [0.25, 0.5, -0.75],  # starting on a corner
+            [0.3, 0.5, 0.1],  # starting on a plane (y), moving down: the voxel below
+            [5.0, 5.0, 5.0],  # missing the box
+            [-3.0, 0.1, 0.2],  # pointing away from the box
+        ]
+    )
+    directions = np.array(
+        [[1, 1, 1], [1, 0, 0], [1, 1, 0], [0, 0, 1], [0, 0, 1], [-1, 1, 0.5], [0.2, -1, 0.1], [1, 0, 0],
+         [-1, 0, 0]],
+        float,
+    )  # fmt: skip
+    n = len(origins)
+    result = assert_first_occupied_matches(random_grid, origins, directions, np.zeros(n), np.full(n, np.inf))
+    assert not result.found[-2:].any() and np.all(result.t_enter[-2:] == np.inf)
+
+
+def test_first_occupied_starting_inside_an_occupied_voxel_enters_at_t_min():
+    occupied = np.zeros((4, 4, 4), bool)
+    occupied[1, 2, 1] = occupied[3, 2, 1] = True
+    grid = VoxelGrid(np.zeros(3), np.ones(3), occupied)
+    o = np.array([[1.25, 2.5, 1.5]] * 4)
+    d = np.array([[1.0, 0.0, 0.0]] * 4)
+    t_min = np.array([0.0, 0.5, 1.0, 0.5])
+    t_max = np.array([np.inf, np.inf, np.inf, 1.2])
+    result = first_occupied(grid, o, d, t_min, t_max)
+    # From inside voxel (1, 2, 1): entered at t_min, left at x = 2.
+    assert result.found[0] and tuple(result.cell[0]) == (1, 2, 1)
+    assert result.t_enter[0] == 0.0 and result.t_exit[0] == 0.75
+    assert result.found[1] and tuple(result.cell[1]) == (1, 2, 1) and result.t_enter[1] == 0.5
+    # t_min past the first voxel: the next occupied one, (3, 2, 1), entered at x = 3.
+    assert tuple(result.cell[2]) == (3, 2, 1) and result.t_enter[2] == 1.75 and result.t_exit[2] == 2.75
+    # A window ending inside the first voxel's neighbour finds nothing beyond t_max... but the first voxel
+    # itself, cut short at t_max when t_max falls inside it.
+    assert result.found[3] and result.t_exit[3] == 0.75
+    cut = first_occupied(grid, o[:1], d[:1], np.array([0.1]), np.array([0.6]))
+    assert cut.found[0] and cut.t_enter[0] == 0.1 and cut.t_exit[0] == 0.6
+    empty_gap = first_occupied(grid, o[:1], d[:1], np.array([0.8]), np.array([1.7]))
+    assert not empty_gap.found[0]  # x in [2.05, 2.95]: the empty voxel (2, 2, 1) only
+
+
+def test_first_occupied_restarted_at_its_own_exit_never_re_enters():
+    """Walking on from t_exit (as traversal does after passing a voxel) moves to the next voxel."""
+    rng = np.random.default_rng(6)
+    grid = VoxelGrid(
+        np.array([-1.03125, -0.0625, -1.0625]), np.full(3, 2.1234567 / 16), np.ones((16,) * 3, bool)
+    )
+    n = 20000
+    o = grid.lo + rng.random((n, 3)) * (grid.hi - grid.lo)
+    d = rng.normal(size=(n, 3))
+    first = first_occupied(grid, o, d, np.zeros(n), np.full(n, np.inf))
+    assert first.found.all()
+    again = first_occupied(grid, o, d, first.t_exit, np.full(n, np.inf))
+    moved = ~np.all(again.cell == first.cell, axis=1)
+    assert np.all(moved | ~again.found)
+    assert np.all(again.t_enter[again.found] == first.t_exit[again.found])
+
+
+def test_first_occupied_no_rays():
+    grid = VoxelGrid(np.zeros(3), np.ones(3), np.ones((2, 2, 2), bool))
+    result = first_occupied(grid, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    assert result.found.shape == (0,) and result.cell.shape == (0, 3)
+
+
+def test_coarsen_is_the_union_of_children():
+    rng = np.random.default_rng(7)
+    fine = rng.random((8, 8, 8)) < 0.05
+    coarse = coarsen(fine)
+    assert coarse.shape == (4, 4, 4)
+    for idx in np.ndindex(4, 4, 4):
+        children = fine[tuple(slice(2 * i, 2 * i + 2) for i in idx)]
+        assert coarse[idx] == children.any(), idx
+    assert coarse.any() and not coarse.all()
+    assert coarsen(coarsen(coarsen(fine))).shape == (1, 1, 1)
+    assert not coarsen(np.zeros((2, 2, 2), bool)).any()
+    with pytest.raises(ValueError, match="even"):
+        coarsen(np.zeros((3, 3, 3), bool))
+    with pytest.raises(ValueError, match="cubic"):
+        coarsen(np.zeros((4, 4, 2), bool))
