@@ -184,9 +184,12 @@ def open_batches(
     samplers: int,
     max_in_flight: int | None = None,
     resources: ResourceRequest | None = None,
+    placement: dict[str, Any] | None = None,
+    start: int = 0,
 ) -> BatchStream:
-    """A Ray pool of `samplers` actors, or the in-process stream when `samplers` is 0."""
+    """Batches from `start` on: a Ray pool of `samplers` actors, or the in-process stream when `samplers` is
+    0. Actors are placed by `placement` (Ray options, e.g. a job's reserved slots) or sized by `resources`."""
     if samplers == 0:
-        return InProcessBatches(spec)
-    options = actor_options(resources or ResourceRequest())
-    return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight, actor_options=options)
+        return InProcessBatches(spec, start=start)
+    options = placement or actor_options(resources or ResourceRequest())
+    return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight, actor_options=options, start=start)

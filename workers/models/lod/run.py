@@ -7,8 +7,6 @@ thresholds are rebuilt deterministically from the scene and the seed.
 
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 import torch
 
@@ -26,7 +24,7 @@ from workers.render.image_io import write_png
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings
 from workers.runtime.report import TimedImage, build_report
-from workers.runtime.samplers import InProcessBatches, SamplerPool
+from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.compile import compile_scene
@@ -63,7 +61,7 @@ def run(ctx: JobContext) -> RunOutput:
 
     with ctx.reserve_samplers(config.samplers) as slots:
         ctx.log(f"training on {slots.count or 'no'} sampler actor(s)")
-        with _batches(spec, slots) as batches:
+        with open_batches(spec, slots.count, placement=slots.actor_options) as batches:
             training = train(networks, lod_loss, batches, config.train, ctx.checkpoints, progress)
             step_seconds = per_network_step_seconds(networks, {k: v for k, v in next(batches).items()})
     round_to_storage(networks)
@@ -129,12 +127,3 @@ def run(ctx: JobContext) -> RunOutput:
         "levels": float(grid.levels),
     }
     return RunOutput(files=files, metrics=metrics)
-
-
-@contextlib.contextmanager
-def _batches(spec: SourceSpec, slots):
-    if slots.count == 0:
-        yield InProcessBatches(spec)
-        return
-    with SamplerPool(spec, actors=slots.count, actor_options=slots.actor_options) as pool:
-        yield pool

@@ -15,7 +15,7 @@ from workers.models.render.outputs import write_outputs
 from workers.models.render.source import TileSource, TileSourceConfig, from_batch
 from workers.render.camera import PinholeCamera
 from workers.render.render import ImageAccumulator, RenderPlan, RenderSettings, TileResult, plan_render
-from workers.runtime.samplers import BatchStream, InProcessBatches, SamplerPool
+from workers.runtime.samplers import BatchStream, open_batches
 from workers.runtime.sources import SourceSpec
 from workers.scene.compile import compile_scene
 
@@ -99,9 +99,7 @@ def _open_stream(ctx: JobContext, settings: RenderSettings, slots: SamplerSlots,
     scene_dir = None if ctx.scene_dir is None else str(ctx.scene_dir)
     source = TileSourceConfig(scene=ctx.scene.model_dump(mode="json"), scene_dir=scene_dir, settings=settings)
     spec = SourceSpec(TileSource, source, ctx.seed)
-    if slots.count == 0:
-        return InProcessBatches(spec, start=start)
-    return SamplerPool(spec, actors=slots.count, actor_options=slots.actor_options, start=start)
+    return open_batches(spec, slots.count, placement=slots.actor_options, start=start)
 
 
 def _next_item(stream: BatchStream) -> TileResult:
