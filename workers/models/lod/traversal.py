@@ -7,6 +7,10 @@ traversal: a ray passing a voxel survives with probability max(p, floor) (p the 
 no occlusion) and is reweighted by its inverse, so long walks through nearly empty voxels end early without
 bias with respect to the classified visibility. The floor keeps the survival along the grid's diagonal
 at the paper's value for 512^3, whatever the resolution.
+
+A ray that starts inside an occupied voxel (a camera or a surface point of the rest of the scene inside
+the asset's voxels at this LoD) classifies the segment from its origin to the voxel's exit, a segment
+the network never saw in training: a LoD is meant to be seen from outside its voxels.
 """
 
 from __future__ import annotations
