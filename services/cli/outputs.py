@@ -2,8 +2,8 @@
 
 Everything sits beside the EXR and shares its stem: `<stem>.exr` (linear HDR, float32),
 `<stem>.png` (sRGB preview) and, with `--aov`, one `<stem>.<aov>.exr` per G-buffer. Separate
-files rather than EXR layers because every image viewer opens them; `roughness` and `depth`
-are single-channel (`Y`), the others RGB. Writability is probed up front so that a long render
+files rather than EXR layers because every image viewer opens them; `roughness`, `depth` and
+`path_length` are single-channel (`Y`), the others RGB. Writability is probed up front so that a long render
 never ends in an unwritable path.
 """
 

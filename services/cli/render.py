@@ -60,7 +60,7 @@ def render_command(
         typer.Option(
             "--aov",
             help="Also write the G-buffers beside the image as <stem>.<name>.exr: position, normal, "
-            "albedo, emission (RGB), roughness, depth (one channel).",
+            "albedo, emission (RGB), roughness, depth, path_length (mean segments per path; one channel).",
         ),
     ] = False,
     png: Annotated[bool, typer.Option(help="Write an sRGB preview <stem>.png beside the EXR.")] = True,

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from services.cli.main import app
 from workers.render.image_io import read_exr, read_exr_channels
-from workers.render.render import AOV_NAMES
+from workers.render.render import AOV_NAMES, SCALAR_AOVS
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_SCENE = REPO / "assets" / "scenes" / "example.yaml"
@@ -64,7 +64,7 @@ def test_aov_writes_each_gbuffer_beside_the_image(tmp_path):
     render_ok("cornell_box", tmp_path / "c.exr", *SMALL, "--aov")
     for name in AOV_NAMES:
         layers = read_exr_channels(tmp_path / f"c.{name}.exr")
-        scalar = name in ("roughness", "depth")
+        scalar = name in SCALAR_AOVS
         assert set(layers) == ({"Y"} if scalar else {"RGB"}), name
         assert layers["Y" if scalar else "RGB"].shape == ((32, 32) if scalar else (32, 32, 3)), name
         assert all(np.isfinite(v).all() for v in layers.values()), name

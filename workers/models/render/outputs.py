@@ -1,8 +1,8 @@
 """The artifact files of a finished render, each written under a temporary name and renamed into place.
 
 `image.exr` (float32 linear RGB), `preview.png` (sRGB), one `image.<aov>.exr` per G-buffer (separate files,
-as `nbake render --aov` writes them, because every viewer opens them; `roughness` and `depth` are
-single-channel `Y`) and `report.json`.
+as `nbake render --aov` writes them, because every viewer opens them; `roughness`, `depth` and
+`path_length` are single-channel `Y`) and `report.json`.
 """
 
 from __future__ import annotations
