@@ -76,6 +76,7 @@ def run() -> Iterator[BenchSection]:
     yield leak_section()
     for name, make_scene, overrides in ASSETS:
         yield asset_section(name, make_scene(), overrides)
+    yield appearance_output_section()
 
 
 def asset_section(name: str, scene, overrides: dict | None) -> BenchSection:
@@ -113,6 +114,22 @@ def asset_section(name: str, scene, overrides: dict | None) -> BenchSection:
         "which never reaches delta lights (the sun) from a voxel. Targets: FLIP within the paper's 0.03-0.2; "
         "coarsest LoD >= 3x faster than LoD 0",
     ]
+    return section
+
+
+def appearance_output_section() -> BenchSection:
+    """The paper learns phi directly; its reference code learns it in log space. Both on one asset."""
+    section = BenchSection("appearance output: linear phi against exp(output), level-3 Menger sponge")
+    for output in ("linear", "log"):
+        with tempfile.TemporaryDirectory() as folder:
+            report, _ = run_lod_job(get_builtin("menger_sponge"), Path(folder), {"appearance_output": output})
+        m = report["method_metrics"]
+        levels = sorted({int(k.split(".")[0][3:]) for k in m if k.startswith("lod")})
+        section.add(
+            output=output,
+            **{f"flip_lod{level}": m[f"lod{level}.flip"] for level in levels},
+            lod0_relative_mse=report["model"]["error"]["relative_mse"],
+        )
     return section
 
 
