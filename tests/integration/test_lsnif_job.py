@@ -3,7 +3,6 @@ report, then load the artifact into a path tracer for a scene whose instances mo
 
 from __future__ import annotations
 
-import json
 import threading
 
 import numpy as np
@@ -14,6 +13,7 @@ from workers.models.registry import get_kind
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.jobs import JobSpec, run_job
+from workers.runtime.report import Report
 from workers.scene.compile import compile_scene
 from workers.scene.spec import Transform
 
@@ -34,17 +34,32 @@ def test_quick_lsnif_job_trains_exports_and_renders(tmp_path):
     events = []
     outcome = run_job(spec, events.append, threading.Event())
     assert outcome.state == "succeeded", outcome.error
-    assert {"lsnif.json", "objects/ball.safetensors", "report.json", "preview.png"} <= set(outcome.files)
+    assert {"lsnif.json", "objects/ball.safetensors", "report.json", "speed_error.png", "preview.png"} <= set(
+        outcome.files
+    )
     steps = [e.step for e in events if e.type == "progress"]
     assert steps and steps[-1] == 30
-    report = json.loads((tmp_path / "out" / "report.json").read_text())
-    ball = report["objects"]["ball"]
-    assert ball["instances"] == 2 and 0.5 < ball["occlusion_accuracy"] <= 1.0
-    assert 0.0 <= report["image"]["flip"] < 1.0 and 0.0 < report["image"]["flip_noise_floor"] < 1.0
+    report = Report.read(str(tmp_path / "out"))
+    metrics = report.method_metrics
+    assert metrics["networks"] == 1 and metrics["ball.instances"] == 2
+    assert 0.5 < metrics["ball.occlusion_accuracy"] <= 1.0
+    assert 0.0 <= metrics["flip_against_embree_same_spp"] < 1.0 and 0.0 < metrics["flip_noise_floor"] < 1.0
+    # One network trained: the job's training is the ball's.
+    assert report.training_seconds == metrics["ball.training_seconds"] and report.training_samples > 0
+    # What the artifact stores: float16 weights, plus the voxel bits and the box.
+    loaded = artifact.load(tmp_path / "out")
+    weights = sum(p.numel() for p in loaded.models["ball"].parameters())
+    assert report.parameter_bytes == 2 * weights < metrics["ball.model_bytes"] == metrics["model_bytes"]
+    # The quick preset's 4-spp LSNIF frame next to Embree at 1 to 64 spp, all against a 256-spp reference.
+    assert report.model.label == "4 spp" and 0.0 < report.model.error.flip < 1.0
+    traced = {p.label: p for p in report.path_tracing}
+    assert list(traced) == ["1 spp", "4 spp", "16 spp", "64 spp"]
+    assert report.path_tracing_equal_time in report.path_tracing
+    assert traced["64 spp"].error.relative_mse < traced["4 spp"].error.relative_mse
+    assert traced["4 spp"].error.relative_mse < traced["1 spp"].error.relative_mse
     assert all(np.isfinite(v) for v in outcome.metrics.values())
 
     # The same networks in a scene where the instances moved: no retraining, a finite image.
-    loaded = artifact.load(tmp_path / "out")
     ball_object = scene.objects[-1].model_copy(
         update={"instances": [Transform(translate=(0.2, -0.5, 0.0), rotate=(0, 90, 0))]}
     )

@@ -61,6 +61,13 @@ def test_plan_keeps_small_objects_and_emitters_on_embree_and_trains_instances_on
     assert result.estimated_seconds > 0 and result.summary.startswith("1 network(s) for 2 instance(s)")
 
 
+def test_the_report_reference_must_converge_further_than_the_preview():
+    every_preset = [LsnifConfig.model_validate(preset) for preset in PRESETS.values()]
+    assert all(c.reference_spp > c.preview_spp for c in every_preset)
+    with pytest.raises(ValueError, match=r"reference_spp \(16\) must exceed preview_spp \(16\)"):
+        LsnifConfig(preview_spp=16, reference_spp=16)
+
+
 def test_encoder_stores_only_vertices_near_occupied_voxels_and_folds_to_the_table_size(compiled):
     prepared = prepare_object(compiled, len(compiled.objects) - 1, 16)
     occupied = prepared.grid.occupied

@@ -8,7 +8,14 @@ from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import AnalyticSource, AnalyticSourceConfig, SourceSpec
-from workers.runtime.training import Progress, Schedule, TrainConfig, TrainingDiverged, train
+from workers.runtime.training import (
+    Progress,
+    Schedule,
+    TrainConfig,
+    TrainingDiverged,
+    TrainResult,
+    train,
+)
 
 SPEC = SourceSpec(AnalyticSource, AnalyticSourceConfig(batch_size=64), seed=11)
 CONFIG = TrainConfig(
@@ -105,6 +112,20 @@ def test_progress_events_are_sensible():
     assert [e.lr for e in events] == [CONFIG.schedule.at(s - 1, 9) for s in (4, 8, 9)]
     assert result.steps == 9 and result.samples == 9 * 64
     assert result.best_loss <= result.final_loss
+
+
+def test_combined_results_add_up_runs_made_one_after_another():
+    first = TrainResult(steps=30, final_loss=0.5, best_loss=0.2, seconds=2.0, samples=300)
+    resumed = TrainResult(steps=30, final_loss=math.nan, best_loss=math.nan, seconds=0.0, samples=0)
+    last = TrainResult(steps=10, final_loss=0.9, best_loss=0.8, seconds=3.0, samples=200)
+    both = TrainResult.combined([first, resumed, last])
+    assert (both.steps, both.seconds, both.samples) == (70, 5.0, 500)
+    assert (both.final_loss, both.best_loss) == (0.9, 0.2)  # the last run's final loss, the lowest best
+    assert both.samples_per_s == 100.0
+    assert TrainResult.combined([first]) == first
+    nothing = TrainResult.combined([])
+    assert (nothing.steps, nothing.seconds, nothing.samples, nothing.samples_per_s) == (0, 0.0, 0, 0.0)
+    assert math.isnan(nothing.final_loss) and math.isnan(nothing.best_loss)
 
 
 def test_nan_loss_stops_with_training_diverged():

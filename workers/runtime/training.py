@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -97,6 +97,23 @@ class TrainResult:
     @property
     def samples_per_s(self) -> float:
         return self.samples / self.seconds if self.seconds > 0 else 0.0
+
+    @classmethod
+    def combined(cls, results: Sequence[TrainResult]) -> TrainResult:
+        """Runs made one after another (e.g. one network per object) as one run: steps, seconds and
+        samples add up, the final loss is the last run's and the best loss the lowest (NaN only if
+        every run's is). No runs: nothing trained, zero steps, seconds and samples and NaN losses."""
+        if not results:
+            return cls(steps=0, final_loss=math.nan, best_loss=math.nan, seconds=0.0, samples=0)
+        return cls(
+            steps=sum(r.steps for r in results),
+            final_loss=results[-1].final_loss,
+            best_loss=min(
+                (r.best_loss for r in results), key=lambda loss: math.inf if math.isnan(loss) else loss
+            ),
+            seconds=sum(r.seconds for r in results),
+            samples=sum(r.samples for r in results),
+        )
 
 
 def select_device() -> torch.device:

@@ -7,7 +7,7 @@ the number of steps (and, for `quick`, the sizes), not the method.
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from workers.runtime.training import Schedule, TrainConfig
 
@@ -37,8 +37,20 @@ class LsnifConfig(BaseModel):
     )
     evaluation_rays: int = Field(1 << 15, ge=256, description="held-out rays per object for the report")
     preview_size: int = Field(96, ge=8, le=2048, description="side of the report's comparison image")
-    preview_spp: int = Field(16, ge=1, le=65536)
+    preview_spp: int = Field(16, ge=1, le=65536, description="spp of the report's LSNIF frame")
+    reference_spp: int = Field(
+        1024, ge=2, le=65536, description="spp of the converged Embree image the report measures against"
+    )
     num_gpus: float = Field(0, ge=0)
+
+    @model_validator(mode="after")
+    def _reference_converges_further(self) -> LsnifConfig:
+        if self.reference_spp <= self.preview_spp:
+            raise ValueError(
+                f"reference_spp ({self.reference_spp}) must exceed preview_spp ({self.preview_spp}): "
+                "the report measures the preview against it"
+            )
+        return self
 
 
 PRESETS: dict[str, dict] = {
@@ -53,6 +65,7 @@ PRESETS: dict[str, dict] = {
         "evaluation_rays": 4096,
         "preview_size": 32,
         "preview_spp": 4,
+        "reference_spp": 256,
     },
     "default": {},
     "paper": {
@@ -61,6 +74,7 @@ PRESETS: dict[str, dict] = {
         "evaluation_rays": 1 << 18,
         "preview_size": 512,
         "preview_spp": 256,
+        "reference_spp": 2048,
         "num_gpus": 1,
     },
 }
