@@ -15,18 +15,16 @@ from __future__ import annotations
 
 import json
 import tempfile
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from tests.bench.common import BenchSection
+from tests.support.jobs import run_kind_job
 from workers.models.lod import artifact
 from workers.models.lod.evaluate import lod_tracer, timed_render
-from workers.models.registry import get_kind
 from workers.render.render import RenderSettings
-from workers.runtime.jobs import JobSpec, run_job
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 from workers.scene.spec import ProceduralShape
@@ -53,18 +51,7 @@ ASSETS = (
 
 
 def run_lod_job(scene, folder: Path, overrides: dict | None = None) -> tuple[dict, dict]:
-    kind = get_kind("lod")
-    config = kind.resolve_config("default", {"samplers": 0, **(overrides or {})})
-    spec = JobSpec(
-        job_id="bench-lod",
-        kind="lod",
-        scene=scene.model_dump(mode="json"),
-        config=config.model_dump(mode="json"),
-        seed=0,
-        checkpoint_dir=str(folder / "checkpoints"),
-        output_dir=str(folder / "out"),
-    )
-    outcome = run_job(spec, lambda event: None, threading.Event())
+    _, outcome = run_kind_job("lod", scene, folder, {"samplers": 0, **(overrides or {})}, preset="default")
     if outcome.state != "succeeded":
         raise RuntimeError(outcome.error)
     return json.loads((folder / "out" / "report.json").read_text()), outcome.metrics

@@ -11,7 +11,6 @@ import json
 import os
 import signal
 import subprocess
-import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -30,10 +29,10 @@ from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
 from services.jobs.db import Database
 from tests.integration.test_api_server import NBAKE, TOKENS, free_port
+from tests.support.jobs import run_kind_job
 from tests.unit.test_lsnif_model import instanced_scene
-from workers.models.registry import get_inference, get_kind
+from workers.models.registry import get_inference
 from workers.render.image_io import read_exr
-from workers.runtime.jobs import JobSpec, run_job
 from workers.scene.builtin import BUILTIN_SCENES
 
 START_TIMEOUT_S = 60
@@ -57,18 +56,7 @@ def _in_process(kind: str, folder: Path):
 
 
 def run_and_publish(store: ArtifactStore, work: Path, kind_name: str, scene, overrides: dict, seed: int):
-    kind = get_kind(kind_name)
-    config = kind.resolve_config("quick", overrides)
-    spec = JobSpec(
-        job_id=f"{kind_name}-{seed}",
-        kind=kind_name,
-        scene=scene.model_dump(mode="json"),
-        config=config.model_dump(mode="json"),
-        seed=seed,
-        checkpoint_dir=str(work / f"{kind_name}-{seed}-checkpoints"),
-        output_dir=str(work / f"{kind_name}-{seed}"),
-    )
-    outcome = run_job(spec, lambda event: None, threading.Event())
+    spec, outcome = run_kind_job(kind_name, scene, work / f"{kind_name}-{seed}", overrides, seed=seed)
     assert outcome.state == "succeeded", outcome.error
     files = {name: (path, outcome.media_types.get(name, "")) for name, path in outcome.files.items()}
     manifest = store.publish(

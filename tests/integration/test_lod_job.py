@@ -4,37 +4,28 @@ thresholds, export, report; then the artifact renders every LoD in the path trac
 from __future__ import annotations
 
 import json
-import threading
 
 import numpy as np
 
+from tests.support.jobs import run_kind_job
 from workers.models.lod import artifact
 from workers.models.lod.evaluate import lod_tracer
 from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
-from workers.runtime.jobs import JobSpec, run_job
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 
 
 def test_quick_lod_job_trains_exports_and_renders(tmp_path):
     kind = get_kind("lod")
-    config = kind.resolve_config("quick", {"train": {"steps": 20}, "samplers": 0})
+    overrides = {"train": {"steps": 20}, "samplers": 0}
+    config = kind.resolve_config("quick", overrides)
     scene = get_builtin("menger_sponge")
     scene = scene.model_copy(update={"camera": scene.camera.model_copy(update={"width": 48, "height": 48})})
     plan = kind.plan(scene, config)
     assert [i.choice for i in plan.items[:2]] == ["keep", "prefilter"]  # the ground stays on Embree
-    spec = JobSpec(
-        job_id="lod-test",
-        kind="lod",
-        scene=scene.model_dump(mode="json"),
-        config=config.model_dump(mode="json"),
-        seed=3,
-        checkpoint_dir=str(tmp_path / "checkpoints"),
-        output_dir=str(tmp_path / "out"),
-    )
     events = []
-    outcome = run_job(spec, events.append, threading.Event())
+    _, outcome = run_kind_job("lod", scene, tmp_path, overrides, seed=3, events=events)
     assert outcome.state == "succeeded", outcome.error
     assert {"lod.json", "lod.safetensors", "report.json", "speed_error.png", "preview.png"} <= set(
         outcome.files

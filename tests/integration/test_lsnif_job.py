@@ -3,36 +3,23 @@ report, then load the artifact into a path tracer for a scene whose instances mo
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
+from tests.support.jobs import run_kind_job
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.models.lsnif import artifact
-from workers.models.registry import get_kind
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.runtime.jobs import JobSpec, run_job
 from workers.runtime.report import Report
 from workers.scene.compile import compile_scene
 from workers.scene.spec import Transform
 
 
 def test_quick_lsnif_job_trains_exports_and_renders(tmp_path):
-    kind = get_kind("lsnif")
-    config = kind.resolve_config("quick", {"min_triangles": 1000, "train": {"steps": 30}})
     scene = instanced_scene()
-    spec = JobSpec(
-        job_id="lsnif-test",
-        kind="lsnif",
-        scene=scene.model_dump(mode="json"),
-        config=config.model_dump(mode="json"),
-        seed=7,
-        checkpoint_dir=str(tmp_path / "checkpoints"),
-        output_dir=str(tmp_path / "out"),
-    )
     events = []
-    outcome = run_job(spec, events.append, threading.Event())
+    overrides = {"min_triangles": 1000, "train": {"steps": 30}}
+    _, outcome = run_kind_job("lsnif", scene, tmp_path, overrides, seed=7, events=events)
     assert outcome.state == "succeeded", outcome.error
     assert {"lsnif.json", "objects/ball.safetensors", "report.json", "speed_error.png", "preview.png"} <= set(
         outcome.files

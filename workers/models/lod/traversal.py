@@ -70,6 +70,15 @@ class LodAggregate:
         return np.full(len(cells), 0.5)
 
     def first_events(self, origins, directions, t_min, t_max, rng) -> AggregateEvents:
+        return self._walk(origins, directions, t_min, t_max, rng)
+
+    def occluded(self, origins, directions, t_min, t_max) -> np.ndarray:
+        """Shadow rays need a yes or no: the same walk without stochastic termination."""
+        return self._walk(origins, directions, t_min, t_max, None).found
+
+    def _walk(self, origins, directions, t_min, t_max, rng: np.random.Generator | None) -> AggregateEvents:
+        """Classify occupied voxels along every ray until one is occluded; with `rng`, passing a voxel
+        is survived with probability max(p, floor) and the survivors are reweighted."""
         n = len(origins)
         events = AggregateEvents(
             np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3), np.int64), np.ones(n)
@@ -85,30 +94,15 @@ class LodAggregate:
             blocked = p < self._thresholds(cells)
             hit = rows[blocked]
             events.found[hit], events.t[hit], events.voxel[hit] = True, t_enter[blocked], cells[blocked]
-            survival = np.maximum(p[~blocked], self.floor)
-            passing = rows[~blocked]
-            alive = rng.random(len(passing)) < survival
-            events.weight[passing] = np.where(alive, events.weight[passing] / survival, 0.0)
-            rows = passing[alive]
-            t_start[rows] = t_exit[~blocked][alive]
+            passing, t_exit = rows[~blocked], t_exit[~blocked]
+            if rng is not None:
+                survival = np.maximum(p[~blocked], self.floor)
+                alive = rng.random(len(passing)) < survival
+                events.weight[passing] = np.where(alive, events.weight[passing] / survival, 0.0)
+                passing, t_exit = passing[alive], t_exit[alive]
+            rows = passing
+            t_start[rows] = t_exit
         return events
-
-    def occluded(self, origins, directions, t_min, t_max) -> np.ndarray:
-        n = len(origins)
-        blocked = np.zeros(n, bool)
-        rows, t_start = np.arange(n), np.asarray(t_min, np.float64).copy()
-        while len(rows):
-            o, d = origins[rows], directions[rows]
-            walk = first_occupied(self.voxels, o, d, t_start[rows], t_max[rows])
-            at = np.flatnonzero(walk.found)
-            rows, t_enter, t_exit, cells = rows[at], walk.t_enter[at], walk.t_exit[at], walk.cell[at]
-            o, d = o[at], d[at]
-            p = self._p_visible(o + t_enter[:, None] * d, o + t_exit[:, None] * d)
-            stop = p < self._thresholds(cells)
-            blocked[rows[stop]] = True
-            rows = rows[~stop]
-            t_start[rows] = t_exit[~stop]
-        return blocked
 
     def throughput(self, voxel: np.ndarray, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
         if len(voxel) == 0:
