@@ -66,3 +66,26 @@ def test_accepts_tensors_and_rejects_mismatched_shapes(image):
         psnr(image, image[:-1])
     with pytest.raises(ValueError):
         psnr(image[..., 0], image[..., 0])
+
+
+def test_flip_of_a_black_reference_is_finite_and_sees_leaked_light():
+    """flip-evaluator exits the process for a black HDR reference (a sealed box's interior); ours does not."""
+    black = np.zeros((16, 16, 3), np.float32)
+    leaked = black.copy()
+    leaked[4:8, 4:8] = 0.5
+    assert flip(black, black) == 0.0
+    assert 0 < flip(black, leaked) <= 1
+    assert flip(np.full_like(black, 1e-30), leaked) == flip(black, leaked)
+
+
+def test_flip_mean_over_a_mask():
+    rng = np.random.default_rng(0)
+    image = rng.random((16, 24, 3)).astype(np.float32)
+    worse = image.copy()
+    worse[:8] += 0.5
+    mask = np.zeros((16, 24), bool)
+    mask[8:] = True
+    assert flip(image, worse, mask=mask) < flip(image, worse) < flip(image, worse, mask=~mask)
+    assert flip(image, worse, mask=np.zeros_like(mask)) == 0.0
+    with pytest.raises(ValueError, match="mask shape"):
+        flip(image, worse, mask=mask[:4])

@@ -20,6 +20,7 @@ from workers.nn.tonemap import TONEMAPS
 ImageLike = np.ndarray | Tensor
 MAX_PSNR_DB = 100.0
 """PSNR of identical images: the MSE is floored at peak^2 * 1e-10 so reports stay finite (and JSON-safe)."""
+HDR_MIN_PEAK = 1e-6  # below, flip-evaluator's start exposure exceeds its stop exposure and it exits
 
 
 def _as_tensor(image: ImageLike) -> Tensor:
@@ -66,9 +67,12 @@ def flip(reference: ImageLike, test: ImageLike, hdr: bool = True, mask: np.ndarr
     with `mask` (H, W) the mean over the masked pixels only (e.g. excluding empty background).
 
     HDR mode takes the linear images (negatives clamped to 0) and lets FLIP choose its exposure range; LDR
-    mode takes them clamped to [0, 1] as linear values (FLIP applies no sRGB decoding).
+    mode takes them clamped to [0, 1] as linear values (FLIP applies no sRGB decoding). A reference whose
+    peak is below HDR_MIN_PEAK has no exposure range to choose from and is compared in LDR mode.
     """
     ref, tst = _pair(reference, test)
+    if hdr and float(ref.max()) < HDR_MIN_PEAK:
+        hdr = False  # flip-evaluator ends the whole process when an HDR reference is (nearly) black
     ref, tst = (x.clamp(min=0.0) if hdr else x.clamp(0.0, 1.0) for x in (ref, tst))
     error_map, mean_error, _ = flip_evaluator.evaluate(
         ref.float().numpy(), tst.float().numpy(), "HDR" if hdr else "LDR", inputsRGB=False, applyMagma=False
