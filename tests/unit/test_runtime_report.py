@@ -2,7 +2,15 @@ import numpy as np
 import pytest
 import torch
 
-from workers.runtime.report import PLOT_FILE, REPORT_FILE, Report, TimedImage, build_report, parameter_bytes
+from workers.runtime.report import (
+    PLOT_FILE,
+    REPORT_FILE,
+    Report,
+    TimedImage,
+    build_report,
+    nearest_in_time,
+    parameter_bytes,
+)
 from workers.runtime.training import TrainResult
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -47,11 +55,23 @@ def test_report_measures_error_against_the_reference(report):
 
 
 def test_json_round_trip_and_plot(report, tmp_path):
-    report.write(str(tmp_path / "report"))
+    written = report.write(str(tmp_path / "report"))
+    assert written == {
+        REPORT_FILE: (str(tmp_path / "report" / REPORT_FILE), "application/json"),
+        PLOT_FILE: (str(tmp_path / "report" / PLOT_FILE), "image/png"),
+    }
     assert Report.read(str(tmp_path / "report")) == report
     png = (tmp_path / "report" / PLOT_FILE).read_bytes()
     assert png.startswith(PNG_SIGNATURE)
     assert (tmp_path / "report" / REPORT_FILE).read_text().startswith("{")
+
+
+def test_equal_time_is_the_nearest_frame_in_ratio():
+    frames = [TimedImage(f"{s} s", np.zeros((1, 1, 3)), s) for s in (0.1, 1.0, 8.0)]
+    assert nearest_in_time(frames, 0.25).seconds == 0.1  # 2.5x from 0.1, 4x from 1.0
+    assert nearest_in_time(frames, 2.0).seconds == 1.0  # 2x from 1.0, 4x from 8.0
+    assert nearest_in_time(frames, 3.0).seconds == 8.0  # 3x from 1.0, 2.7x from 8.0
+    assert nearest_in_time(frames, 0.0).seconds == 0.1
 
 
 def test_parameter_bytes_count_buffers_and_dtypes():

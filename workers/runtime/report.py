@@ -24,6 +24,7 @@ from workers.runtime.training import TrainResult
 
 REPORT_FILE = "report.json"
 PLOT_FILE = "speed_error.png"
+MEDIA_TYPES = {REPORT_FILE: "application/json", PLOT_FILE: "image/png"}
 
 
 class ImageError(BaseModel):
@@ -131,12 +132,16 @@ class Report(BaseModel):
         """The report as artifact files: JSON and the speed-against-error plot."""
         return {REPORT_FILE: self.model_dump_json(indent=2).encode(), PLOT_FILE: self.plot_png()}
 
-    def write(self, folder: str) -> None:
-        """Write the report files into `folder` (a local path or an fsspec URL)."""
+    def write(self, folder: str) -> dict[str, tuple[str, str]]:
+        """Write the report files into `folder` (a local path or an fsspec URL); returns them as a kind's
+        `RunOutput.files` entries: name -> (path, media type)."""
         fs, root = fsspec.core.url_to_fs(str(folder))
         fs.makedirs(root, exist_ok=True)
+        written = {}
         for name, content in self.files().items():
             fs.pipe_file(f"{root}/{name}", content)
+            written[name] = (f"{str(folder).rstrip('/')}/{name}", MEDIA_TYPES[name])
+        return written
 
     @classmethod
     def read(cls, folder: str) -> Report:
@@ -153,6 +158,11 @@ def parameter_bytes(model: torch.nn.Module) -> int:
 def peak_rss_bytes() -> int:
     """Peak resident memory of this process so far (Linux reports kilobytes)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def nearest_in_time(frames: Sequence[TimedImage], seconds: float) -> TimedImage:
+    """The frame whose time is nearest `seconds` in ratio: path tracing "at equal time" to a model."""
+    return min(frames, key=lambda f: abs(np.log(max(f.seconds, 1e-9) / max(seconds, 1e-9))))
 
 
 def build_report(

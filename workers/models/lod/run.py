@@ -23,13 +23,14 @@ from workers.models.registry import JobContext, RunOutput
 from workers.render.image_io import write_png
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings
-from workers.runtime.report import TimedImage, build_report
+from workers.runtime.report import TimedImage, build_report, nearest_in_time
 from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.compile import compile_scene
 
 PATH_TRACING_SPP = (1, 4, 16, 64, 256)
+PREVIEW = "preview.png"  # the reference and LoD 0 side by side
 
 
 def run(ctx: JobContext) -> RunOutput:
@@ -63,7 +64,7 @@ def run(ctx: JobContext) -> RunOutput:
         ctx.log(f"training on {slots.count or 'no'} sampler actor(s)")
         with open_batches(spec, slots.count, placement=slots.actor_options) as batches:
             training = train(networks, lod_loss, batches, config.train, ctx.checkpoints, progress)
-            step_seconds = per_network_step_seconds(networks, {k: v for k, v in next(batches).items()})
+            step_seconds = per_network_step_seconds(networks, next(batches))
     round_to_storage(networks)
     networks.eval()
 
@@ -89,7 +90,7 @@ def run(ctx: JobContext) -> RunOutput:
             timed_render(PathTracer(scene), RenderSettings(spp=spp, width=width, height=height, max_depth=64))
         ]
     ]
-    equal_time = min(traced, key=lambda f: abs(np.log(f.seconds / max(lod_frame.seconds, 1e-9))))
+    equal_time = nearest_in_time(traced, lod_frame.seconds)
     storage = {
         "network_bytes": float(asset.network_bytes()),
         "grid_bytes": float(grid.storage_bytes()),
@@ -111,14 +112,9 @@ def run(ctx: JobContext) -> RunOutput:
     report = build_report(
         "lod", training, networks, lod_frame, equal_time, traced, reference, method_metrics=method_metrics
     )
-    report.write(str(ctx.output_dir))
-    write_png(ctx.output_dir / "preview.png", np.concatenate([reference, lod_frame.image], 1))
-    for name, media in (
-        ("report.json", "application/json"),
-        ("speed_error.png", "image/png"),
-        ("preview.png", "image/png"),
-    ):
-        files[name] = (str(ctx.output_dir / name), media)
+    files.update(report.write(str(ctx.output_dir)))
+    write_png(ctx.output_dir / PREVIEW, np.concatenate([reference, lod_frame.image], 1))
+    files[PREVIEW] = (str(ctx.output_dir / PREVIEW), "image/png")
     metrics = {
         "flip": figures[0].flip,
         "flip_coarsest": figures[-1].flip,

@@ -25,7 +25,7 @@ from workers.render.integrator import PathTracer
 from workers.render.neural_intersector import NeuralIntersector
 from workers.render.render import RenderSettings, render
 from workers.render.voxels import boundary_points
-from workers.runtime.report import TimedImage
+from workers.runtime.report import TimedImage, nearest_in_time
 from workers.scene.compile import CompiledScene
 
 HELD_OUT_SEED = 2**31 - 1
@@ -136,9 +136,7 @@ class ReportImages:
 
     @property
     def equal_time(self) -> TimedImage:
-        """The path-traced frame whose time is nearest the model's (in ratio)."""
-        model_seconds = max(self.model.seconds, 1e-9)
-        return min(self.path_tracing, key=lambda f: abs(np.log(max(f.seconds, 1e-9) / model_seconds)))
+        return nearest_in_time(self.path_tracing, self.model.seconds)
 
 
 def report_images(

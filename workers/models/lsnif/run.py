@@ -30,7 +30,7 @@ from workers.models.lsnif.train import train_object
 from workers.models.registry import JobContext, RunOutput
 from workers.render.image_io import write_png
 from workers.runtime.checkpoints import CheckpointStore
-from workers.runtime.report import PLOT_FILE, REPORT_FILE, build_report
+from workers.runtime.report import build_report
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import TrainResult
@@ -133,17 +133,12 @@ def run(ctx: JobContext) -> RunOutput:
         images.reference,
         method_metrics=method_metrics,
     )
-    report.write(str(ctx.output_dir))
+    files.update(report.write(str(ctx.output_dir)))
     write_png(
         ctx.output_dir / PREVIEW,
         np.concatenate([images.reference, images.comparison.embree_image, images.model.image], 1),
     )
-    for name, media in (
-        (REPORT_FILE, "application/json"),
-        (PLOT_FILE, "image/png"),
-        (PREVIEW, "image/png"),
-    ):
-        files[name] = (str(ctx.output_dir / name), media)
+    files[PREVIEW] = (str(ctx.output_dir / PREVIEW), "image/png")
     metrics = {
         "flip": report.model.error.flip,
         "flip_path_tracing_equal_time": report.path_tracing_equal_time.error.flip,
