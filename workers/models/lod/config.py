@@ -52,8 +52,11 @@ class LodConfig(BaseModel):
     appearance: NetworkSize = NetworkSize(features_per_level=4)
     visibility: NetworkSize = NetworkSize(features_per_level=4)
     sh_degree: int = Field(8, ge=1, le=8)
+    # The paper learns phi directly, its reference code in log space. On the level-3 Menger sponge (32^3 to
+    # 8^3, 500 steps) log gave FLIP 0.190 / 0.136 / 0.124 per LoD against linear's 0.208 / 0.156 /
+    # 0.125 at equal relative MSE, so log is the default.
     appearance_output: Literal["linear", "log"] = Field(
-        "linear", description="linear: phi = network output; log: phi = exp(output) (always positive)"
+        "log", description="log: phi = exp(output) (always positive); linear: phi = network output"
     )
     batch_size: int = Field(1 << 13, ge=64, description="voxel samples per step (pairs of boundary points)")
     domain_extrusion: float = Field(0.005, ge=0, le=0.1, description="learned domain grown by this x voxel")
