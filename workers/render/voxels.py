@@ -190,6 +190,14 @@ def check_rays(origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray,
     return origins, directions
 
 
+def start_cell(grid: VoxelGrid, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The voxel a walk at o + t d (inside the box) is in: on a voxel plane, the one the ray moves into."""
+    start = o + t[:, None] * d
+    cell = np.clip(np.floor((start - grid.lo) / grid.size).astype(np.int64), 0, grid.resolution - 1)
+    on_lower_plane = (grid.plane(cell) == start) & (d < 0)
+    return np.where(on_lower_plane & (cell > 0), cell - 1, cell)
+
+
 def boundary_points(
     grid: VoxelGrid,
     origins: np.ndarray,
@@ -214,11 +222,7 @@ def boundary_points(
     o, d = origins[live], directions[live]
     t_cur, t_end = t_near[live], t_far[live]
     step = np.where(d > 0, 1, -1).astype(np.int64)
-    # The voxel the segment starts in: inside the box, on the side the ray moves to when on a plane.
-    start = o + t_cur[:, None] * d
-    cell = np.clip(np.floor((start - grid.lo) / grid.size).astype(np.int64), 0, r - 1)
-    on_lower_plane = (grid.plane(cell) == start) & (d < 0)
-    cell = np.where(on_lower_plane & (cell > 0), cell - 1, cell)
+    cell = start_cell(grid, o, d, t_cur)
     previous = np.zeros(len(live), bool)  # whether the voxel before t_cur is occupied
     safe_d = np.where(d != 0, d, 1.0)
     rows = live
@@ -293,10 +297,7 @@ def first_occupied(
     o, d = origins[rows], directions[rows]
     t_cur, t_end = t_near[rows], t_far[rows]
     step = np.where(d > 0, 1, -1).astype(np.int64)
-    start = o + t_cur[:, None] * d
-    cell = np.clip(np.floor((start - grid.lo) / grid.size).astype(np.int64), 0, r - 1)
-    on_lower_plane = (grid.plane(cell) == start) & (d < 0)
-    cell = np.where(on_lower_plane & (cell > 0), cell - 1, cell)
+    cell = start_cell(grid, o, d, t_cur)
     safe_d = np.where(d != 0, d, 1.0)
     while len(rows):
         t_axis = np.where(d != 0, (grid.plane(cell + (step > 0)) - o) / safe_d, np.inf)
