@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from tests.support.lod import OracleVisibility
 from workers.models.lod.grid import LodGrid
 from workers.models.lod.sampling import asset_tracer, asset_triangles, boundary_pairs, first_asset_hits
 from workers.models.lod.thresholds import best_thresholds, f_measure, optimise_thresholds
@@ -106,28 +107,6 @@ def test_voxels_of_one_class_get_a_sensible_threshold_without_dividing_by_zero()
     # All occluded: every sample occluded (p < t), and the neutral ~0.5 when max p < 0.5.
     assert np.all((p[2] < t[2]) & (p[3] < t[3]))
     assert abs(t[3] - 0.5) < 0.011 and t[2] > 0.99
-
-
-class OracleVisibility(torch.nn.Module):
-    """A visibility 'network' that answers from the true geometry, with probabilities 0.8 (occluded) and
-    0.9 (visible): perfectly separable, and all above a fixed 0.5."""
-
-    def __init__(self, grid: LodGrid, tracer, occluded_p: float = 0.8, visible_p: float = 0.9) -> None:
-        super().__init__()
-        self.grid, self.tracer = grid, tracer
-        self.logits = torch.logit(torch.tensor([occluded_p, visible_p], dtype=torch.float64))
-        self.dummy = torch.nn.Parameter(torch.zeros(1))
-        self.calls = 0
-
-    def forward(self, p_o: torch.Tensor, p_i: torch.Tensor) -> torch.Tensor:
-        self.calls += 1
-        a = self.grid.lo + p_o.double().numpy() * self.grid.extent
-        b = self.grid.lo + p_i.double().numpy() * self.grid.extent
-        length = np.linalg.norm(b - a, axis=1)
-        direction = (b - a) / np.maximum(length, 1e-300)[:, None]
-        hits = self.tracer.rays.intersect(a, direction)
-        blocked = hits.found & (hits.t < length)
-        return self.logits[torch.from_numpy((~blocked).astype(np.int64))].float()
 
 
 def closed_box_asset(resolutions):

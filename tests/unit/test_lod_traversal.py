@@ -18,6 +18,7 @@ import pytest
 import torch
 from torch import nn
 
+from tests.support.lod import OracleVisibility
 from workers.models.lod.artifact import LodAsset
 from workers.models.lod.config import LodConfig
 from workers.models.lod.evaluate import lod_tracer
@@ -47,24 +48,6 @@ class VoxelVisibility(nn.Module):
         r = self.p.shape[0]
         cell = torch.clamp(((p_o + p_i) / 2 * r).floor().long(), 0, r - 1)
         return torch.logit(self.p[cell[:, 0], cell[:, 1], cell[:, 2]]).float()
-
-
-class OracleVisibility(nn.Module):
-    """Answers from the true geometry: p = 0.8 for occluded segments, 0.9 for visible ones."""
-
-    def __init__(self, grid: LodGrid, tracer) -> None:
-        super().__init__()
-        self.grid, self.tracer = grid, tracer
-        self.dummy = nn.Parameter(torch.zeros(1))
-
-    def forward(self, p_o: torch.Tensor, p_i: torch.Tensor) -> torch.Tensor:
-        a = self.grid.lo + p_o.double().numpy() * self.grid.extent
-        b = self.grid.lo + p_i.double().numpy() * self.grid.extent
-        length = np.linalg.norm(b - a, axis=1)
-        direction = (b - a) / np.maximum(length, 1e-300)[:, None]
-        hits = self.tracer.rays.intersect(a, direction)
-        blocked = hits.found & (hits.t < length)
-        return torch.logit(torch.where(torch.from_numpy(blocked), 0.8, 0.9)).float()
 
 
 class ConstantAppearance(nn.Module):

@@ -68,7 +68,7 @@ def optimise_thresholds(
     rng: np.random.Generator,
     on_level: Callable[[int], None] | None = None,
 ) -> dict[str, float]:
-    """Fill `grid.thresholds` for every level; returns the mean F-measure gain over a fixed 0.5."""
+    """Fill `grid.thresholds` at every level; returns the mean accuracy gain over a fixed 0.5."""
     device = next(network.parameters()).device
     gains = []
     for level in range(grid.levels):
