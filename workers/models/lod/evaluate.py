@@ -60,12 +60,12 @@ def matched_size(scene: CompiledScene, asset: LodAsset, level: int, max_height: 
     return max(1, round(height * camera.width / camera.height)), height
 
 
-def asset_mask(scene: CompiledScene, names: list[str], width: int, height: int) -> np.ndarray:
+def asset_mask(scene: CompiledScene, asset_only: PathTracer, width: int, height: int) -> np.ndarray:
     """Pixels whose centre sees the asset: FLIP is averaged over these, as in the paper's Fig. 16."""
     camera = PinholeCamera(scene.spec.camera, width, height)
     ys, xs = np.mgrid[0:height, 0:width]
     origins, directions = camera.rays(xs.ravel() + 0.5, ys.ravel() + 0.5)
-    return asset_tracer(scene, names).rays.intersect(origins, directions).found.reshape(height, width)
+    return asset_only.rays.intersect(origins, directions).found.reshape(height, width)
 
 
 def lod_tracer(scene: CompiledScene, asset: LodAsset, level: int, **options) -> PathTracer:
@@ -98,13 +98,14 @@ def evaluate_levels(
     common = RenderSettings(
         spp=config.evaluation_spp, width=common_w, height=common_h, max_depth=MAX_DEPTH, aovs=True
     )
-    common_mask = asset_mask(scene, asset.objects, common_w, common_h)
+    asset_only = asset_tracer(scene, asset.objects)  # one BVH of the asset for every mask
+    common_mask = asset_mask(scene, asset_only, common_w, common_h)
     traced = timed_render(reference_tracer, common)
     traced_length = _masked_mean(traced.aovs["path_length"][..., 0], common_mask)
     figures, images = [], {}
     for level in range(asset.grid.levels):
         w, h = matched_size(scene, asset, level, config.evaluation_max_height)
-        mask = asset_mask(scene, asset.objects, w, h)
+        mask = asset_mask(scene, asset_only, w, h)
         reference = timed_render(
             reference_tracer, RenderSettings(spp=config.reference_spp, width=w, height=h, max_depth=MAX_DEPTH)
         ).image
