@@ -1,8 +1,11 @@
 """The training loop every model kind runs: batches in, Adam steps, checkpoints, progress, exact resume.
 
-The learning rate is a pure function of the step (no scheduler object carrying state), and a checkpoint
-holds the weights, Adam's state, the grad scaler, the RNG states and the next batch index; resuming from
-step k and running to n therefore repeats the uninterrupted run exactly (bit for bit on CPU).
+A step runs one or more phases, each a loss descended by its own named Adam with its own parameters,
+schedule, clipping and grad scaler: one phase for a kind that fits one network, two alternating ones for
+a GAN's discriminator and generator. The learning rate is a pure function of the step (no scheduler
+object carrying state), and a checkpoint holds the weights, every optimizer's state and grad scaler, the
+RNG states, the next batch index and each phase's latest loss; resuming from step k and running to n
+therefore repeats the uninterrupted run exactly (bit for bit on CPU).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from typing import Any, Literal
 
 import torch
 from pydantic import BaseModel, Field
+from torch.optim.optimizer import ParamsT
 
 from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
@@ -22,6 +26,7 @@ from workers.runtime.samplers import BatchStream
 from workers.runtime.sources import Batch
 
 LossFunction = Callable[[torch.nn.Module, Batch], torch.Tensor]
+MAIN_PHASE = "main"  # the one phase of `train`
 
 
 class TrainingDiverged(RuntimeError):
@@ -59,18 +64,61 @@ class Schedule(BaseModel):
         return self.lr
 
 
-class TrainConfig(BaseModel):
-    """The loop's knobs; model kinds embed this in their own presets."""
+class OptimizerConfig(BaseModel):
+    """One Adam's knobs: its learning-rate schedule, moment decays, weight decay and gradient clipping."""
 
-    steps: int = Field(1000, ge=1)
     schedule: Schedule = Schedule()
     betas: tuple[float, float] = (0.9, 0.99)
     eps: float = Field(1e-15, gt=0)
     weight_decay: float = Field(0.0, ge=0)
     grad_clip_norm: float | None = Field(None, gt=0)
+
+
+class TrainConfig(OptimizerConfig):
+    """The loop's knobs; model kinds embed this in their own presets.
+
+    The optimizer fields it inherits configure every phase that `optimizers` does not name: a kind with
+    one network sets them directly, a GAN sets `optimizers["generator"]` and `["discriminator"]`.
+    """
+
+    steps: int = Field(1000, ge=1)
+    optimizers: dict[str, OptimizerConfig] = {}
     mixed_precision: bool = True  # honoured on CUDA only; CPU runs stay in float32
     checkpoint_every: int = Field(500, ge=1)
     progress_every: int = Field(10, ge=1)
+
+    def optimizer(self, phase: str) -> OptimizerConfig:
+        """The settings of the named phase's optimizer: its entry in `optimizers`, else the loop's own."""
+        if phase in self.optimizers:
+            return self.optimizers[phase]
+        return OptimizerConfig.model_validate(self.model_dump(include=set(OptimizerConfig.model_fields)))
+
+
+@dataclass
+class Phase:
+    """One named optimizer's part of a training step: the loss it descends, the parameters it moves and
+    how often it runs (on steps 0, `every`, 2 `every`, ...).
+
+    A GAN is two phases over one model: the discriminator's every step and the generator's every k-th (k
+    discriminator updates per generator update). The generator's loss backpropagates through the
+    discriminator but moves only the generator: a phase steps its own parameters and then drops every
+    gradient its loss left, so the next phase starts from none. `parameters` are tensors or Adam parameter
+    groups (default: all of the model's); a group may set `weight_decay` and an `lr_scale` that multiplies
+    the scheduled rate, e.g. to treat a hash grid and an MLP differently.
+    """
+
+    name: str
+    loss: LossFunction
+    parameters: ParamsT | None = None
+    every: int = 1
+
+    def __post_init__(self) -> None:
+        if not self.name.isidentifier():  # it names the phase's checkpoint files and progress entries
+            raise ValueError(f"a phase's name must be an identifier, got {self.name!r}")
+        if self.every < 1:
+            raise ValueError(f"phase {self.name} must run at least every step, got every={self.every}")
+        if self.parameters is not None:
+            self.parameters = list(self.parameters)  # a generator such as `module.parameters()` runs dry
 
 
 class Progress(BaseModel):
@@ -78,8 +126,9 @@ class Progress(BaseModel):
 
     step: int
     total_steps: int
-    loss: float
-    lr: float
+    loss: float  # the sum of `losses`
+    losses: dict[str, float]  # each phase's latest loss, by phase name
+    lr: float  # the first phase's scheduled rate at the step
     samples_per_s: float
     eta_s: float
 
@@ -120,12 +169,64 @@ def select_device() -> torch.device:
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
-def _first_nonfinite_gradient(model: torch.nn.Module) -> tuple[str, float]:
-    for name, parameter in model.named_parameters():
-        if parameter.grad is not None and not torch.isfinite(parameter.grad).all():
-            bad = parameter.grad[~torch.isfinite(parameter.grad)]
-            return f"gradient of {name}", float(bad[0])
-    return "gradient norm", math.nan
+class _PhaseOptimizer:
+    """A phase's Adam with its settings and grad scaler; `update` is one step of the phase."""
+
+    def __init__(
+        self, phase: Phase, config: OptimizerConfig, model: torch.nn.Module, device_type: str, amp: bool
+    ) -> None:
+        self.phase, self.config, self.device_type, self.amp = phase, config, device_type, amp
+        self.adam = torch.optim.Adam(
+            model.parameters() if phase.parameters is None else phase.parameters,
+            lr=config.schedule.lr,
+            betas=config.betas,
+            eps=config.eps,
+            weight_decay=config.weight_decay,
+        )
+        self.scaler = torch.amp.GradScaler(self.device_type, enabled=amp)
+        self.parameters = [p for group in self.adam.param_groups for p in group["params"]]
+
+    def lr(self, step: int, total_steps: int) -> float:
+        return self.config.schedule.at(step, total_steps)
+
+    def update(self, model: torch.nn.Module, batch: Batch, step: int, total_steps: int) -> float:
+        """One Adam step on the phase's loss, which it returns; raises `TrainingDiverged` on a non-finite
+        loss or gradient. Leaves no gradient on any of the model's parameters."""
+        lr = self.lr(step, total_steps)
+        for group in self.adam.param_groups:
+            group["lr"] = lr * group.get("lr_scale", 1.0)
+        with torch.autocast(self.device_type, enabled=self.amp):
+            loss = self.phase.loss(model, batch)
+        self.scaler.scale(loss).backward()
+        self.scaler.unscale_(self.adam)
+        grad_norm = torch.nn.utils.get_total_norm([p.grad for p in self.parameters if p.grad is not None])
+        loss_value, grad_norm_value = torch.stack([loss.detach().float(), grad_norm.float()]).tolist()
+        if not math.isfinite(loss_value):
+            raise TrainingDiverged(step, f"{self.phase.name} loss", loss_value)
+        if not self.amp and not math.isfinite(grad_norm_value):  # with AMP the scaler skips such steps itself
+            raise TrainingDiverged(step, *self._first_nonfinite_gradient(model))
+        if self.config.grad_clip_norm is not None:
+            torch.nn.utils.clip_grads_with_norm_(self.parameters, self.config.grad_clip_norm, grad_norm)
+        self.scaler.step(self.adam)
+        self.scaler.update()
+        model.zero_grad(set_to_none=True)  # also what the loss left on other phases' parameters
+        return loss_value
+
+    def _first_nonfinite_gradient(self, model: torch.nn.Module) -> tuple[str, float]:
+        own = {id(p) for p in self.parameters}
+        for name, parameter in model.named_parameters():
+            grad = parameter.grad
+            if id(parameter) in own and grad is not None and not torch.isfinite(grad).all():
+                return f"gradient of {name}", float(grad[~torch.isfinite(grad)][0])
+        return "gradient norm", math.nan
+
+
+def _check_phase_names(phases: Sequence[Phase], config: TrainConfig) -> None:
+    names = [phase.name for phase in phases]
+    if not names or len(set(names)) < len(names):
+        raise ValueError(f"training needs at least one phase and distinct phase names, got {names}")
+    if unknown := sorted(set(config.optimizers) - set(names)):
+        raise ValueError(f"config.optimizers names {unknown}, which no phase has; the phases are {names}")
 
 
 class _ProgressMeter:
@@ -145,12 +246,13 @@ class _ProgressMeter:
         self.window_samples += size
         self.window_steps += 1
 
-    def event(self, step: int, loss: float, lr: float) -> Progress:
+    def event(self, step: int, losses: dict[str, float], lr: float) -> Progress:
         window = max(time.perf_counter() - self.window_start, 1e-9)
         progress = Progress(
             step=step,
             total_steps=self.total_steps,
-            loss=loss,
+            loss=sum(losses.values()),
+            losses=dict(losses),
             lr=lr,
             samples_per_s=self.window_samples / window,
             eta_s=(self.total_steps - step) * window / self.window_steps,
@@ -168,62 +270,61 @@ def train(
     on_progress: Callable[[Progress], None] | None = None,
     param_groups: list[dict[str, Any]] | None = None,
 ) -> TrainResult:
+    """Train `model` on one loss with one Adam: `train_phases` with the single phase `main`.
+
+    `loss_fn(model, batch)` returns a scalar loss; `param_groups` are the phase's parameters (see `Phase`).
+    """
+    phase = Phase(MAIN_PHASE, loss_fn, param_groups)
+    return train_phases(model, [phase], batches, config, checkpoints, on_progress)
+
+
+def train_phases(
+    model: torch.nn.Module,
+    phases: Sequence[Phase],
+    batches: BatchStream,
+    config: TrainConfig,
+    checkpoints: CheckpointStore | None = None,
+    on_progress: Callable[[Progress], None] | None = None,
+) -> TrainResult:
     """Train `model` on `batches` for `config.steps` steps, resuming from the latest checkpoint if any.
 
-    `loss_fn(model, batch)` returns a scalar loss; the batch is already on the model's device.
-    `param_groups` (Adam's, default one group of all parameters) may set `weight_decay` and an
-    `lr_scale` that multiplies the scheduled rate, e.g. to treat a hash grid and an MLP differently.
+    Each step runs the phases due at it, in order, on the same batch (already on the model's device);
+    each phase's optimizer is configured by `config.optimizer(phase.name)`. The step's loss (progress,
+    best and final loss) is the sum of every phase's latest loss, so it is the loss itself for one phase.
     """
+    _check_phase_names(phases, config)
     device = select_device()
     model.to(device)
     amp = config.mixed_precision and device.type == "cuda"
-    optimizer = torch.optim.Adam(
-        param_groups or model.parameters(),
-        lr=config.schedule.lr,
-        betas=config.betas,
-        eps=config.eps,
-        weight_decay=config.weight_decay,
-    )
-    scaler = torch.amp.GradScaler(device.type, enabled=amp)
+    optimizers = [
+        _PhaseOptimizer(phase, config.optimizer(phase.name), model, device.type, amp) for phase in phases
+    ]
+    adams = {o.phase.name: o.adam for o in optimizers}
+    scalers = {o.phase.name: o.scaler for o in optimizers}
     loop = training_state.LoopState()
     if checkpoints is not None and (latest := checkpoints.latest()) is not None:
-        loop = training_state.decode(checkpoints.load(latest), model, optimizer, scaler)
+        loop = training_state.decode(checkpoints.load(latest), model, adams, scalers)
         loop.restore_rng()
     batches.seek(loop.batch_position)
-    step, best_loss = loop.step, loop.best_loss
-    parameters = [p for group in optimizer.param_groups for p in group["params"]]
+    step, best_loss, losses = loop.step, loop.best_loss, dict(loop.losses)
     meter = _ProgressMeter(config.steps)
     started = time.perf_counter()
     loss_value = math.nan
     while step < config.steps:
         batch = {k: v.to(device, non_blocking=True) for k, v in next(batches).items()}
-        lr = config.schedule.at(step, config.steps)
-        for group in optimizer.param_groups:
-            group["lr"] = lr * group.get("lr_scale", 1.0)
-        with torch.autocast(device.type, enabled=amp):
-            loss = loss_fn(model, batch)
-        scaler.scale(loss).backward()
-        scaler.unscale_(optimizer)
-        grad_norm = torch.nn.utils.get_total_norm([p.grad for p in parameters if p.grad is not None])
-        loss_value, grad_norm_value = torch.stack([loss.detach().float(), grad_norm.float()]).tolist()
-        if not math.isfinite(loss_value):
-            raise TrainingDiverged(step, "loss", loss_value)
-        if not amp and not math.isfinite(grad_norm_value):  # with AMP the scaler skips such steps itself
-            raise TrainingDiverged(step, *_first_nonfinite_gradient(model))
-        if config.grad_clip_norm is not None:
-            torch.nn.utils.clip_grads_with_norm_(parameters, config.grad_clip_norm, grad_norm)
-        scaler.step(optimizer)
-        scaler.update()
-        optimizer.zero_grad(set_to_none=True)
+        for optimizer in optimizers:
+            if step % optimizer.phase.every == 0:
+                losses[optimizer.phase.name] = optimizer.update(model, batch, step, config.steps)
+        loss_value = sum(losses.values())
 
         step += 1
         best_loss = loss_value if best_loss is None else min(best_loss, loss_value)
         meter.count(batch)
         if checkpoints is not None and (step % config.checkpoint_every == 0 or step == config.steps):
-            state = training_state.LoopState.capture(step, batches.position, best_loss)
-            checkpoints.save(step, training_state.encode(model, optimizer, scaler, state))
+            state = training_state.LoopState.capture(step, batches.position, best_loss, losses)
+            checkpoints.save(step, training_state.encode(model, adams, scalers, state))
         if on_progress is not None and (step % config.progress_every == 0 or step == config.steps):
-            on_progress(meter.event(step, loss_value, lr))
+            on_progress(meter.event(step, losses, optimizers[0].lr(step - 1, config.steps)))
 
     return TrainResult(
         steps=step,
