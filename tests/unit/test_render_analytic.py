@@ -222,7 +222,7 @@ def test_parallel_render_keeps_a_custom_intersector():
 
     class Nothing:  # an intersector that sees no geometry: only the (absent) environment remains
         def intersect(self, origins, directions):
-            from workers.render.embree import Hits
+            from workers.render.intersector import Hits
 
             n = len(origins)
             return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))

@@ -1,45 +1,12 @@
-"""Closest-hit and occlusion queries through Embree (embreex); each call releases the GIL."""
+"""Closest-hit and occlusion queries through Embree (embreex), as `Intersector`s; each releases the GIL."""
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-
-@dataclass
-class Hits:
-    """Closest hits of a batch of rays; `prim` is -1 where the ray escaped.
-
-    Intersectors that answer some hits without triangles (neural objects) set `neural` and, on those
-    rows, the surface they predicted: `prim` then names a triangle of the hit instance (for its object,
-    instance and coordinate scale), `normal` is the shading and geometric normal, and `material` and
-    `albedo` replace the triangle's. Embree's own hits leave these None and cost nothing extra.
-    """
-
-    prim: np.ndarray  # (N,) int32 triangle index into the compiled scene
-    t: np.ndarray  # (N,) float64 distance along the (unit) direction
-    u: np.ndarray  # (N,) barycentric weight of vertex 1
-    v: np.ndarray  # (N,) barycentric weight of vertex 2
-    neural: np.ndarray | None = None  # (N,) bool: the surface below comes from a model
-    normal: np.ndarray | None = None  # (N, 3) unit world-space normal where `neural`
-    material: np.ndarray | None = None  # (N,) scene material id where `neural`
-    albedo: np.ndarray | None = None  # (N, 3) base colour where `neural`
-
-    @property
-    def found(self) -> np.ndarray:
-        return self.prim >= 0
-
-    def take(self, rows: np.ndarray) -> Hits:
-        """The hits of `rows` only, overrides included."""
-        if self.neural is None:
-            return Hits(self.prim[rows], self.t[rows], self.u[rows], self.v[rows])
-        return Hits(
-            self.prim[rows], self.t[rows], self.u[rows], self.v[rows],
-            self.neural[rows], self.normal[rows], self.material[rows], self.albedo[rows],
-        )  # fmt: skip
+from workers.render.intersector import Hits
 
 
 class RayScene:
@@ -86,8 +53,7 @@ class SubsetRayScene:
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         if self._scene is None:
-            n = len(origins)
-            return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+            return Hits.misses(len(origins))
         hits = self._scene.intersect(origins, directions)
         found = hits.prim >= 0
         hits.prim = np.where(found, self.triangle_ids[np.where(found, hits.prim, 0)], -1)

@@ -5,21 +5,27 @@ Next-event estimation and BSDF sampling are combined with the power heuristic; R
 starts at `rr_depth`. `max_depth` counts path segments as Mitsuba does: 1 shows emitters only,
 2 is direct lighting. This is the API the training samplers call: `trace` for radiance along
 given rays, `first_hits` for surface records, `occluded` for visibility.
+
+Extension points, none of which names a model kind: geometry answers through `Intersector`s
+(`workers.render.intersector`; hits may carry predicted surfaces), materials are BSDF families
+registered by name (`workers.render.bsdf`), an `Aggregate` scatters light in voxels beside the surfaces
+(`workers.render.aggregate`), and a `PathObserver` sees the events of traced paths
+(`workers.render.observer`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Protocol
 
 import numpy as np
 
 from workers.render.aggregate import Aggregate, AggregateEvents
-from workers.render.bsdf import Kind, SurfaceBatch, eval_bsdf, sample_bsdf
-from workers.render.embree import Hits, RayScene
+from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
+from workers.render.embree import RayScene
+from workers.render.intersector import Hits, Intersector
 from workers.render.lights import LightSample, LightSampler
 from workers.render.materials import MaterialTable
-from workers.render.region_rays import rays_entering_box
+from workers.render.observer import PathObserver
 from workers.render.sampling import (
     coordinate_frame,
     dot,
@@ -37,30 +43,11 @@ RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
 
 
-class Intersector(Protocol):
-    """What the path tracer asks of geometry: `RayScene` and the neural intersectors answer it."""
-
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits: ...
-
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray: ...
-
-
 @dataclass
 class TraceResult:
     radiance: np.ndarray  # (N, 3) float64, finite, >= 0
     bounces: np.ndarray  # (N,) int: segments traced before the path ended
     rays_traced: int  # closest-hit plus shadow rays, for throughput figures
-
-
-@dataclass
-class RegionSamples:
-    """Rays entering a region, their first hits and the radiance arriving back along them."""
-
-    origins: np.ndarray  # (N, 3)
-    directions: np.ndarray  # (N, 3)
-    records: SurfaceRecords
-    inside: np.ndarray  # (N,) bool: the first hit lies inside the region
-    radiance: np.ndarray  # (N, 3) radiance leaving the first hit towards the origin (incl. emission)
 
 
 @dataclass
@@ -153,7 +140,7 @@ class PathTracer:
         aggregate_next_event: bool = True,
     ):
         """`intersector` answers closest-hit and occlusion queries in place of an Embree scene over every
-        triangle (e.g. neural objects beside Embree); it must index hits by the scene's triangles.
+        triangle (e.g. a model's objects beside Embree); it must index hits by the scene's triangles.
         `primary` (default: the same) answers the first segment of paths and `first_hits`, as a
         rasteriser would for camera rays. `aggregate` scatters light in voxels beside the surfaces
         (`workers.render.aggregate`); `aggregate_next_event` samples lights from its scattering voxels."""
@@ -202,10 +189,10 @@ class PathTracer:
             b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
             uvs = self._uv[prim]
             uv = (1.0 - b1 - b2) * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
-        if hits.neural is not None and hits.neural.any():
-            neural = np.flatnonzero(hits.neural)
-            ng[neural] = hits.normal[neural]  # ng is a fresh gather; ns is ng or a copy of it
-            ns[neural] = hits.normal[neural]
+        if hits.surface is not None and hits.surface.where.any():
+            predicted = np.flatnonzero(hits.surface.where)
+            ng[predicted] = hits.surface.normal[predicted]  # ng is a fresh gather; ns is ng or a copy of it
+            ns[predicted] = hits.surface.normal[predicted]
         scale = np.maximum(max3(np.abs(position)), self._coordinate_scale[prim])
         return _Interaction(position, ng, ns, uv, scale)
 
@@ -263,30 +250,16 @@ class PathTracer:
         rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
         return rec
 
-    def sample_region(
-        self, bounds: np.ndarray, n: int, rng: np.random.Generator, max_depth: int = 8
-    ) -> RegionSamples:
-        """Paths whose first segment enters the box `bounds` (2, 3) from its faces, traced to the end."""
-        origins, directions = rays_entering_box(bounds, n, rng)
-        records = self.first_hits(origins, directions)
-        lo, hi = np.asarray(bounds[0]), np.asarray(bounds[1])
-        slack = RAY_OFFSET * np.maximum(np.abs(lo), np.abs(hi)).max()
-        inside = records.hit & np.all(
-            (records.position >= lo - slack) & (records.position <= hi + slack), axis=1
-        )
-        radiance = self.trace(origins, directions, rng, max_depth).radiance
-        return RegionSamples(origins, directions, records, inside, radiance)
-
     def _material_ids(self, hits: Hits) -> np.ndarray:
         mat = self.scene.material_ids[hits.prim]
-        if hits.neural is not None:
-            mat = np.where(hits.neural, hits.material, mat)
+        if hits.surface is not None:
+            mat = np.where(hits.surface.where, hits.surface.material, mat)
         return mat
 
     def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray):
         surf = self.materials.surfaces(mat, uv)
-        if hits.neural is not None and hits.neural.any():
-            surf.base[hits.neural] = hits.albedo[hits.neural]
+        if hits.surface is not None and hits.surface.where.any():
+            surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf
 
     def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
@@ -302,8 +275,10 @@ class PathTracer:
         rng: np.random.Generator,
         max_depth: int = 8,
         rr_depth: int = 5,
+        observer: PathObserver | None = None,
     ) -> TraceResult:
-        """Radiance arriving at each origin from its direction (unit directions)."""
+        """Radiance arriving at each origin from its direction (unit directions); `observer` sees the
+        paths' events (`workers.render.observer`) and changes nothing traced."""
         n = len(origins)
         radiance = np.zeros((n, 3))
         bounces = np.zeros(n, np.int64)
@@ -333,27 +308,32 @@ class PathTracer:
                 found = found & ~events.found
 
             miss = np.flatnonzero(~found if events is None else ~found & ~events.found)
-            if env is not None and len(miss):
+            if len(miss) and (env is not None or observer is not None):
                 dm = paths.d[miss]
                 weight = np.where(
                     paths.prev_delta[miss],
                     1.0,
                     power_heuristic(paths.prev_pdf[miss], self.lights.pdf_environment(dm)),
                 )
-                radiance[paths.idx[miss]] += paths.beta[miss] * env.radiance(dm) * weight[:, None]
+                if env is not None:
+                    radiance[paths.idx[miss]] += paths.beta[miss] * env.radiance(dm) * weight[:, None]
+                if observer is not None:
+                    observer.on_escape(paths.idx[miss], dm, paths.beta[miss] * weight[:, None])
 
             scattered = None
             if events is not None:
                 at = np.flatnonzero(events.found)
                 scattered = self._scatter_in_aggregate(
-                    paths.take(at), events.take(at), segment, max_depth, rng, radiance
+                    paths.take(at), events.take(at), segment, max_depth, rng, radiance, observer
                 )
                 rays_traced += scattered.rays_traced
             if len(miss) or events is not None:
                 keep = np.flatnonzero(found)
                 paths = paths.take(keep)
                 hits = hits.take(keep)
-            paths, shadow_rays = self._scatter_at_surfaces(paths, hits, segment, max_depth, rng, radiance)
+            paths, shadow_rays = self._scatter_at_surfaces(
+                paths, hits, segment, max_depth, rng, radiance, observer
+            )
             rays_traced += shadow_rays
             if scattered is not None:
                 paths = _Paths.concatenate(paths, scattered.paths)
@@ -366,13 +346,22 @@ class PathTracer:
         return TraceResult(radiance, bounces, rays_traced)
 
     def _scatter_at_surfaces(
-        self, paths: _Paths, hits: Hits, segment: int, max_depth: int, rng, radiance: np.ndarray
+        self,
+        paths: _Paths,
+        hits: Hits,
+        segment: int,
+        max_depth: int,
+        rng,
+        radiance: np.ndarray,
+        observer: PathObserver | None,
     ) -> tuple[_Paths, int]:
         """Emission, next-event estimation and BSDF sampling at surface hits: the continuing paths."""
         if len(paths.idx) == 0:
             return paths, 0
         idx, d, beta = paths.idx, paths.d, paths.beta
         it = self._interaction(hits, paths.o, d, self._needs_uv)
+        if observer is not None:
+            observer.on_surface(idx, it.position, it.ns, beta)
         prim = hits.prim
         wo = -d
 
@@ -390,7 +379,7 @@ class PathTracer:
         sh = self._shade(it, hits, wo)
         u = rng.random((len(idx), 6))
 
-        shadow_rays = self._next_event(idx, sh, beta, u, radiance)
+        shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
 
         wi_local, weight, pdf, delta = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
         wi = sh.to_world(wi_local)
@@ -398,15 +387,26 @@ class PathTracer:
         return _Paths(idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx))), shadow_rays
 
     def _scatter_in_aggregate(
-        self, paths: _Paths, events: AggregateEvents, segment: int, max_depth: int, rng, radiance: np.ndarray
+        self,
+        paths: _Paths,
+        events: AggregateEvents,
+        segment: int,
+        max_depth: int,
+        rng,
+        radiance: np.ndarray,
+        observer: PathObserver | None,
     ) -> _Scattered:
         """At voxels the aggregate scatters in: light sampling weighted by the voxel's throughput (MIS with
         the uniform direction sampling below; beyond Weier et al., switchable), then a uniform direction
         with weight throughput / pdf. The continuing ray starts at the voxel's entry point."""
         n = len(paths.idx)
-        if segment == max_depth or n == 0:
-            return _Scattered(paths.take(np.zeros(0, np.int64)), 0)
+        if n == 0:
+            return _Scattered(paths, 0)
         position = paths.o + events.t[:, None] * paths.d
+        if observer is not None:
+            observer.on_aggregate(paths.idx, position, events.voxel, paths.beta)
+        if segment == max_depth:
+            return _Scattered(paths.take(np.zeros(0, np.int64)), 0)
         wo = -paths.d
         u = rng.random((n, 5))
         wi = square_to_uniform_sphere(u[:, 3:5])
@@ -420,7 +420,9 @@ class PathTracer:
                 np.concatenate([wi, ls.direction]),
             )
             phi = both[:n]
-            shadow_rays = self._next_event_in_aggregate(paths, events, position, ls, both[n:], radiance)
+            shadow_rays = self._next_event_in_aggregate(
+                paths, events, position, ls, both[n:], radiance, observer
+            )
         else:
             phi = self.aggregate.throughput(events.voxel, wo, wi)
         t_min = self.aggregate.exit_distance(events.voxel, position, wi)
@@ -429,7 +431,14 @@ class PathTracer:
         return _Scattered(_Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min), shadow_rays)
 
     def _next_event_in_aggregate(
-        self, paths: _Paths, events: AggregateEvents, position, ls: LightSample, phi, radiance
+        self,
+        paths: _Paths,
+        events: AggregateEvents,
+        position,
+        ls: LightSample,
+        phi,
+        radiance,
+        observer: PathObserver | None,
     ) -> int:
         """Light samples `ls` from scattering voxels, weighted by the throughput `phi` towards them."""
         mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, np.full(len(ls.pdf), UNIFORM_SPHERE_PDF)))
@@ -445,6 +454,9 @@ class PathTracer:
         blocked = self.rays.occluded(origin, direction, t_max)
         blocked |= self.aggregate.occluded(origin, direction, t_min, t_max)
         radiance[paths.idx[live]] += contribution[live] * ~blocked[:, None]
+        if observer is not None:
+            weight = paths.beta[live] * phi[live] * scale[live, None]
+            _observe_environment_samples(observer, paths.idx[live], ls, live, weight, blocked)
         return len(live)
 
     def _occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -462,12 +474,12 @@ class PathTracer:
     def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray) -> Shading:
         surf = self._surfaces(hits, self._material_ids(hits), it.uv)
         ns = it.ns
-        flip = (dot(wo, ns) < 0) & (surf.kind != Kind.DIELECTRIC)
+        flip = (dot(wo, ns) < 0) & surf.two_sided
         ns = np.where(flip[:, None], -ns, ns)
         fs, ft = coordinate_frame(ns)
         return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, to_local(wo, fs, ft, ns))
 
-    def _next_event(self, idx, sh: Shading, beta, u, radiance) -> int:
+    def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
         """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
         if self.lights.count == 0:
             return 0
@@ -493,4 +505,18 @@ class PathTracer:
         t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * sh.scale[at], np.inf)
         blocked = self._occluded(origin, direction, t_max)
         radiance[idx[at]] += contribution[live] * ~blocked[:, None]
+        if observer is not None:
+            weight = beta[at] * f_cos[live] * scale[live, None]
+            _observe_environment_samples(observer, idx[at], ls, live, weight, blocked)
         return len(live)
+
+
+def _observe_environment_samples(
+    observer: PathObserver, idx, ls: LightSample, rows: np.ndarray, weight: np.ndarray, blocked: np.ndarray
+) -> None:
+    """The unblocked light samples `ls[rows]` of the environment as escapes of paths `idx` with `weight`
+    (what multiplies their radiance). The environment is the one light at infinite distance that is not
+    a delta light."""
+    escaped = np.flatnonzero(~blocked & ~ls.delta[rows] & np.isinf(ls.distance[rows]))
+    if len(escaped):
+        observer.on_escape(idx[escaped], ls.direction[rows[escaped]], weight[escaped])

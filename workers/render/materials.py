@@ -1,52 +1,37 @@
-"""Material parameters by triangle: the scene's materials as arrays, textures looked up by UV."""
+"""Material parameters by scene material id: the scene's materials as arrays, textures looked up by UV.
+
+Each scene material is shaded by the BSDF family registered under its `type` (`workers.render.bsdf`);
+the family says what the material contributes to a `SurfaceBatch`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from workers.render.bsdf import Kind, SurfaceBatch
+import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
+from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
 from workers.scene.textures import evaluate_texture, load_image_texture
-
-_KIND = {
-    spec.Diffuse: Kind.DIFFUSE,
-    spec.Conductor: Kind.CONDUCTOR,
-    spec.Plastic: Kind.PLASTIC,
-    spec.Dielectric: Kind.DIELECTRIC,
-}
-
-
-def _base_colour(material: spec.Material):
-    match material:
-        case spec.Diffuse():
-            return material.reflectance
-        case spec.Conductor():
-            return material.specular
-        case spec.Plastic():
-            return material.diffuse
-        case _:
-            return (1.0, 1.0, 1.0)
 
 
 class MaterialTable:
     def __init__(self, scene: CompiledScene):
         materials = scene.materials
-        self.kind = np.array([_KIND[type(m)] for m in materials], dtype=np.int8)
-        self.alpha = np.array([getattr(m, "roughness", 0.0) for m in materials], dtype=np.float64)
-        if (self.kind == Kind.DIFFUSE).any():
-            self.alpha[self.kind == Kind.DIFFUSE] = 1.0  # reported roughness of a Lambertian surface
-        self.ior = np.array([getattr(m, "ior", 1.5) for m in materials], dtype=np.float64)
+        parameters = [bsdf_family(m.type).parameters(m) for m in materials]
+        self.family = np.array([bsdf_code(m.type) for m in materials], dtype=np.int8)
+        self.alpha = np.array([p.alpha for p in parameters], dtype=np.float64)
+        self.ior = np.array([p.ior for p in parameters], dtype=np.float64)
+        self._roughness = np.array([p.roughness for p in parameters], dtype=np.float64)
         self.base = np.zeros((len(materials), 3))
         self.textures: dict[int, tuple[spec.Texture, np.ndarray | None]] = {}
-        for i, (name, m) in enumerate(zip(scene.material_names, materials, strict=True)):
-            colour = _base_colour(m)
-            if isinstance(colour, tuple):
-                self.base[i] = colour
+        for i, (name, p) in enumerate(zip(scene.material_names, parameters, strict=True)):
+            if isinstance(p.base, tuple):
+                self.base[i] = p.base
             else:
                 field = f"materials.{name}"
-                image = load_image_texture(colour, field, scene.base_dir) if colour.type == "image" else None
-                self.textures[i] = (colour, image)
+                image = load_image_texture(p.base, field, scene.base_dir) if p.base.type == "image" else None
+                self.textures[i] = (p.base, image)
 
     def surfaces(self, material_ids: np.ndarray, uv: np.ndarray) -> SurfaceBatch:
         base = self.base[material_ids]
@@ -54,8 +39,8 @@ class MaterialTable:
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
                 base[sel] = evaluate_texture(texture, image, uv[sel])
-        alpha = np.where(self.kind[material_ids] == Kind.DIFFUSE, 0.0, self.alpha[material_ids])
-        return SurfaceBatch(self.kind[material_ids], base, alpha, self.ior[material_ids])
+        return SurfaceBatch(self.family[material_ids], base, self.alpha[material_ids], self.ior[material_ids])
 
     def roughness(self, material_ids: np.ndarray) -> np.ndarray:
-        return self.alpha[material_ids]
+        """Roughness for the AOV: the GGX alpha, and 1 for Lambertian surfaces."""
+        return self._roughness[material_ids]

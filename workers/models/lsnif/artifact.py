@@ -19,8 +19,8 @@ import safetensors.numpy
 import torch
 
 from workers.models.lsnif.config import LsnifConfig
+from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
 from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
-from workers.render.neural_intersector import NeuralInstance, NeuralIntersector
 from workers.render.voxels import VoxelGrid
 from workers.scene.compile import CompiledScene
 

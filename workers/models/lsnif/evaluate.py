@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workers.models.lsnif.intersector import NeuralIntersector
 from workers.models.lsnif.network import LsnifObject
 from workers.models.lsnif.sampling import PreparedObject, training_rays
 from workers.nn.metrics import flip
 from workers.render.integrator import PathTracer
-from workers.render.neural_intersector import NeuralIntersector
 from workers.render.render import RenderSettings, render
 from workers.render.voxels import boundary_points
 from workers.runtime.report import TimedImage, nearest_in_time

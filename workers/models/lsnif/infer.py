@@ -18,8 +18,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from workers.models.lsnif.artifact import LsnifArtifact, load
+from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
 from workers.models.registry import QUERY, Answer, ArraySpec, Operation
-from workers.render.neural_intersector import NeuralInstance, NeuralIntersector
 
 
 class RayQuery(BaseModel):
@@ -66,9 +66,9 @@ class LsnifModel:
             arrays={
                 "hit": hit,
                 "distance": np.where(hit, hits.t, np.inf).astype(np.float32),
-                "normal": hits.normal.astype(np.float32),
-                "albedo": hits.albedo.astype(np.float32),
-                "material": np.where(hit, hits.material, -1).astype(np.int32),
+                "normal": hits.surface.normal.astype(np.float32),
+                "albedo": hits.surface.albedo.astype(np.float32),
+                "material": np.where(hit, hits.surface.material, -1).astype(np.int32),
                 "object": np.where(hit, self.instance_object[instance], -1).astype(np.int32),
             },
             meta={"materials": self.materials, "objects": self.objects},

@@ -16,7 +16,8 @@ from typing import Protocol
 
 import numpy as np
 
-from workers.render.embree import Hits, RayScene
+from workers.render.embree import RayScene
+from workers.render.intersector import Hits, SurfaceOverride
 from workers.scene.compile import CompiledScene
 
 
@@ -74,7 +75,8 @@ def box_entry(
 
 
 class NeuralIntersector:
-    """Embree for every triangle outside `instances`, the instances' models for the rest."""
+    """Embree for every triangle outside `instances`, the instances' models for the rest: an `Intersector`
+    whose hits on a model carry the predicted surface as their `SurfaceOverride`."""
 
     def __init__(self, scene: CompiledScene, instances: list[NeuralInstance], robust: bool = True) -> None:
         self.instances = instances
@@ -89,11 +91,8 @@ class NeuralIntersector:
         self.neural_queries = 0  # rays handed to models, for throughput figures
 
     def _embree(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
-        n = len(origins)
         if self.rays is None:
-            return Hits(
-                np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n, np.float32), np.zeros(n, np.float32)
-            )
+            return Hits.misses(len(origins))
         hits = self.rays.intersect(origins, directions)
         hits.prim = np.where(hits.found, self.kept[np.maximum(hits.prim, 0)], -1).astype(np.int32)
         hits.t = np.where(hits.found, hits.t, np.inf)
@@ -137,7 +136,7 @@ class NeuralIntersector:
             normal[at] = instance.normal_to_world(answer.normal[part][closer])
             albedo[at] = answer.albedo[part][closer]
             material[at] = instance.material_ids[answer.material[part][closer]]
-        hits.neural, hits.normal, hits.material, hits.albedo = neural, normal, material, albedo
+        hits.surface = SurfaceOverride(neural, normal, material, albedo)
         return hits
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
