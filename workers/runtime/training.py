@@ -116,7 +116,7 @@ class Phase:
         if not self.name.isidentifier():  # it names the phase's checkpoint files and progress entries
             raise ValueError(f"a phase's name must be an identifier, got {self.name!r}")
         if self.every < 1:
-            raise ValueError(f"phase {self.name} must run at least every step, got every={self.every}")
+            raise ValueError(f"phase {self.name} runs every `every` steps, at least 1, got {self.every}")
         if self.parameters is not None:
             self.parameters = list(self.parameters)  # a generator such as `module.parameters()` runs dry
 
