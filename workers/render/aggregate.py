@@ -1,4 +1,4 @@
-"""Aggregate scattering: parts of a scene replaced by voxels that scatter as a whole (prefiltered LoDs).
+"""Aggregate scattering: parts of a scene replaced by voxels that scatter as a whole (levels of detail).
 
 The path tracer asks an `Aggregate` where each ray first scatters in it before the nearest surface, how
 much light a scattering voxel sends from one direction into another (`throughput`, which plays the role of

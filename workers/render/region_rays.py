@@ -2,7 +2,7 @@
 
 `rays_from_bounding_sphere`: origins uniform on the box's circumscribed sphere, directions
 cosine-distributed about the inward radial direction (view- and light-independent rays through an
-object, as in LSNIF's training).
+object, for models of an object that must answer any ray).
 """
 
 from __future__ import annotations

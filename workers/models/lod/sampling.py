@@ -22,8 +22,9 @@ import torch
 from workers.models.lod.config import LodConfig
 from workers.models.lod.grid import LodGrid
 from workers.render.bsdf import eval_bsdf, sample_bsdf
-from workers.render.embree import Hits, SubsetRayScene
+from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
+from workers.render.intersector import Hits
 from workers.render.sampling import max3, square_to_uniform_sphere
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import CompiledScene, compile_scene
