@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from workers.render.integrator import PathTracer
+from workers.render.intersector import Hits
 from workers.render.render import RenderSettings, render
 from workers.scene import spec
 from workers.scene.builtin import cornell_box
@@ -222,10 +223,7 @@ def test_parallel_render_keeps_a_custom_intersector():
 
     class Nothing:  # an intersector that sees no geometry: only the (absent) environment remains
         def intersect(self, origins, directions):
-            from workers.render.intersector import Hits
-
-            n = len(origins)
-            return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))
+            return Hits.misses(len(origins))
 
         def occluded(self, origins, directions, t_max):
             return np.zeros(len(origins), bool)
