@@ -37,6 +37,7 @@ bench: venv
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports
 
 ## Regenerate the gRPC stubs from proto/ into the client package (the server imports them from there).
 PROTO_OUT ?= clients/python

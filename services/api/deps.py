@@ -7,7 +7,6 @@ from typing import Annotated
 from fastapi import Depends, Request
 
 from services.api.services import Services
-from services.artifacts.digests import parse_digest
 
 
 def _services(request: Request) -> Services:
@@ -15,12 +14,3 @@ def _services(request: Request) -> Services:
 
 
 ServicesDep = Annotated[Services, Depends(_services)]
-
-
-def known_digest(value: str, not_found: type[LookupError]) -> str:
-    """An id that is not even a digest names nothing: `not_found` (a 404) like any unknown id."""
-    try:
-        parse_digest(value)
-    except ValueError:
-        raise not_found(value) from None
-    return value

@@ -39,3 +39,12 @@ def canonical_json(data: Any) -> bytes:
 
 def digest_json(data: Any) -> str:
     return digest_bytes(canonical_json(data))
+
+
+def known_digest(value: str, not_found: type[LookupError]) -> str:
+    """An id that is not even a digest names nothing: `not_found` (a 404) like any unknown id."""
+    try:
+        parse_digest(value)
+    except ValueError:
+        raise not_found(value) from None
+    return value

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.cli.errors import fail
-from workers.render.image_io import write_exr, write_png
 from workers.render.render import AOV_NAMES, RenderResult
+from workers.scene.image_io import write_exr, write_png
 
 
 @dataclass(frozen=True)

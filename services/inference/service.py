@@ -14,8 +14,8 @@ import numpy as np
 import torch
 from pydantic import BaseModel
 
-from services.api.deps import known_digest
 from services.artifacts.artifacts import ArtifactNotFound, ArtifactStore
+from services.artifacts.digests import known_digest
 from services.artifacts.store import BlobStore
 from services.inference.batching import Batcher
 from services.inference.cache import ModelCache

@@ -26,8 +26,8 @@ from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.states import JobState
 from services.jobs.tables import Job
+from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
-from workers.runtime.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 
 log = logging.getLogger(__name__)
 
@@ -172,8 +172,7 @@ class Scheduler:
     @staticmethod
     def _gpus(job: Job) -> float:
         """What the config asks for, when the cluster has it; otherwise the job runs on CPUs."""
-        kind = get_kind(job.kind)
-        wanted = kind.resources(kind.config_model.model_validate(job.config)).num_gpus
+        wanted = get_kind(job.kind).config_model.model_validate(job.config).num_gpus
         return wanted if 0 < wanted <= ray.cluster_resources().get("GPU", 0) else 0
 
     # ------------------------------------------------------------------ following

@@ -19,6 +19,7 @@ from services.jobs.tables import Job, utcnow
 from workers.models.registry import UnknownKind, get_kind
 from workers.scene.errors import SceneError
 from workers.scene.io import dotted_path
+from workers.scene.reference import SceneRef
 
 MAX_IDEMPOTENCY_HEADER = 255
 
@@ -63,7 +64,7 @@ class Submitter:
             raise InvalidInput(str(error), "config") from None
         scene = self.scenes.resolve(request.scene)
         try:
-            plan = kind.plan(scene.spec, config)
+            plan = kind.plan(SceneRef(scene.spec, self.scenes.scene_dir(scene.ref)), config)
         except SceneError as error:
             raise InvalidInput(error.problem, scene_field(error)) from None
         except ValueError as error:

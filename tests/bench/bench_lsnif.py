@@ -23,13 +23,16 @@ from workers.models.lsnif.evaluate import (
     compare_images,
     held_out,
 )
-from workers.models.lsnif.network import LsnifObject
+from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
-from workers.models.lsnif.train import train_object
+from workers.models.lsnif.train import lsnif_loss
+from workers.runtime.pipeline import round_to_storage
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
+from workers.runtime.training import train
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.reference import SceneRef
 
 CURVE_STEPS = 300
 IMAGE_SIZE = 64
@@ -52,14 +55,13 @@ def config(steps: int | None = None, **overrides) -> LsnifConfig:
 
 
 def trained(scene, index: int, cfg: LsnifConfig) -> tuple[LsnifObject, ObjectRaySource, float]:
-    source_config = ObjectSourceConfig(
-        scene=scene.model_dump(mode="json"), scene_dir=None, object_index=index, lsnif=cfg
-    )
+    source_config = ObjectSourceConfig(scene=SceneRef(scene), object_index=index, lsnif=cfg)
     source = ObjectRaySource(source_config, 0)
     torch.manual_seed(0)
     model = LsnifObject(source.prepared.grid, len(source.prepared.material_names), cfg)
     with InProcessBatches(SourceSpec(ObjectRaySource, source_config, 0)) as batches:
-        result = train_object(model, batches, cfg.train)
+        result = train(model, lsnif_loss, batches, cfg.train)
+        round_to_storage(model, STORAGE_DTYPE)
     return model.eval(), source, result.seconds
 
 

@@ -10,10 +10,10 @@ import numpy as np
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import QUICK_RENDER, events, submit, wait_for
 from workers.models.render.config import RenderConfig
-from workers.render.image_io import read_exr
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.image_io import read_exr
 
 SEED = 7
 database, server, client = api.database, api.server, api.client  # fixtures

@@ -32,8 +32,8 @@ from tests.integration.test_api_server import NBAKE, TOKENS, free_port
 from tests.support.jobs import run_kind_job
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.models.registry import get_inference
-from workers.render.image_io import read_exr
 from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.image_io import read_exr
 
 START_TIMEOUT_S = 60
 RAY_OUTPUTS = ("hit", "distance", "normal", "albedo", "material", "object")

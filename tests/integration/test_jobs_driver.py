@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
-from workers.render.image_io import read_exr, read_exr_channels
 from workers.render.render import RenderSettings, render
-from workers.runtime.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.image_io import read_exr, read_exr_channels
 
 WAIT_S = 120  # generous: a deadline for a hung test, never a speed assertion
 

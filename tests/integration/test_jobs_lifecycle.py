@@ -10,7 +10,7 @@ import ray
 
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import FINAL, QUICK_RENDER, events, problem_of, submit, wait_for
-from workers.runtime.jobs import NAMESPACE, actor_name
+from workers.driver.jobs import NAMESPACE, actor_name
 from workers.scene.builtin import get_builtin
 
 database, server, client = api.database, api.server, api.client  # fixtures

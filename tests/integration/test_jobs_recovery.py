@@ -20,10 +20,10 @@ import pytest
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, events, free_port, submit, wait_for
 from workers.models.render.config import RenderConfig
-from workers.render.image_io import read_exr
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.image_io import read_exr
 
 database = api.database  # fixture
 SEED = 3

@@ -14,6 +14,7 @@ from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.reference import SceneRef
 
 
 def test_quick_lod_job_trains_exports_and_renders(tmp_path):
@@ -22,7 +23,7 @@ def test_quick_lod_job_trains_exports_and_renders(tmp_path):
     config = kind.resolve_config("quick", overrides)
     scene = get_builtin("menger_sponge")
     scene = scene.model_copy(update={"camera": scene.camera.model_copy(update={"width": 48, "height": 48})})
-    plan = kind.plan(scene, config)
+    plan = kind.plan(SceneRef(scene), config)
     assert [i.choice for i in plan.items[:2]] == ["keep", "prefilter"]  # the ground stays on Embree
     events = []
     _, outcome = run_kind_job("lod", scene, tmp_path, overrides, seed=3, events=events)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+from workers.driver.jobs import JobEvent, JobOutcome, JobSpec, run_job
 from workers.models.registry import get_kind
-from workers.runtime.jobs import JobEvent, JobOutcome, JobSpec, run_job
 from workers.scene.spec import SceneSpec
 
 

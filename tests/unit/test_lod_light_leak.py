@@ -42,6 +42,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.reference import SceneRef
 
 SEED = 0
 STEPS = 120
@@ -89,7 +90,7 @@ def _leaks(seed: int) -> dict[tuple[int, bool], float]:
     grid = LodGrid.build(triangles, config.resolutions)
     torch.manual_seed(seed)
     networks = build_networks(config, grid)
-    source = LodSourceConfig(spec.model_dump(mode="json"), None, ["box"], config, grid.arrays())
+    source = LodSourceConfig(SceneRef(spec), ["box"], config, grid.arrays())
     train(networks, lod_loss, InProcessBatches(SourceSpec(LodSource, source, seed)), config.train)
     networks.eval()
     optimise_thresholds(

@@ -22,6 +22,7 @@ from workers.models.lod.plan import (
 from workers.models.registry import get_kind
 from workers.scene.builtin import get_builtin
 from workers.scene.errors import SceneError
+from workers.scene.reference import SceneRef
 
 
 def quick(**overrides) -> LodConfig:
@@ -30,7 +31,7 @@ def quick(**overrides) -> LodConfig:
 
 def test_default_asset_skips_small_objects_and_emitters():
     scene = get_builtin("dense_foliage")
-    asset = choose_asset(scene, quick())
+    asset = choose_asset(SceneRef(scene), quick())
     assert asset.names == ["branches", "leaves"]  # the 2-triangle ground stays on Embree
     ground = next(c for c in asset.choices if c.name == "ground")
     assert not ground.prefiltered and "triangles" in ground.reason
@@ -39,21 +40,23 @@ def test_default_asset_skips_small_objects_and_emitters():
 
 def test_named_objects_and_unknown_names():
     scene = get_builtin("closed_box")
-    assert choose_asset(scene, quick(objects=["box"])).names == ["box"]  # 24 triangles, but asked for
+    assert choose_asset(SceneRef(scene), quick(objects=["box"])).names == [
+        "box"
+    ]  # 24 triangles, but asked for
     with pytest.raises(SceneError) as error:
-        choose_asset(scene, quick(objects=["lid"]))
+        choose_asset(SceneRef(scene), quick(objects=["lid"]))
     assert error.value.field == "config.objects" and "'lid'" in str(error.value)
 
 
 def test_nothing_to_prefilter_is_a_clear_error():
     with pytest.raises(SceneError, match="nothing to prefilter"):
-        choose_asset(get_builtin("closed_box"), quick())  # the box is below min_triangles
+        choose_asset(SceneRef(get_builtin("closed_box")), quick())  # the box is below min_triangles
 
 
 def test_view_distances_pick_the_lod_whose_voxel_is_a_pixel():
     scene = get_builtin("menger_sponge")
     config = quick(finest_resolution=128, view_distances=[])
-    extent = cube_extent(choose_asset(scene, config).bounds, 128)
+    extent = cube_extent(choose_asset(SceneRef(scene), config).bounds, 128)
     assert [r for r, _ in choose_resolutions(scene, config, extent)] == [128, 64, 32, 16, 8]
     camera = scene.camera
     pixel_at = lambda d: 2 * d * math.tan(math.radians(camera.fov) / 2) / camera.height  # noqa: E731
@@ -82,7 +85,7 @@ def test_plan_counts_parameters_like_the_built_networks():
     )
     visibility = parameter_count(config.visibility, n_oct, 8, 0, 1, encoded_points=2)
     assert visibility == sum(p.numel() for p in networks.visibility.parameters())
-    result = plan(scene, config)
+    result = plan(SceneRef(scene), config)
     assert result.estimated_seconds > 0
     assert "32^3, 16^3, 8^3" in result.summary
     assert [i.name for i in result.items] == ["ground", "sponge", "LoD 0", "LoD 1", "LoD 2", "networks"]

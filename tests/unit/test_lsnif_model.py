@@ -9,7 +9,7 @@ import torch
 from workers.models.lsnif import artifact
 from workers.models.lsnif.config import PRESETS, LsnifConfig
 from workers.models.lsnif.encoding import VoxelGridEncoding, occupied_vertices
-from workers.models.lsnif.network import LsnifObject
+from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.models.lsnif.plan import EMBREE, LSNIF, choose_objects, plan
 from workers.models.lsnif.sampling import (
     ObjectRaySource,
@@ -23,8 +23,10 @@ from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
 from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
 from workers.render.voxels import boundary_points
+from workers.runtime.pipeline import round_to_storage
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
+from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
 from workers.scene.spec import SceneObject, SphereShape, Transform
 
@@ -52,20 +54,20 @@ def compiled():
 
 def test_plan_keeps_small_objects_and_emitters_on_embree_and_trains_instances_once():
     scene = instanced_scene()
-    choices = {c.name: c for c in choose_objects(scene, QUICK)}
+    choices = {c.name: c for c in choose_objects(SceneRef(scene), QUICK)}
     assert choices["ball"].choice == LSNIF and choices["ball"].instances == 2
     assert "shared by its 2 instances" in choices["ball"].reason
     assert choices["floor"].choice == EMBREE and "triangles" in choices["floor"].reason
     assert choices["light"].choice == EMBREE and "emits light" in choices["light"].reason
-    result = plan(scene, QUICK)
+    result = plan(SceneRef(scene), QUICK)
     assert result.estimated_seconds > 0 and result.summary.startswith("1 network(s) for 2 instance(s)")
 
 
 def test_the_report_reference_must_converge_further_than_the_preview():
     every_preset = [LsnifConfig.model_validate(preset) for preset in PRESETS.values()]
-    assert all(c.reference_spp > c.preview_spp for c in every_preset)
-    with pytest.raises(ValueError, match=r"reference_spp \(16\) must exceed preview_spp \(16\)"):
-        LsnifConfig(preview_spp=16, reference_spp=16)
+    assert all(c.reference_spp > c.evaluation_spp for c in every_preset)
+    with pytest.raises(ValueError, match=r"reference_spp \(16\) must exceed evaluation_spp \(16\)"):
+        LsnifConfig(evaluation_spp=16, reference_spp=16)
 
 
 def test_encoder_stores_only_vertices_near_occupied_voxels_and_folds_to_the_table_size(compiled):
@@ -115,8 +117,7 @@ def test_normal_labels_face_the_ray_on_both_sides_of_a_thin_surface(compiled):
 
 def test_training_rays_half_on_the_surface_and_loss_is_finite_and_trainable(compiled):
     config = ObjectSourceConfig(
-        scene=instanced_scene().model_dump(mode="json"),
-        scene_dir=None,
+        scene=SceneRef(instanced_scene()),
         object_index=len(instanced_scene().objects) - 1,
         lsnif=QUICK,
     )
@@ -234,7 +235,7 @@ def test_intersector_places_scaled_and_rotated_instances_like_embree(compiled):
 def test_artifact_round_trip_answers_identically(tmp_path, compiled):
     prepared = prepare_object(compiled, len(compiled.objects) - 1, 16)
     torch.manual_seed(0)
-    model = LsnifObject(prepared.grid, 1, QUICK).round_to_storage().eval()
+    model = round_to_storage(LsnifObject(prepared.grid, 1, QUICK), STORAGE_DTYPE).eval()
     stored = artifact.export_object(model)
     assert stored["grid.table"].dtype == np.float16 and stored["mlp.layers.0.weight"].dtype == np.float16
     assert model.size_bytes() == sum(v.nbytes for v in stored.values())  # counts what the file holds

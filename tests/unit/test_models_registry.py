@@ -1,8 +1,9 @@
 import pytest
 from pydantic import ValidationError
 
-from workers.models.registry import PRESET_NAMES, ModelKind, UnknownKind, get_kind, kind_names
+from workers.models.registry import PRESET_NAMES, Kind, UnknownKind, get_kind, kind_names
 from workers.scene.builtin import get_builtin
+from workers.scene.reference import SceneRef
 
 
 @pytest.fixture(scope="module")
@@ -14,7 +15,7 @@ def test_every_registered_kind_satisfies_the_protocol_and_has_the_three_presets(
     assert "render" in kind_names()
     for name in kind_names():
         kind = get_kind(name)
-        assert isinstance(kind, ModelKind)
+        assert isinstance(kind, Kind)
         assert kind.name == name
         assert set(PRESET_NAMES) <= set(kind.presets)
         assert kind.config_model.model_config.get("extra") == "forbid"
@@ -55,7 +56,7 @@ def test_a_bad_override_is_a_validation_error_naming_the_field(render, overrides
 
 def test_the_plan_explains_every_item_and_grows_with_the_preset(render):
     scene = get_builtin("cornell_box")
-    plans = [render.plan(scene, render.resolve_config(name, {})) for name in PRESET_NAMES]
+    plans = [render.plan(SceneRef(scene), render.resolve_config(name, {})) for name in PRESET_NAMES]
     for plan in plans:
         assert {item.name for item in plan.items} >= {"image", "passes", "tiles", "samplers"}
         assert all(item.choice and item.reason for item in plan.items)
@@ -66,7 +67,6 @@ def test_the_plan_explains_every_item_and_grows_with_the_preset(render):
     assert "rays/s per core" in estimate.reason
 
 
-def test_resources_follow_the_config(render):
+def test_every_kind_config_names_samplers_and_gpus_alike(render):
     config = render.resolve_config("quick", {"samplers": 3, "num_gpus": 0.5})
-    resources = render.resources(config)
-    assert (resources.num_cpus, resources.num_gpus) == (3, 0.5)
+    assert (config.samplers, config.num_gpus) == (3, 0.5)

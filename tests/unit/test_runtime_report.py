@@ -29,13 +29,11 @@ def report() -> Report:
         TimedImage(f"{spp} spp", noisy(reference, 1.0 / np.sqrt(spp), spp), seconds=0.01 * spp)
         for spp in (1, 4, 16)
     ]
-    model = torch.nn.Linear(8, 4)
     return build_report(
         kind="lod",
         training=TrainResult(steps=100, final_loss=0.1, best_loss=0.09, seconds=4.0, samples=8000),
-        model=model,
+        stored_bytes=parameter_bytes(torch.nn.Linear(8, 4)),
         model_frame=TimedImage("256x256 frame", noisy(reference, 0.05, 99), seconds=0.02),
-        path_tracing_equal_time=path_tracing[0],
         path_tracing=path_tracing,
         reference=reference,
         seconds_per_query=1e-6,
@@ -51,7 +49,8 @@ def test_report_measures_error_against_the_reference(report):
     assert [e.relative_mse for e in errors] == sorted((e.relative_mse for e in errors), reverse=True)
     assert [e.psnr for e in errors] == sorted(e.psnr for e in errors)
     assert report.model.error.flip < report.path_tracing_equal_time.error.flip
-    assert report.path_tracing_equal_time == report.path_tracing[0]
+    assert report.path_tracing_equal_time == report.path_tracing[0]  # 0.01 s is nearest 0.02 s
+    assert not report.worse_than_one_spp and report.warnings() == []
 
 
 def test_json_round_trip_and_plot(report, tmp_path):
@@ -74,10 +73,28 @@ def test_equal_time_is_the_nearest_frame_in_ratio():
     assert nearest_in_time(frames, 0.0).seconds == 0.1
 
 
-def test_parameter_bytes_count_buffers_and_dtypes():
-    model = torch.nn.BatchNorm1d(10).to(torch.float64)
-    # weight, bias, running mean and var in float64, plus an int64 batch counter
-    assert parameter_bytes(model) == 4 * 10 * 8 + 8
+def test_parameter_bytes_count_parameters_at_their_stored_precision():
+    model = torch.nn.BatchNorm1d(10).to(torch.float64)  # running statistics are buffers: not counted
+    assert parameter_bytes(model) == 2 * 10 * 8
+    assert parameter_bytes(model, torch.float16) == 2 * 10 * 2
+
+
+@pytest.mark.parametrize(
+    "broken",
+    [np.zeros((32, 32, 3), np.float32), np.full((32, 32, 3), np.nan, np.float32)],
+    ids=["black", "nan"],
+)
+def test_a_model_worse_than_one_spp_path_tracing_is_flagged(broken):
+    """A black (or NaN) frame where the scene is lit: the report says the model is not usable."""
+    rng = np.random.default_rng(1)
+    reference = rng.uniform(0.5, 2.0, (32, 32, 3)).astype(np.float32)
+    curve = [
+        TimedImage(f"{spp} spp", noisy(reference, 1.0 / np.sqrt(spp), spp), 0.01 * spp) for spp in (1, 4)
+    ]
+    training = TrainResult(steps=1, final_loss=0.0, best_loss=0.0, seconds=1.0, samples=1)
+    report = build_report("lod", training, 4, TimedImage("model", broken, 0.01), curve, reference)
+    assert report.worse_than_one_spp
+    assert "worse than 1 spp path tracing" in report.warnings()[0]
 
 
 def test_a_report_needs_a_path_tracing_curve(report):
@@ -85,9 +102,8 @@ def test_a_report_needs_a_path_tracing_curve(report):
         build_report(
             kind="lod",
             training=TrainResult(steps=1, final_loss=0.0, best_loss=0.0, seconds=1.0, samples=1),
-            model=torch.nn.Linear(1, 1),
+            stored_bytes=4,
             model_frame=TimedImage("frame", np.zeros((4, 4, 3), np.float32), 0.1),
-            path_tracing_equal_time=TimedImage("1 spp", np.zeros((4, 4, 3), np.float32), 0.1),
             path_tracing=[],
             reference=np.zeros((4, 4, 3), np.float32),
         )

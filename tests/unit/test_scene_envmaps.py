@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from workers.render.image_io import write_exr
 from workers.scene import spec
 from workers.scene.envmaps import (
     builtin_environment_names,
@@ -16,6 +15,7 @@ from workers.scene.envmaps import (
     uv_to_direction,
 )
 from workers.scene.errors import SceneError
+from workers.scene.image_io import write_exr
 
 BUILTIN_HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
 

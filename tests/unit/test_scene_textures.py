@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from workers.render.image_io import srgb_to_linear, write_exr
 from workers.scene import spec
 from workers.scene.errors import SceneError
+from workers.scene.image_io import srgb_to_linear, write_exr
 from workers.scene.textures import evaluate_texture, load_image_texture
 
 

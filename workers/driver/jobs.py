@@ -30,12 +30,21 @@ from ray.exceptions import (
     WorkerCrashedError,
 )
 
-from workers.models.registry import InfrastructureFailure, JobCancelled, JobContext, get_kind
+from workers.driver.placement import remove_reservation, sampler_reserver
+from workers.models.registry import get_kind
 from workers.runtime.checkpoints import CheckpointStore
-from workers.runtime.job_placement import remove_reservation, sampler_reserver
+from workers.runtime.contract import (
+    InfrastructureFailure,
+    JobCancelled,
+    JobContext,
+    Kind,
+    RunOutput,
+    imported,
+)
+from workers.runtime.pipeline import run_method
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.scene.errors import SceneError
-from workers.scene.io import scene_from_dict
+from workers.scene.reference import SceneRef
 
 NAMESPACE = "neuralbake"
 MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory
@@ -86,6 +95,7 @@ class JobOutcome(BaseModel):
     media_types: dict[str, str] = {}  # artifact file name -> media type
     metrics: dict[str, float] = {}
     infrastructure_failure: bool = False  # True: retrying may help (a worker died); False: the job failed
+    warnings: list[str] = []  # what a person must read before using the result (also in the job's log)
 
 
 def one_line(error: BaseException) -> str:
@@ -103,6 +113,13 @@ def one_line(error: BaseException) -> str:
     return f"{type(error).__name__}: {text}" if text else type(error).__name__
 
 
+def run_kind(kind: Kind, ctx: JobContext) -> RunOutput:
+    """A training kind's method on the shared pipeline, or a kind's own run function."""
+    if kind.method is not None:
+        return run_method(imported(kind.method)(), ctx)
+    return imported(kind.run_function)(ctx)
+
+
 def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.Event) -> JobOutcome:
     """Run the spec's kind to its outcome; every failure becomes an outcome, none escapes."""
 
@@ -113,8 +130,7 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
         kind = get_kind(spec.kind)
         ctx = JobContext(
             job_id=spec.job_id,
-            scene=scene_from_dict(spec.scene),
-            scene_dir=Path(spec.scene_dir) if spec.scene_dir else None,
+            scene=SceneRef.from_json(spec.scene, spec.scene_dir),
             config=kind.config_model.model_validate(spec.config),
             seed=spec.seed,
             output_dir=Path(spec.output_dir),
@@ -124,7 +140,7 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
             on_log=log,
             cancel_requested=cancel,
         )
-        output = kind.run(ctx)
+        output = run_kind(kind, ctx)
     except JobCancelled:
         return JobOutcome(state="cancelled")
     except INFRASTRUCTURE_ERRORS as error:
@@ -137,6 +153,7 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
         files={name: path for name, (path, _) in output.files.items()},
         media_types={name: media_type for name, (_, media_type) in output.files.items()},
         metrics=output.metrics,
+        warnings=output.warnings,
     )
 
 

@@ -20,7 +20,7 @@ import ray
 from ray.util.placement_group import get_placement_group, placement_group, remove_placement_group
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
-from workers.models.registry import JobCancelled, SamplerSlots
+from workers.runtime.contract import JobCancelled, SamplerSlots
 
 READY_POLL_S = 0.5
 

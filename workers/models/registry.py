@@ -8,46 +8,22 @@ without loading the path tracer or torch until a kind is actually asked for.
 from __future__ import annotations
 
 import importlib
-import threading
-from collections.abc import Callable, Mapping
-from contextlib import AbstractContextManager
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pydantic import BaseModel
 
-from workers.runtime.checkpoints import CheckpointStore
-from workers.scene.spec import SceneSpec
+from workers.runtime.contract import PRESET_NAMES, Kind
 
 if TYPE_CHECKING:
     import numpy as np
 
-# One line per kind: a module exposing `KIND`, an object satisfying `ModelKind`.
+# One line per kind: a module exposing `KIND`, a `workers.runtime.contract.Kind` declaration.
 KIND_MODULES = ("workers.models.render", "workers.models.lsnif", "workers.models.lod")
-PRESET_NAMES = ("quick", "default", "paper")
-
-
-class PlanItem(BaseModel):
-    name: str
-    choice: str
-    reason: str
-
-
-class Plan(BaseModel):
-    """What this scene needs and why, with the estimated cost."""
-
-    items: list[PlanItem]
-    estimated_seconds: float
-    summary: str
-
-
-class Resources(BaseModel):
-    """What a job of this config asks the cluster for (its sampler actors and the driver together)."""
-
-    num_cpus: float = 1
-    num_gpus: float = 0
+__all__ = ["PRESET_NAMES", "Kind", "UnknownKind", "get_inference", "get_kind", "kind_names"]
 
 
 class UnknownKind(KeyError):
@@ -57,88 +33,6 @@ class UnknownKind(KeyError):
 
     def __str__(self) -> str:
         return f"unknown model kind {self.name!r}; known kinds: {', '.join(kind_names())}"
-
-
-class JobCancelled(Exception):
-    """Raised inside a kind's `run` once the job is cancelled; the driver reports a cancelled outcome."""
-
-
-class InfrastructureFailure(RuntimeError):
-    """Raised by a kind when the cluster, not the job, failed (workers keep dying): a retry may succeed."""
-
-
-@dataclass(frozen=True)
-class SamplerSlots:
-    """Sampler actors a kind may start (its request, capped to the cluster) and the Ray options that place
-    each one in the job's reservation."""
-
-    count: int
-    actor_options: dict[str, Any]
-
-
-@dataclass
-class JobContext:
-    """Everything a kind's `run` gets from the driver: inputs, where to write, and how to talk back.
-
-    A render reports samples per pixel as steps; a training kind reports optimizer steps and its loss.
-    `checkpoints` is the job's own store: a kind resumes from `checkpoints.latest()` when there is one.
-    Sampler actors are started inside `with ctx.reserve_samplers(n) as slots:`, which waits until the
-    cluster fits them all at once.
-    """
-
-    job_id: str
-    scene: SceneSpec
-    scene_dir: Path | None
-    config: BaseModel
-    seed: int
-    output_dir: Path
-    checkpoints: CheckpointStore
-    reserve_samplers: Callable[[int], AbstractContextManager[SamplerSlots]] = field(repr=False)
-    on_progress: Callable[..., None] = field(repr=False)
-    on_log: Callable[[str], None] = field(repr=False)
-    cancel_requested: threading.Event = field(default_factory=threading.Event, repr=False)
-
-    def progress(
-        self,
-        step: int,
-        total: int,
-        *,
-        loss: float | None = None,
-        samples_per_s: float | None = None,
-        eta_s: float | None = None,
-    ) -> None:
-        self.on_progress(step=step, total=total, loss=loss, samples_per_s=samples_per_s, eta_s=eta_s)
-
-    def log(self, message: str) -> None:
-        self.on_log(message)
-
-    def raise_if_cancelled(self) -> None:
-        """Kinds call this between work items, so a cancel takes effect within one item's time."""
-        if self.cancel_requested.is_set():
-            raise JobCancelled(self.job_id)
-
-
-@dataclass
-class RunOutput:
-    """What a finished `run` leaves: artifact files (name -> (local path, media type)) and metrics."""
-
-    files: dict[str, tuple[str, str]]
-    metrics: dict[str, float]
-
-
-@runtime_checkable
-class ModelKind(Protocol):
-    name: str
-    config_model: type[BaseModel]  # extra="forbid"
-    presets: dict[str, dict]  # "quick", "default", "paper"
-
-    def resolve_config(self, preset: str, overrides: dict) -> BaseModel: ...
-
-    def plan(self, scene: SceneSpec, config: BaseModel) -> Plan: ...
-
-    def resources(self, config: BaseModel) -> Resources: ...
-
-    def run(self, ctx: JobContext) -> RunOutput: ...
 
 
 # ------------------------------------------------------------------ inference
@@ -199,30 +93,8 @@ def get_inference(name: str) -> Inference | None:
     return None if module is None else importlib.import_module(module).INFERENCE
 
 
-def resolve_preset(
-    config_model: type[BaseModel], presets: Mapping[str, dict], preset: str, overrides: dict
-) -> BaseModel:
-    """The preset's values with `overrides` merged in (nested dicts merge key by key), validated.
-
-    Raises ValueError for an unknown preset and pydantic's ValidationError (naming the field) for bad values.
-    """
-    if preset not in presets:
-        raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(presets)}")
-    return config_model.model_validate(_merge(presets[preset], overrides or {}))
-
-
-def _merge(base: dict, overrides: dict) -> dict:
-    merged = dict(base)
-    for key, value in overrides.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _merge(merged[key], value)
-        else:
-            merged[key] = value
-    return merged
-
-
 @cache
-def _kinds() -> dict[str, ModelKind]:
+def _kinds() -> dict[str, Kind]:
     kinds = [importlib.import_module(module).KIND for module in KIND_MODULES]
     return {kind.name: kind for kind in kinds}
 
@@ -231,7 +103,7 @@ def kind_names() -> list[str]:
     return sorted(_kinds())
 
 
-def get_kind(name: str) -> ModelKind:
+def get_kind(name: str) -> Kind:
     """The kind registered under `name`; UnknownKind (a KeyError) lists the known ones."""
     try:
         return _kinds()[name]

@@ -26,6 +26,10 @@ class CheckpointStore:
         self.keep = keep
         self.fs.makedirs(self.root, exist_ok=True)
 
+    def sub(self, name: str) -> CheckpointStore:
+        """The store of one part of a job (one of several models, say) in a folder of its own."""
+        return CheckpointStore(self.fs.unstrip_protocol(f"{self.root}/{name}"), keep=self.keep)
+
     def _folder(self, step: int) -> str:
         return f"{self.root}/step-{step:09d}"
 

@@ -1,8 +1,11 @@
 """The report every trained model ships with: its cost, and its error next to plain path tracing's.
 
 A neural representation is only worth having if it beats the path tracer it replaces at equal time, so the
-report puts the model's (time per frame, error) point on the same axes as path tracing at several sample
-counts, and records the path-traced image that took as long as the model's frame.
+report puts the model's (time per frame, error) point on the same axes as path tracing at the spp of
+`PATH_TRACING_SPP`, and records the path-traced image that took as long as the model's frame. Every kind
+fills the same fields, so reports of different kinds can be compared and plotted together. A model whose
+frame is worse than one sample per pixel of path tracing is flagged (`worse_than_one_spp`): training ran
+but produced nothing worth shipping, and the job's log and the CLI say so.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pydantic import BaseModel
 from workers.nn.metrics import flip, psnr, relative_mse
 from workers.runtime.training import TrainResult
 
+PATH_TRACING_SPP = (1, 4, 16, 64, 256)  # the curve's sample counts (those below the reference's spp)
 REPORT_FILE = "report.json"
 PLOT_FILE = "speed_error.png"
 MEDIA_TYPES = {REPORT_FILE: "application/json", PLOT_FILE: "image/png"}
@@ -74,13 +78,25 @@ class Report(BaseModel):
     training_samples: int
     training_samples_per_s: float
     seconds_per_query: float | None = None
-    parameter_bytes: int
+    parameter_bytes: int  # as the artifact stores them (e.g. float16 weights)
     peak_rss_bytes: int
     peak_gpu_bytes: int | None = None
     model: SpeedErrorPoint
     path_tracing_equal_time: SpeedErrorPoint
     path_tracing: list[SpeedErrorPoint]
+    worse_than_one_spp: bool = False  # the model's FLIP exceeds 1-spp path tracing's
     method_metrics: dict[str, float] = {}
+
+    def warnings(self) -> list[str]:
+        """What a person must read before using the model."""
+        if not self.worse_than_one_spp:
+            return []
+        one = self.path_tracing[0]
+        return [
+            f"the {self.kind} model's frame is worse than {one.label} path tracing of the same view "
+            f"(FLIP {self.model.error.flip:.3f} against {one.error.flip:.3f}): the model is not usable; "
+            "train longer or check the scene"
+        ]
 
     def plot_png(self) -> bytes:
         """Time per frame against FLIP and relative MSE, model against path tracing, as PNG bytes."""
@@ -149,10 +165,12 @@ class Report(BaseModel):
         return cls.model_validate_json(fs.cat_file(f"{root}/{REPORT_FILE}"))
 
 
-def parameter_bytes(model: torch.nn.Module) -> int:
-    """Bytes of parameters and buffers: what the exported weights weigh."""
-    tensors = [*model.parameters(), *model.buffers()]
-    return sum(t.numel() * t.element_size() for t in tensors)
+def parameter_bytes(model: torch.nn.Module, stored_dtype: torch.dtype | None = None) -> int:
+    """Bytes of the model's trained parameters as exported: at `stored_dtype` (the artifact's precision)
+    where given, else at their own. Buffers are not counted: kinds rebuild theirs (row maps, keys) on
+    load and list what else they store in their own figures."""
+    itemsize = (lambda p: stored_dtype.itemsize) if stored_dtype is not None else (lambda p: p.element_size())
+    return sum(p.numel() * itemsize(p) for p in model.parameters())
 
 
 def peak_rss_bytes() -> int:
@@ -162,36 +180,46 @@ def peak_rss_bytes() -> int:
 
 def nearest_in_time(frames: Sequence[TimedImage], seconds: float) -> TimedImage:
     """The frame whose time is nearest `seconds` in ratio: path tracing "at equal time" to a model."""
-    return min(frames, key=lambda f: abs(np.log(max(f.seconds, 1e-9) / max(seconds, 1e-9))))
+    return frames[_nearest_index(frames, seconds)]
+
+
+def _nearest_index(frames: Sequence[TimedImage], seconds: float) -> int:
+    ratio = [abs(np.log(max(f.seconds, 1e-9) / max(seconds, 1e-9))) for f in frames]
+    return int(np.argmin(ratio))
 
 
 def build_report(
     kind: str,
     training: TrainResult,
-    model: torch.nn.Module,
+    stored_bytes: int,
     model_frame: TimedImage,
-    path_tracing_equal_time: TimedImage,
     path_tracing: Sequence[TimedImage],
     reference: np.ndarray,
     seconds_per_query: float | None = None,
     method_metrics: dict[str, float] | None = None,
 ) -> Report:
-    """Measure every frame against `reference` and gather the model's cost into a Report."""
+    """Measure every frame against `reference` and gather the model's cost into a Report.
+
+    `path_tracing` is the curve in increasing spp; the equal-time frame is the one nearest the model's
+    frame time, and the first frame (1 spp) is the floor below which a model is flagged."""
     if not path_tracing:
         raise ValueError(
             "the speed-against-error curve needs path-traced frames at one sample count at least"
         )
+    model = SpeedErrorPoint.measure(model_frame, reference)
+    curve = [SpeedErrorPoint.measure(frame, reference) for frame in path_tracing]
     return Report(
         kind=kind,
         training_seconds=training.seconds,
         training_samples=training.samples,
         training_samples_per_s=training.samples_per_s,
         seconds_per_query=seconds_per_query,
-        parameter_bytes=parameter_bytes(model),
+        parameter_bytes=stored_bytes,
         peak_rss_bytes=peak_rss_bytes(),
         peak_gpu_bytes=torch.cuda.max_memory_allocated() if torch.cuda.is_available() else None,
-        model=SpeedErrorPoint.measure(model_frame, reference),
-        path_tracing_equal_time=SpeedErrorPoint.measure(path_tracing_equal_time, reference),
-        path_tracing=[SpeedErrorPoint.measure(frame, reference) for frame in path_tracing],
+        model=model,
+        path_tracing_equal_time=curve[_nearest_index(path_tracing, model_frame.seconds)],
+        path_tracing=curve,
+        worse_than_one_spp=not model.error.flip <= curve[0].error.flip,  # NaN counts as worse
         method_metrics=method_metrics or {},
     )

@@ -14,11 +14,14 @@ import ray
 import torch
 from ray.exceptions import ObjectLostError, RayActorError
 
+from workers.runtime.contract import InfrastructureFailure
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.runtime.sources import Batch, SourceSpec
 
 SAMPLER_FAILURES = (RayActorError, ObjectLostError)
-REPLACEMENTS_PER_BATCH = 3  # a batch whose fresh samplers keep dying points at a broken source, not bad luck
+# Samplers that keep dying on one batch (killed, out of memory, a lost node) fail the job as the cluster's
+# fault: InfrastructureFailure, which the service retries up to the job's attempts.
+REPLACEMENTS_PER_BATCH = 3
 
 
 class BatchStream(Protocol):
@@ -156,7 +159,7 @@ class SamplerPool:
             except SAMPLER_FAILURES:
                 self._replace(slot)
         else:
-            raise RuntimeError(
+            raise InfrastructureFailure(
                 f"sampler actors died {REPLACEMENTS_PER_BATCH + 1} times making batch {self.position}; "
                 "check that the sample source can be built and run in a Ray worker"
             )

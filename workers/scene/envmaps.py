@@ -14,9 +14,9 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
 
-from workers.render.image_io import read_exr
 from workers.scene import spec
 from workers.scene.errors import SceneError
+from workers.scene.image_io import read_exr
 from workers.scene.procedural import parse_params
 
 HDRI_DIR = Path(__file__).resolve().parents[2] / "assets" / "hdri"

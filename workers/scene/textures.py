@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from workers.render.image_io import read_exr, srgb_to_linear
 from workers.scene import spec
 from workers.scene.errors import SceneError
+from workers.scene.image_io import read_exr, srgb_to_linear
 
 
 def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> np.ndarray:

@@ -4,15 +4,18 @@ resumes an interrupted download by asking again from the bytes it has)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 from neuralbake.v1 import artifacts_pb2, artifacts_pb2_grpc
 
-from services.api.deps import known_digest
 from services.api.grpc.messages import manifest_message
 from services.api.grpc.streams import StreamTracker
-from services.api.services import Services
 from services.artifacts.artifacts import ArtifactNotFound
+from services.artifacts.digests import known_digest
 from services.jobs.errors import InvalidInput
+
+if TYPE_CHECKING:  # annotations only: the inference service reuses this package
+    from services.api.services import Services
 
 CHUNK_BYTES = 1 << 20  # well under the message limit; large enough that framing costs nothing
 

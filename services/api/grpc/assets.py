@@ -8,15 +8,17 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Iterator
 from contextlib import ExitStack
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 from neuralbake.v1 import assets_pb2, assets_pb2_grpc
 
-from services.api.deps import known_digest
 from services.api.grpc.messages import asset_message
-from services.api.services import Services
+from services.artifacts.digests import known_digest
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, UploadError
 from services.artifacts.uploads import AssetNotFound, ingest_upload, load_asset, save_asset
+
+if TYPE_CHECKING:  # annotations only: the inference service reuses this package
+    from services.api.services import Services
 
 
 class AssetServicer(assets_pb2_grpc.AssetServiceServicer):

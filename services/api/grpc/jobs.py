@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import grpc
 from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
 
 from services.api.grpc.messages import STATE_NAMES, event_message, job_message, submit_fields
 from services.api.grpc.streams import StreamTracker, pause
-from services.api.services import Services
 from services.jobs.errors import InvalidInput
 from services.jobs.following import follow
 from services.jobs.submission import JobRequest
+
+if TYPE_CHECKING:  # annotations only: the inference service reuses this package
+    from services.api.services import Services
 
 DEFAULT_PAGE, MAX_PAGE = 50, 200
 

@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator, Iterator
 from concurrent import futures
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import grpc
 from fastapi import FastAPI
@@ -31,7 +32,9 @@ from services.api.grpc.auth import TokenAuth
 from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.jobs import JobServicer
 from services.api.grpc.streams import StreamTracker
-from services.api.services import Services
+
+if TYPE_CHECKING:  # the inference service reuses this server without the job service's Services
+    from services.api.services import Services
 
 MAX_MESSAGE_BYTES = 4 << 20  # an upload chunk or a download chunk (1 MiB) with room for framing
 MAX_WORKERS = 32  # each open stream (WatchJob, DownloadFile) holds one worker while it runs

@@ -6,10 +6,11 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.responses import Response
 
 from services.api.auth import require
-from services.api.deps import ServicesDep, known_digest
+from services.api.deps import ServicesDep
 from services.api.files import blob_response
 from services.api.problems import PROBLEM_RESPONSES
 from services.artifacts.artifacts import ArtifactNotFound
+from services.artifacts.digests import known_digest
 from services.artifacts.manifest import Manifest
 
 router = APIRouter(

@@ -7,8 +7,9 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, File, Response, UploadFile
 
 from services.api.auth import require
-from services.api.deps import ServicesDep, known_digest
+from services.api.deps import ServicesDep
 from services.api.problems import PROBLEM_RESPONSES
+from services.artifacts.digests import known_digest
 from services.artifacts.uploads import Asset, AssetNotFound, ingest_upload, load_asset, save_asset
 
 router = APIRouter(prefix="/v1/assets", tags=["assets"], responses={401: PROBLEM_RESPONSES[401]})

@@ -7,7 +7,7 @@ from fastapi.responses import JSONResponse, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from sqlalchemy import select
 
-from services.api.routes.health import PROBE, readiness
+from services.api.readiness import PROBE, readiness
 from services.inference.state import StateDep
 from services.jobs.tables import ApiToken
 

@@ -9,34 +9,15 @@ loads, `evaluate` measures.
 
 from __future__ import annotations
 
-from pydantic import BaseModel
-
 from workers.models.lod.config import PRESETS, LodConfig
-from workers.models.registry import JobContext, Plan, Resources, RunOutput, resolve_preset
-from workers.scene.spec import SceneSpec
+from workers.runtime.contract import Example, Kind
 
-
-class LodKind:
-    name = "lod"
-    config_model = LodConfig
-    presets = PRESETS
-    infer_module = "workers.models.lod.infer"
-
-    def resolve_config(self, preset: str, overrides: dict) -> LodConfig:
-        return resolve_preset(LodConfig, PRESETS, preset, overrides)
-
-    def plan(self, scene: SceneSpec, config: BaseModel) -> Plan:
-        from workers.models.lod.plan import plan
-
-        return plan(scene, config)
-
-    def resources(self, config: LodConfig) -> Resources:
-        return Resources(num_cpus=1, num_gpus=config.num_gpus)
-
-    def run(self, ctx: JobContext) -> RunOutput:
-        from workers.models.lod.run import run  # torch and the path tracer load only where jobs run
-
-        return run(ctx)
-
-
-KIND = LodKind()
+KIND = Kind(
+    name="lod",
+    config_model=LodConfig,
+    presets=PRESETS,
+    plan_function="workers.models.lod.plan:plan",
+    example=Example("menger_sponge", {"samplers": 0}),
+    method="workers.models.lod.run:LodMethod",
+    infer_module="workers.models.lod.infer",
+)

@@ -47,13 +47,6 @@ def build_networks(config: LodConfig, grid: LodGrid) -> LodNetworks:
     return LodNetworks(config, octaves(grid.resolutions), grid.resolutions[-1])
 
 
-def round_to_storage(networks: LodNetworks) -> None:
-    """Round the weights to float16 and back, so what is measured is what the artifact holds."""
-    with torch.no_grad():
-        for tensor in networks.state_dict().values():
-            tensor.copy_(tensor.to(STORAGE_DTYPE).to(tensor.dtype))
-
-
 def save(folder: Path, asset: LodAsset) -> dict[str, tuple[str, str]]:
     folder.mkdir(parents=True, exist_ok=True)
     tensors = dict(asset.grid.arrays())

@@ -12,6 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
 
@@ -35,9 +36,7 @@ def _power_of_two(value: int) -> int:
     return value
 
 
-class LodConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class LodConfig(TrainedKindConfig):
     objects: list[str] | None = Field(
         None, description="names of the objects to prefilter; default: non-emitting objects >= min_triangles"
     )
@@ -70,13 +69,11 @@ class LodConfig(BaseModel):
     survival_floor_at_512: float = Field(
         0.9925, gt=0, le=1, description="lowest survival per voxel at 512^3; scaled to keep the diagonal's"
     )
-    evaluation_spp: int = Field(64, ge=1, le=65536)
-    reference_spp: int = Field(512, ge=1, le=1 << 20)
+    evaluation_spp: int = Field(64, ge=1, le=65536, description="spp of each LoD's frames")
+    reference_spp: int = Field(512, ge=2, le=1 << 20, description="spp of the converged path-traced images")
     evaluation_max_height: int = Field(
         192, ge=8, le=4096, description="cap on the height of the images that measure each LoD"
     )
-    samplers: int = Field(1, ge=0, le=64, description="Ray actors generating training batches")
-    num_gpus: float = Field(0, ge=0)
 
     _power_of_two = field_validator("finest_resolution", "coarsest_resolution")(_power_of_two)
 

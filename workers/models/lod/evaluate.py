@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -27,6 +28,7 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.report import TimedImage
 from workers.runtime.threads import torch_threads
+from workers.runtime.view import PathTracedView
 from workers.scene.compile import CompiledScene
 
 MIN_HEIGHT = 16
@@ -86,30 +88,41 @@ def timed_render(tracer: PathTracer, settings: RenderSettings) -> RenderResult:
         return render(tracer, settings)
 
 
+@dataclass
+class LevelEvaluation:
+    figures: list[LevelFigures]
+    view: PathTracedView  # LoD 0's view: the report's
+    frame: TimedImage  # LoD 0 rendered of that view
+
+
 def evaluate_levels(
     scene: CompiledScene,
     asset: LodAsset,
+    seed: int = 0,
     on_level: Callable[[int], None] | None = None,
-) -> tuple[list[LevelFigures], dict[str, TimedImage]]:
-    """Per-level figures (module docstring) and the images of LoD 0 for the report."""
+) -> LevelEvaluation:
+    """Per-level figures (module docstring), and LoD 0's view and frame for the report."""
     config = asset.config
     reference_tracer = PathTracer(scene)
     common_w, common_h = matched_size(scene, asset, 0, config.evaluation_max_height)
     common = RenderSettings(
-        spp=config.evaluation_spp, width=common_w, height=common_h, max_depth=MAX_DEPTH, aovs=True
+        spp=config.evaluation_spp, width=common_w, height=common_h, max_depth=MAX_DEPTH, seed=seed, aovs=True
     )
+    views = {}
     asset_only = asset_tracer(scene, asset.objects)  # one BVH of the asset for every mask
     common_mask = asset_mask(scene, asset_only, common_w, common_h)
     traced = timed_render(reference_tracer, common)
     traced_length = _masked_mean(traced.aovs["path_length"][..., 0], common_mask)
-    figures, images = [], {}
+    figures, frame = [], None
     for level in range(asset.grid.levels):
         w, h = matched_size(scene, asset, level, config.evaluation_max_height)
         mask = asset_mask(scene, asset_only, w, h)
-        reference = timed_render(
-            reference_tracer, RenderSettings(spp=config.reference_spp, width=w, height=h, max_depth=MAX_DEPTH)
-        ).image
         at_level = common.model_copy(update={"width": w, "height": h})
+        if (w, h) not in views:
+            views[w, h] = PathTracedView(
+                scene, at_level.model_copy(update={"aovs": False}), config.reference_spp, reference_tracer
+            )
+        reference = views[w, h].reference()
         with_nee = timed_render(lod_tracer(scene, asset, level), at_level)
         without_nee = timed_render(lod_tracer(scene, asset, level, light_sampling=False), at_level)
         timing = (
@@ -134,15 +147,12 @@ def evaluate_levels(
             )
         )
         if level == 0:
-            images = {
-                "reference": TimedImage("reference", reference, 0.0),
-                "lod": TimedImage(f"LoD 0, {config.evaluation_spp} spp", with_nee.image, with_nee.seconds),
-            }
+            frame = TimedImage(f"LoD 0, {config.evaluation_spp} spp", with_nee.image, with_nee.seconds)
         if on_level is not None:
             on_level(level)
     for f in figures:
         f.speedup_over_lod0 = figures[0].seconds / max(f.seconds, 1e-12)
-    return figures, images
+    return LevelEvaluation(figures, views[common_w, common_h], frame)
 
 
 def _masked_mean(values: np.ndarray, mask: np.ndarray) -> float:

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from workers.models.lod.config import LodConfig, NetworkSize
-from workers.models.registry import Plan, PlanItem
 from workers.render.voxels import padded_bounds
+from workers.runtime.contract import Plan, PlanItem
 from workers.scene.errors import SceneError
-from workers.scene.shapes import MeshData, shape_mesh
+from workers.scene.reference import SceneRef
+from workers.scene.shapes import MeshData
 from workers.scene.spec import SceneSpec
 
 TRAINING_SAMPLES_PER_SECOND = 60_000.0  # voxel samples per second, one idle 2-core CPU, default sizes
@@ -56,17 +57,17 @@ def mesh_bytes(mesh: MeshData) -> int:
     return len(mesh.vertices) * per_vertex + 12 * len(mesh.faces)
 
 
-def choose_asset(scene: SceneSpec, config: LodConfig, base_dir=None) -> Asset:
+def choose_asset(scene: SceneRef, config: LodConfig) -> Asset:
+    """The objects to prefilter, from the compiled scene (its meshes read from the scene's folder)."""
     if config.objects is not None:
-        unknown = sorted(set(config.objects) - {o.name for o in scene.objects})
+        unknown = sorted(set(config.objects) - {o.name for o in scene.spec.objects})
         if unknown:
             raise SceneError(
                 "config.objects", f"no object named {', '.join(map(repr, unknown))} in the scene"
             )
     choices, corners, size = [], [], 0
-    for index, obj in enumerate(scene.objects):
-        mesh = shape_mesh(obj.shape, f"objects[{index}].shape", base_dir)
-        matrices = obj.instance_matrices()
+    for obj, geometry in zip(scene.spec.objects, scene.compiled().objects, strict=True):
+        mesh, matrices = geometry.mesh, geometry.instance_matrices
         triangles = mesh.num_triangles * len(matrices)
         if obj.emission is not None:
             chosen, reason = False, "emits light: light sampling needs its triangles"
@@ -137,10 +138,10 @@ def octaves(resolutions: list[int]) -> int:
     return int(math.log2(resolutions[0] // resolutions[-1])) + 1
 
 
-def plan(scene: SceneSpec, config: LodConfig) -> Plan:
+def plan(scene: SceneRef, config: LodConfig) -> Plan:
     asset = choose_asset(scene, config)
     extent = cube_extent(asset.bounds, config.finest_resolution)
-    levels = choose_resolutions(scene, config, extent)
+    levels = choose_resolutions(scene.spec, config, extent)
     resolutions = [r for r, _ in levels]
     n_oct = octaves(resolutions)
     sh = (config.sh_degree + 1) ** 2

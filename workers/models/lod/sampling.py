@@ -27,8 +27,8 @@ from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
 from workers.render.sampling import max3, square_to_uniform_sphere
 from workers.runtime.sources import Batch, batch_rng
-from workers.scene.compile import CompiledScene, compile_scene
-from workers.scene.spec import SceneSpec
+from workers.scene.compile import CompiledScene
+from workers.scene.reference import SceneRef
 
 RR_MAX_SURVIVAL = 0.95
 
@@ -149,8 +149,7 @@ def throughput_estimates(
 class LodSourceConfig:
     """What a sampler process needs to rebuild the source: the scene, the asset and its LoD-0 voxels."""
 
-    scene: dict
-    scene_dir: str | None
+    scene: SceneRef
     objects: list[str]
     lod: LodConfig
     grid: dict[str, np.ndarray]  # LodGrid.arrays()
@@ -161,8 +160,7 @@ class LodSource:
 
     def __init__(self, config: LodSourceConfig, seed: int) -> None:
         self.config, self.seed = config, seed
-        scene = compile_scene(SceneSpec.model_validate(config.scene), config.scene_dir)
-        self.tracer = asset_tracer(scene, config.objects)
+        self.tracer = asset_tracer(config.scene.compiled(), config.objects)
         self.grid = LodGrid.from_arrays(config.grid)
 
     def batch(self, index: int) -> Batch:

@@ -8,34 +8,15 @@ tracer's intersector, `evaluate` measures them.
 
 from __future__ import annotations
 
-from pydantic import BaseModel
-
 from workers.models.lsnif.config import PRESETS, LsnifConfig
-from workers.models.registry import JobContext, Plan, Resources, RunOutput, resolve_preset
-from workers.scene.spec import SceneSpec
+from workers.runtime.contract import Example, Kind
 
-
-class LsnifKind:
-    name = "lsnif"
-    config_model = LsnifConfig
-    presets = PRESETS
-    infer_module = "workers.models.lsnif.infer"
-
-    def resolve_config(self, preset: str, overrides: dict) -> LsnifConfig:
-        return resolve_preset(LsnifConfig, PRESETS, preset, overrides)
-
-    def plan(self, scene: SceneSpec, config: BaseModel) -> Plan:
-        from workers.models.lsnif.plan import plan
-
-        return plan(scene, config)
-
-    def resources(self, config: LsnifConfig) -> Resources:
-        return Resources(num_cpus=1, num_gpus=config.num_gpus)
-
-    def run(self, ctx: JobContext) -> RunOutput:
-        from workers.models.lsnif.run import run  # torch and the path tracer load only where jobs run
-
-        return run(ctx)
-
-
-KIND = LsnifKind()
+KIND = Kind(
+    name="lsnif",
+    config_model=LsnifConfig,
+    presets=PRESETS,
+    plan_function="workers.models.lsnif.plan:plan",
+    example=Example("thin_walls"),
+    method="workers.models.lsnif.run:LsnifMethod",
+    infer_module="workers.models.lsnif.infer",
+)

@@ -7,8 +7,8 @@ internal nodes: 85 bytes per triangle, a lower bound), and at the 140 bytes per 
 own figures imply (0.8 GB for 5.7M, 2.5 GB for 18.2M, 2.9 GB for 20.5M, 3.8 GB for 27.0M triangles),
 i.e. leaves that hold 1.2 triangles on average.
 
-The images (`compare_images`, `report_images`) path-trace the scene with LSNIF for secondary and shadow
-rays and with Embree alone; frames are timed on one render thread each.
+`compare_images` path-traces the report's view with LSNIF for secondary and shadow rays and with Embree
+alone; frames are timed on one render thread each.
 """
 
 from __future__ import annotations
@@ -23,10 +23,9 @@ from workers.models.lsnif.network import LsnifObject
 from workers.models.lsnif.sampling import PreparedObject, training_rays
 from workers.nn.metrics import flip
 from workers.render.integrator import PathTracer
-from workers.render.render import RenderSettings, render
+from workers.render.render import render
 from workers.render.voxels import boundary_points
-from workers.runtime.report import TimedImage, nearest_in_time
-from workers.scene.compile import CompiledScene
+from workers.runtime.view import PathTracedView
 
 HELD_OUT_SEED = 2**31 - 1
 BVH_NODE_BYTES = 128
@@ -35,7 +34,6 @@ TRIANGLES_PER_LEAF = 2
 
 
 PAPER_TABLE1_BYTES_PER_TRIANGLE = 140
-PATH_TRACING_SPP = (1, 4, 16, 64)  # the report's path-traced frames, besides the preview's spp
 
 
 def bvh_bytes_estimate(triangles: int) -> int:
@@ -97,23 +95,18 @@ class ImageComparison:
     embree_image: np.ndarray
 
 
-def frame_settings(size: int, spp: int, seed: int, threads: int = 1) -> RenderSettings:
-    """A square frame of the scene's camera; timed frames keep the default single render thread."""
-    return RenderSettings(spp=spp, width=size, height=size, seed=seed, threads=threads)
-
-
-def compare_images(scene: CompiledScene, intersector: NeuralIntersector, size: int, spp: int, seed: int = 0):
+def compare_images(view: PathTracedView, intersector: NeuralIntersector) -> ImageComparison:
     """FLIP of a path-traced image whose secondary and shadow rays use LSNIF against pure Embree, at the
-    same samples per pixel and seed; camera rays stay on Embree in both (the paper rasterises them).
+    view's samples per pixel and seed; camera rays stay on Embree in both (the paper rasterises them).
 
     Where LSNIF changes a path, the two images' noise decorrelates, so at low spp part of the FLIP is
     Monte Carlo noise: the noise floor (Embree against itself with another seed) says how much; LSNIF's
     FLIP can also fall below it where most paths stay the same."""
-    settings = frame_settings(size, spp, seed)
-    embree = PathTracer(scene)
-    pure = render(embree, settings)
-    other_seed = render(embree, settings.model_copy(update={"seed": seed + 1})).image
-    hybrid = PathTracer(scene, intersector=intersector, primary=embree.rays)
+    settings = view.settings
+    pure = view.frame(settings.spp)
+    embree = PathTracer(view.scene)
+    other_seed = render(embree, settings.model_copy(update={"seed": settings.seed + 1})).image
+    hybrid = PathTracer(view.scene, intersector=intersector, primary=embree.rays)
     image = render(hybrid, settings)
     return ImageComparison(
         float(flip(pure.image, image.image)),
@@ -122,46 +115,4 @@ def compare_images(scene: CompiledScene, intersector: NeuralIntersector, size: i
         pure.seconds,
         image.image,
         pure.image,
-    )
-
-
-@dataclass
-class ReportImages:
-    """The frames of the shared report (`workers.runtime.report`), all of the same view and size."""
-
-    comparison: ImageComparison  # LSNIF against Embree at the preview's spp and seed
-    model: TimedImage  # path tracing with LSNIF for secondary and shadow rays
-    path_tracing: list[TimedImage]  # pure Embree at `PATH_TRACING_SPP` and the preview's spp, by spp
-    reference: np.ndarray  # pure Embree at the reference's spp, another seed
-
-    @property
-    def equal_time(self) -> TimedImage:
-        return nearest_in_time(self.path_tracing, self.model.seconds)
-
-
-def report_images(
-    scene: CompiledScene,
-    intersector: NeuralIntersector,
-    size: int,
-    spp: int,
-    reference_spp: int,
-    seed: int = 0,
-) -> ReportImages:
-    """`compare_images` at the preview's spp, pure Embree at the other spp of `PATH_TRACING_SPP` below
-    the reference's (seed `seed`), and the converged reference (seed `seed + 2`: independent of every
-    frame and of the noise floor's seed `seed + 1`; its time is not measured, so it renders on two
-    threads, which yields the same image)."""
-    comparison = compare_images(scene, intersector, size, spp, seed)
-    embree = PathTracer(scene)
-    traced = {spp: TimedImage(f"{spp} spp", comparison.embree_image, comparison.embree_seconds)}
-    for count in PATH_TRACING_SPP:
-        if count < reference_spp and count not in traced:
-            result = render(embree, frame_settings(size, count, seed))
-            traced[count] = TimedImage(f"{count} spp", result.image, result.seconds)
-    reference = render(embree, frame_settings(size, reference_spp, seed + 2, threads=2)).image
-    return ReportImages(
-        comparison=comparison,
-        model=TimedImage(f"{spp} spp", comparison.lsnif_image, comparison.lsnif_seconds),
-        path_tracing=[traced[count] for count in sorted(traced)],
-        reference=reference,
     )

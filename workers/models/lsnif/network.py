@@ -115,14 +115,6 @@ class LsnifObject(nn.Module):
         material = raw[:, OUTPUTS_BEFORE_MATERIALS:].argmax(1)
         return Prediction(hit, t, normal, albedo, material)
 
-    @torch.no_grad()
-    def round_to_storage(self) -> LsnifObject:
-        """Round the feature table and the MLP to float16, the precision the artifact stores them in
-        (the paper's sizes assume half precision), so what is measured after training is what ships."""
-        for parameter in self.parameters():
-            parameter.copy_(parameter.to(STORAGE_DTYPE))
-        return self
-
     def size_bytes(self) -> int:
         """Bytes the artifact stores for this object: packed voxel bits, the box, and the feature table
         and MLP in float16."""

@@ -10,10 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from workers.models.lsnif.config import LsnifConfig
-from workers.models.registry import Plan, PlanItem
-from workers.scene.errors import SceneError
-from workers.scene.shapes import shape_mesh
-from workers.scene.spec import SceneSpec
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.reference import SceneRef
 
 LSNIF = "lsnif"
 EMBREE = "embree"
@@ -26,23 +24,19 @@ class ObjectChoice:
     index: int
     name: str
     choice: str  # LSNIF or EMBREE
-    triangles: int | None
+    triangles: int
     instances: int
     reason: str
 
 
-def choose_objects(scene: SceneSpec, config: LsnifConfig, base_dir=None) -> list[ObjectChoice]:
+def choose_objects(scene: SceneRef, config: LsnifConfig) -> list[ObjectChoice]:
+    """Every object's choice, from the compiled scene (its meshes read from the scene's folder)."""
     choices = []
-    for index, obj in enumerate(scene.objects):
-        instances = len(obj.instance_matrices())
-        try:
-            triangles = shape_mesh(obj.shape, f"objects[{index}].shape", base_dir).num_triangles
-        except SceneError:
-            triangles = None  # a mesh file the planner cannot read here; the job decides on the real mesh
+    for index, (obj, geometry) in enumerate(zip(scene.spec.objects, scene.compiled().objects, strict=True)):
+        instances = len(geometry.instance_matrices)
+        triangles = geometry.mesh.num_triangles
         if obj.emission is not None:
             choice, reason = EMBREE, "emits light: light sampling needs its triangles"
-        elif triangles is None:
-            choice, reason = LSNIF, "mesh not readable while planning; the job checks its triangle count"
         elif triangles < config.min_triangles:
             choice, reason = EMBREE, f"{triangles} triangles < {config.min_triangles}: a BVH is cheaper"
         else:
@@ -52,13 +46,12 @@ def choose_objects(scene: SceneSpec, config: LsnifConfig, base_dir=None) -> list
     return choices
 
 
-def plan(scene: SceneSpec, config: LsnifConfig) -> Plan:
+def plan(scene: SceneRef, config: LsnifConfig) -> Plan:
     choices = choose_objects(scene, config)
     trained = [c for c in choices if c.choice == LSNIF]
     rays = config.train.steps * config.batch_size
     seconds = sum(
-        rays / TRAINING_RAYS_PER_SECOND + SECONDS_PER_MILLION_TRIANGLES * (c.triangles or 0) / 1e6
-        for c in trained
+        rays / TRAINING_RAYS_PER_SECOND + SECONDS_PER_MILLION_TRIANGLES * c.triangles / 1e6 for c in trained
     )
     items = [PlanItem(name=c.name, choice=c.choice, reason=c.reason) for c in choices]
     items.append(

@@ -14,7 +14,6 @@ from functools import cached_property
 
 import numpy as np
 import torch
-from pydantic import BaseModel
 
 from workers.models.lsnif.config import LsnifConfig
 from workers.models.lsnif.network import network_inputs
@@ -25,9 +24,9 @@ from workers.render.region_rays import rays_from_bounding_sphere
 from workers.render.sampling import coordinate_frame, dot, square_to_cosine_hemisphere, to_world
 from workers.render.voxels import VoxelGrid, voxelize
 from workers.runtime.sources import Batch, batch_rng
-from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.compile import CompiledScene
+from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
-from workers.scene.spec import SceneSpec
 
 SURFACE_SEARCH_ROUNDS = 8
 
@@ -145,9 +144,9 @@ def label_batch(grid: VoxelGrid, max_points: int, reference: ObjectReference, or
     }
 
 
-class ObjectSourceConfig(BaseModel):
-    scene: dict  # SceneSpec.model_dump(mode="json")
-    scene_dir: str | None
+@dataclass(frozen=True)
+class ObjectSourceConfig:
+    scene: SceneRef
     object_index: int
     lsnif: LsnifConfig
 
@@ -178,7 +177,7 @@ class ObjectRaySource:
 
     @cached_property
     def prepared(self) -> PreparedObject:
-        compiled = compile_scene(SceneSpec.model_validate(self.config.scene), self.config.scene_dir)
+        compiled = self.config.scene.compiled()
         return prepare_object(compiled, self.config.object_index, self.config.lsnif.voxel_resolution)
 
     def batch(self, index: int) -> Batch:

@@ -1,4 +1,5 @@
-"""Training one LSNIF object: the loss of Sec. 5.3 and the runtime's loop over an object's ray source.
+"""The loss of one LSNIF object (Sec. 5.3); the shared pipeline trains each object with it (Adam on the
+grid and the MLP together, the paper's joint optimisation).
 
 Occlusion is a binary cross-entropy on every ray; distance (MAE after a sigmoid), normal (cosine),
 albedo (relative L2 after a sigmoid) and material (cross-entropy) count only where the reference ray
@@ -6,8 +7,6 @@ hits, so the network spends nothing on what a miss would have hit.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import torch
 from torch import Tensor
@@ -20,10 +19,7 @@ from workers.nn.losses import (
     mae,
     relative_l2,
 )
-from workers.runtime.checkpoints import CheckpointStore
-from workers.runtime.samplers import BatchStream
 from workers.runtime.sources import Batch
-from workers.runtime.training import Progress, TrainConfig, TrainResult, train
 
 
 def lsnif_loss(model: LsnifObject, batch: Batch) -> Tensor:
@@ -37,17 +33,3 @@ def lsnif_loss(model: LsnifObject, batch: Batch) -> Tensor:
         loss = loss + relative_l2(torch.sigmoid(raw[:, 5:8]), batch["albedo"][hit])
         loss = loss + categorical_cross_entropy(raw[:, OUTPUTS_BEFORE_MATERIALS:], batch["material"][hit])
     return loss
-
-
-def train_object(
-    model: LsnifObject,
-    batches: BatchStream,
-    config: TrainConfig,
-    checkpoints: CheckpointStore | None = None,
-    on_progress: Callable[[Progress], None] | None = None,
-) -> TrainResult:
-    """Adam on the grid and the MLP together (the paper's joint optimisation), resuming from checkpoints;
-    the trained weights are then rounded to the artifact's float16 (`LsnifObject.round_to_storage`)."""
-    result = train(model, lsnif_loss, batches, config, checkpoints, on_progress)
-    model.round_to_storage()
-    return result

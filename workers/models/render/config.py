@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from workers.render.render import RenderSettings
+from workers.runtime.kind_config import KindConfig
 
 
-class RenderConfig(BaseModel):
+class RenderConfig(KindConfig):
     """What to render; the seed is not here because it belongs to the job (it is part of its identity)."""
-
-    model_config = ConfigDict(extra="forbid")
 
     spp: int = Field(256, ge=1, le=1 << 20)
     width: int = Field(256, ge=1, le=16384)
@@ -20,7 +19,6 @@ class RenderConfig(BaseModel):
     tile_size: int = Field(64, ge=8, le=1024)
     aovs: bool = Field(True, description="also write the G-buffers (position, normal, albedo, ...)")
     samplers: int = Field(2, ge=0, le=1024, description="Ray sampler actors; 0 renders inside the driver")
-    num_gpus: float = Field(0, ge=0)
     # Checkpoint after a pass once this many seconds have passed since the last one; 0: after every pass.
     checkpoint_interval_s: float = Field(10.0, ge=0)
 

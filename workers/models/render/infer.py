@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
-from workers.render.image_io import read_exr_channels
+from workers.scene.image_io import read_exr_channels
 
 MAIN_LAYER = "image"
 

@@ -12,8 +12,8 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-from workers.render.image_io import write_exr, write_png
 from workers.render.render import RenderResult
+from workers.scene.image_io import write_exr, write_png
 
 EXR = "image/x-exr"
 PNG = "image/png"

@@ -2,19 +2,19 @@
 
 from __future__ import annotations
 
-from workers.models.registry import Plan, PlanItem
 from workers.models.render.config import RenderConfig
 from workers.render.camera import PinholeCamera
 from workers.render.render import MAX_PATHS_PER_ITEM, plan_render
-from workers.scene.spec import SceneSpec
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.reference import SceneRef
 
 RAYS_PER_SECOND_PER_CORE = 2.5e6  # Embree closest hits plus NumPy shading, measured on the build machines
 RAYS_PER_SAMPLE = 8  # camera ray, bounces and shadow rays of an average path at max_depth 8
 
 
-def plan(scene: SceneSpec, config: RenderConfig) -> Plan:
+def plan(scene: SceneRef, config: RenderConfig) -> Plan:
     settings = config.settings(seed=0)
-    render_plan = plan_render(PinholeCamera(scene.camera, settings.width, settings.height), settings)
+    render_plan = plan_render(PinholeCamera(scene.spec.camera, settings.width, settings.height), settings)
     cores = max(config.samplers, 1)
     rays_per_sample = RAYS_PER_SAMPLE + (1 if config.aovs else 0)
     rays = config.width * config.height * config.spp * rays_per_sample

@@ -8,23 +8,22 @@ from __future__ import annotations
 
 import time
 
-from workers.models.registry import InfrastructureFailure, JobContext, RunOutput, SamplerSlots
 from workers.models.render import checkpoint
 from workers.models.render.config import RenderConfig
 from workers.models.render.outputs import write_outputs
 from workers.models.render.source import TileSource, TileSourceConfig, from_batch
 from workers.render.camera import PinholeCamera
-from workers.render.render import ImageAccumulator, RenderPlan, RenderSettings, TileResult, plan_render
+from workers.render.render import ImageAccumulator, RenderPlan, RenderSettings, plan_render
+from workers.runtime.contract import JobContext, RunOutput, SamplerSlots
 from workers.runtime.samplers import BatchStream, open_batches
 from workers.runtime.sources import SourceSpec
-from workers.scene.compile import compile_scene
 
 
 def run(ctx: JobContext) -> RunOutput:
     config: RenderConfig = ctx.config
     settings = config.settings(ctx.seed)
-    compile_scene(ctx.scene, ctx.scene_dir)  # scene errors surface here, in one clear line, not in actors
-    plan = plan_render(PinholeCamera(ctx.scene.camera, settings.width, settings.height), settings)
+    ctx.scene.compiled()  # scene errors surface here, in one clear line, not in actors
+    plan = plan_render(PinholeCamera(ctx.scene.spec.camera, settings.width, settings.height), settings)
     accum = ImageAccumulator(plan, settings.aovs)
     state = checkpoint.restore(ctx.checkpoints, settings, accum)
     if state is not None:
@@ -74,7 +73,7 @@ def _render_passes(
     for pass_index in range(state.passes_done, len(plan.passes)):
         for tile in plan.tiles:
             ctx.raise_if_cancelled()
-            accum.add(tile, _next_item(stream))
+            accum.add(tile, from_batch(next(stream)))
         now = time.perf_counter()
         state = state.model_copy(
             update={
@@ -96,18 +95,6 @@ def _render_passes(
 
 def _open_stream(ctx: JobContext, settings: RenderSettings, slots: SamplerSlots, start: int) -> BatchStream:
     """Items from `start` on, rendered by the reserved sampler actors, or in the driver without any."""
-    scene_dir = None if ctx.scene_dir is None else str(ctx.scene_dir)
-    source = TileSourceConfig(scene=ctx.scene.model_dump(mode="json"), scene_dir=scene_dir, settings=settings)
+    source = TileSourceConfig(scene=ctx.scene, settings=settings)
     spec = SourceSpec(TileSource, source, ctx.seed)
     return open_batches(spec, slots.count, placement=slots.actor_options, start=start)
-
-
-def _next_item(stream: BatchStream) -> TileResult:
-    """The next item in plan order; samplers that keep dying are the cluster's failure, not the job's."""
-    replacements = getattr(stream, "replacements", 0)
-    try:
-        return from_batch(next(stream))
-    except RuntimeError as error:
-        if getattr(stream, "replacements", 0) > replacements:
-            raise InfrastructureFailure(str(error)) from error
-        raise

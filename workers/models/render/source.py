@@ -6,24 +6,24 @@ exactly what a dead one owed, and the driver adds batches in index order, as the
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
-from pydantic import BaseModel
 
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, TileResult, plan_render, render_item
 from workers.runtime.sources import Batch
-from workers.scene.compile import compile_scene
-from workers.scene.spec import SceneSpec
+from workers.scene.reference import SceneRef
 
 RADIANCE = "radiance"
 RAYS = "rays_traced"
 AOV_PREFIX = "aov."
 
 
-class TileSourceConfig(BaseModel):
-    scene: dict  # SceneSpec.model_dump(mode="json")
-    scene_dir: str | None
+@dataclass(frozen=True)
+class TileSourceConfig:
+    scene: SceneRef
     settings: RenderSettings
 
 
@@ -32,9 +32,8 @@ class TileSource:
 
     def __init__(self, config: TileSourceConfig, seed: int) -> None:
         self.settings = config.settings.model_copy(update={"seed": seed})
-        spec = SceneSpec.model_validate(config.scene)
-        self.tracer = PathTracer(compile_scene(spec, config.scene_dir))
-        self.camera = PinholeCamera(spec.camera, self.settings.width, self.settings.height)
+        self.tracer = PathTracer(config.scene.compiled())
+        self.camera = PinholeCamera(config.scene.spec.camera, self.settings.width, self.settings.height)
         self.plan = plan_render(self.camera, self.settings)
         self.items = self.plan.items
 

@@ -1,0 +1,39 @@
+"""What every kind's config has, under the same names: how many sampler actors, GPUs, and, for a kind that
+trains, the training loop and the report's sample counts. A kind's config subclasses one of these and adds
+its method's knobs; `extra="forbid"` makes a misspelt field an error naming it.
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from workers.runtime.training import TrainConfig
+
+
+class KindConfig(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    samplers: int = Field(1, ge=0, le=1024, description="Ray sampler actors; 0 makes batches in the driver")
+    num_gpus: float = Field(0, ge=0, description="GPUs for the driver (used when the cluster has them)")
+
+
+class TrainedKindConfig(KindConfig):
+    """A kind that trains a model and reports it against path tracing of one view."""
+
+    train: TrainConfig = TrainConfig()
+    evaluation_spp: int = Field(16, ge=1, le=65536, description="spp of the model's frame in the report")
+    reference_spp: int = Field(
+        1024,
+        ge=2,
+        le=1 << 20,
+        description="spp of the converged path-traced image the report measures against",
+    )
+
+    @model_validator(mode="after")
+    def _reference_converges_further(self) -> TrainedKindConfig:
+        if self.reference_spp <= self.evaluation_spp:
+            raise ValueError(
+                f"reference_spp ({self.reference_spp}) must exceed evaluation_spp ({self.evaluation_spp}): "
+                "the report measures the model's frame against it"
+            )
+        return self

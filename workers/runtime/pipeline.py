@@ -1,0 +1,163 @@
+"""One pipeline for every kind that trains: the kind writes its method, the pipeline does the rest.
+
+As in nerfstudio's split of model, data manager and pipeline, a kind's `Method` supplies its parts: what to
+train (`Trainable`: a model, its sample source, its loss and loop settings), how to export the trained
+models and what its model renders of the report's view (`Finished`). The pipeline reserves the job's
+sampler actors and opens their pool (dead samplers become a retryable `InfrastructureFailure` in
+`workers.runtime.samplers`), trains each model with exact resume from its own checkpoint sub-store,
+reports progress across all of them and stops on cancel, rounds weights to their stored precision,
+measures the model's frame against path tracing of the same view (`workers.runtime.report`), writes the
+report and `preview.png`, and returns the `RunOutput`, with a warning when the model is worse than 1-spp
+path tracing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from workers.runtime.contract import JobContext, RunOutput
+from workers.runtime.kind_config import TrainedKindConfig
+from workers.runtime.report import TimedImage, build_report, parameter_bytes
+from workers.runtime.samplers import open_batches
+from workers.runtime.sources import SourceSpec
+from workers.runtime.training import Phase, Progress, TrainConfig, TrainResult, train_phases
+from workers.runtime.view import PathTracedView
+from workers.scene.image_io import write_png
+
+PREVIEW = "preview.png"  # the reference, any images the kind adds, and the model's frame, side by side
+
+
+@dataclass
+class Trainable:
+    """One model to train: its step's phases (one loss and optimizer, or several such as a GAN's
+    discriminator and generator, `workers.runtime.training.Phase`) on batches of `source`. `name` names
+    its checkpoint sub-store (empty: the job's store itself)."""
+
+    model: torch.nn.Module
+    phases: list[Phase]
+    source: SourceSpec
+    train: TrainConfig
+    name: str = ""
+    stored_dtype: torch.dtype | None = torch.float16  # the artifact's precision, measured as shipped
+
+
+@dataclass
+class Trained:
+    trainable: Trainable
+    result: TrainResult
+
+    @property
+    def model(self) -> torch.nn.Module:
+        return self.trainable.model
+
+
+@dataclass
+class Finished:
+    """What a method leaves after export: files, its model's frame of `view`, and its own figures.
+
+    `frame` is rendered at the view's settings, whose spp is the config's `evaluation_spp`."""
+
+    files: dict[str, tuple[str, str]]
+    view: PathTracedView
+    frame: TimedImage
+    method_metrics: dict[str, float] = field(default_factory=dict)
+    metrics: dict[str, float] = field(default_factory=dict)  # the job's headline figures beside the report's
+    preview: Sequence[np.ndarray] = ()  # images shown between the reference and the model's frame
+
+
+class Method(Protocol):
+    """What a training kind writes."""
+
+    kind: str  # the kind's registered name, as the report names it
+
+    def trainables(self, ctx: JobContext) -> list[Trainable]:
+        """The models to train, in order (built before any trains: their sources fix the batches)."""
+        ...
+
+    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
+        """Export the trained models into `ctx.output_dir` and render the report's frame."""
+        ...
+
+
+def run_method(method: Method, ctx: JobContext) -> RunOutput:
+    """Train, export and measure a kind's method as one job (the module docstring lists the steps)."""
+    config: TrainedKindConfig = ctx.config
+    trainables = method.trainables(ctx)
+    trained = _train_all(ctx, trainables, config.samplers)
+    ctx.raise_if_cancelled()
+    finished = method.finish(ctx, trained)
+    ctx.raise_if_cancelled()
+    ctx.log(
+        f"measuring against path tracing at {finished.view.settings.width}x{finished.view.settings.height}"
+    )
+    report = build_report(
+        method.kind,
+        TrainResult.combined([t.result for t in trained]),
+        sum(parameter_bytes(t.model, t.trainable.stored_dtype) for t in trained),
+        finished.frame,
+        finished.view.curve(),
+        finished.view.reference(),
+        method_metrics=finished.method_metrics,
+    )
+    files = dict(finished.files)
+    files.update(report.write(str(ctx.output_dir)))
+    preview = ctx.output_dir / PREVIEW
+    write_png(
+        preview, np.concatenate([finished.view.reference(), *finished.preview, finished.frame.image], 1)
+    )
+    files[PREVIEW] = (str(preview), "image/png")
+    for warning in report.warnings():
+        ctx.log(f"warning: {warning}")
+    metrics = {
+        "flip": report.model.error.flip,
+        "flip_path_tracing_equal_time": report.path_tracing_equal_time.error.flip,
+        "parameter_bytes": float(report.parameter_bytes),
+        "worse_than_one_spp": float(report.worse_than_one_spp),
+        **finished.metrics,
+    }
+    return RunOutput(files=files, metrics=metrics, warnings=report.warnings())
+
+
+def _train_all(ctx: JobContext, trainables: list[Trainable], samplers: int) -> list[Trained]:
+    """Each trainable in turn on the job's sampler actors (or in process without any), resuming from its
+    checkpoints; progress counts steps across all of them."""
+    total = sum(t.train.steps for t in trainables)
+    trained: list[Trained] = []
+    if not trainables:
+        return trained
+    with ctx.reserve_samplers(samplers) as slots:
+        ctx.log(f"training {len(trainables)} model(s) on {slots.count or 'no'} sampler actor(s)")
+        done = 0
+        for trainable in trainables:
+            ctx.raise_if_cancelled()
+            store = ctx.checkpoints.sub(trainable.name) if trainable.name else ctx.checkpoints
+
+            def progress(p: Progress, done: int = done) -> None:
+                ctx.raise_if_cancelled()
+                ctx.progress(done + p.step, total, loss=p.loss, samples_per_s=p.samples_per_s, eta_s=p.eta_s)
+
+            with open_batches(trainable.source, slots.count, placement=slots.actor_options) as batches:
+                result = train_phases(
+                    trainable.model, trainable.phases, batches, trainable.train, store, progress
+                )
+            if trainable.stored_dtype is not None:
+                round_to_storage(trainable.model, trainable.stored_dtype)
+            trained.append(Trained(trainable, result))
+            done += trainable.train.steps
+    for t in trained:
+        t.model.eval()
+    return trained
+
+
+def round_to_storage(model: torch.nn.Module, dtype: torch.dtype) -> torch.nn.Module:
+    """Round the trained parameters to `dtype` and back, so what is measured is what the artifact holds
+    (buffers such as row maps or frequencies are rebuilt on load, not stored at that precision)."""
+    with torch.no_grad():
+        for parameter in model.parameters():
+            parameter.copy_(parameter.to(dtype))
+    return model

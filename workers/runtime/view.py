@@ -1,0 +1,62 @@
+"""The view a report measures a model on, and plain path tracing of it: the curve, the converged reference.
+
+Renders are kept by their settings, so a kind that needs a path-traced frame of the view for its own
+figures (the reference at its resolution, Embree at the model's spp and seed) gets the one the report
+uses instead of tracing it twice.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.runtime.report import PATH_TRACING_SPP, TimedImage
+from workers.scene.compile import CompiledScene
+
+REFERENCE_SEED_OFFSET = 2  # the reference's noise is independent of every frame rendered at the view's seed
+
+
+@dataclass
+class PathTracedView:
+    """Path tracing of one view (`settings` without its spp) of the full scene, rendered on demand once."""
+
+    scene: CompiledScene
+    settings: RenderSettings
+    reference_spp: int
+    tracer: PathTracer | None = field(default=None, repr=False)  # built on first use when not given
+    _frames: dict[int, TimedImage] = field(default_factory=dict, repr=False)
+    _reference: np.ndarray | None = field(default=None, repr=False)
+
+    def _path_tracer(self) -> PathTracer:
+        if self.tracer is None:
+            self.tracer = PathTracer(self.scene)
+        return self.tracer
+
+    def at(self, spp: int) -> RenderSettings:
+        """The view's settings at `spp`."""
+        return self.settings.model_copy(update={"spp": spp})
+
+    def frame(self, spp: int) -> TimedImage:
+        """The view path-traced at `spp` with the view's seed, timed."""
+        if spp not in self._frames:
+            result = render(self._path_tracer(), self.at(spp))
+            self._frames[spp] = TimedImage(f"{spp} spp", result.image, result.seconds)
+        return self._frames[spp]
+
+    def curve(self) -> list[TimedImage]:
+        """The report's speed-against-error curve: `PATH_TRACING_SPP` below the reference's spp."""
+        return [self.frame(spp) for spp in PATH_TRACING_SPP if spp < self.reference_spp]
+
+    def reference(self) -> np.ndarray:
+        """The converged image every frame is measured against (its own seed)."""
+        if self._reference is None:
+            settings = self.at(self.reference_spp).model_copy(
+                # the image is the same on any number of threads; its time is not measured
+                update={"seed": self.settings.seed + REFERENCE_SEED_OFFSET, "threads": os.cpu_count() or 1}
+            )
+            self._reference = render(self._path_tracer(), settings).image
+        return self._reference
