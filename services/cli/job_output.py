@@ -25,11 +25,14 @@ class Output:
         """One JSON line: `{"event": ..., ...}` (JSON mode only)."""
         print(json.dumps({"event": event, **fields}, default=str), flush=True)
 
-    def job(self, job: Job, event: str = "job") -> None:
+    def job(self, job: Job, event: str = "job", warning: str | None = None) -> None:
+        """The job; `warning` is what its artifact was flagged with (a model worse than path tracing)."""
         if self.json:
-            self.line(event, job=job.model_dump(mode="json"))
+            self.line(event, job=job.model_dump(mode="json"), **({"warning": warning} if warning else {}))
             return
         print(summary(job))
+        if warning:
+            self.console.print(f"[bold yellow]warning:[/bold yellow] {warning}")
 
     @contextmanager
     def following(self, job: Job) -> Iterator[Callable[[JobEvent], None]]:
@@ -58,7 +61,9 @@ class Output:
                 elif event.state is not None:
                     bar.update(task, description=f"{event.job_id} {event.state}")
                 elif event.type == "log":
-                    bar.console.print(f"[dim]{event.data.get('message', '')}[/dim]")
+                    message = event.data.get("message", "")
+                    style = "bold yellow" if message.startswith("warning:") else "dim"
+                    bar.console.print(f"[{style}]{message}[/{style}]", highlight=False)
 
             yield update
 

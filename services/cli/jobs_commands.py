@@ -59,7 +59,8 @@ def follow(client: Client, job: Job, out: Output) -> None:
     """Print the job's events until its final state, then the job; exit with the state's status."""
     with out.following(job) as on_event:
         final = client.wait(job, on_event=on_event)
-    out.job(final, event="result")
+    warning = client.manifest(final.artifact_id).annotations.get("warning") if final.artifact_id else None
+    out.job(final, event="result", warning=warning)
     raise typer.Exit(EXIT_BY_STATE[final.state])
 
 

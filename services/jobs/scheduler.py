@@ -29,6 +29,10 @@ from services.jobs.tables import Job
 from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
 
+WARNING_ANNOTATION = (
+    "warning"  # on an artifact whose model the job flagged (e.g. worse than 1-spp path tracing)
+)
+
 log = logging.getLogger(__name__)
 
 
@@ -230,6 +234,7 @@ class Scheduler:
             config=job.config,
             code_version=job.code_version,
             metrics=outcome.metrics,
+            annotations={WARNING_ANNOTATION: " ".join(outcome.warnings)} if outcome.warnings else None,
         )
         self._end(job, JobState.SUCCEEDED, "succeeded", artifact_id=manifest.artifact_id)
 
