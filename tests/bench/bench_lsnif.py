@@ -26,10 +26,12 @@ from workers.models.lsnif.evaluate import (
 from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
 from workers.models.lsnif.train import lsnif_loss
+from workers.render.render import RenderSettings
 from workers.runtime.pipeline import round_to_storage
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
+from workers.runtime.view import PathTracedView
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 from workers.scene.reference import SceneRef
@@ -83,7 +85,12 @@ def run() -> list[BenchSection]:
         bundle = LsnifArtifact(
             preset, {geometry.name: model}, {geometry.name: source.prepared.material_names}, {}
         )
-        image = compare_images(compiled, bundle.intersector(compiled), IMAGE_SIZE, IMAGE_SPP)
+        view = PathTracedView(
+            compiled,
+            RenderSettings(spp=IMAGE_SPP, width=IMAGE_SIZE, height=IMAGE_SIZE, threads=1),
+            4 * IMAGE_SPP,
+        )
+        image = compare_images(view, bundle.intersector(compiled))
         bvh = bvh_bytes_estimate(geometry.mesh.num_triangles)
         bvh_table1 = bvh_bytes_paper_table1(geometry.mesh.num_triangles)
         assets.add(
