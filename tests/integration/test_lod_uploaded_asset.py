@@ -35,9 +35,12 @@ def scene_yaml() -> bytes:
 
 @pytest.fixture(scope="module")
 def client(ray_cluster, tmp_path_factory):
-    with ServerThread(
-        settings_for(tmp_path_factory.mktemp("lod-asset"), DatabaseChoice("sqlite", None))
-    ) as server, server.client("submit") as http:
+    with (
+        ServerThread(
+            settings_for(tmp_path_factory.mktemp("lod-asset"), DatabaseChoice("sqlite", None))
+        ) as server,
+        server.client("submit") as http,
+    ):
         yield http
 
 

@@ -165,8 +165,12 @@ class Kind:
         if (self.method is None) == (self.run_function is None):
             raise ValueError(f"kind {self.name!r} names either a method or a run function")
         if set(self.presets) != set(PRESET_NAMES):
-            raise ValueError(f"kind {self.name!r} has presets {sorted(self.presets)}, not {list(PRESET_NAMES)}")
-        for preset in PRESET_NAMES:  # a preset that does not validate fails at registration, not at submission
+            raise ValueError(
+                f"kind {self.name!r} has presets {sorted(self.presets)}, not {list(PRESET_NAMES)}"
+            )
+        for (
+            preset
+        ) in PRESET_NAMES:  # a preset that does not validate fails at registration, not at submission
             self.resolve_config(preset, {})
 
     def resolve_config(self, preset: str, overrides: dict) -> BaseModel:
