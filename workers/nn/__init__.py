@@ -1,5 +1,16 @@
-"""Neural toolkit shared by every model kind: encodings, MLPs, losses, cube-map wavelets, metrics."""
+"""Neural toolkit shared by every model kind: encodings, MLPs and their configs, losses, cube-map wavelets,
+metrics."""
 
+from workers.nn.configs import (
+    EncodingConfig,
+    FrequencyConfig,
+    HashGridConfig,
+    HashTableConfig,
+    MLPConfig,
+    OneBlobConfig,
+    SharedInputsConfig,
+    SphericalHarmonicsConfig,
+)
 from workers.nn.cubemap import (
     cubemap_directions,
     cubemap_solid_angles,
@@ -48,16 +59,24 @@ from workers.nn.tonemap import mu_law, reinhard, srgb_encode
 
 __all__ = [
     "MLP",
+    "EncodingConfig",
     "FourierFeatures",
+    "FrequencyConfig",
     "GridGeometry",
     "HashGrid",
+    "HashGridConfig",
+    "HashTableConfig",
     "IntegratedPositionalEncoding",
+    "MLPConfig",
     "OneBlob",
+    "OneBlobConfig",
+    "SharedInputsConfig",
     "SharedInputsEncoding",
     "SkipGenerator",
     "SparseHashGrid",
     "SparseWavelets",
     "SphericalHarmonics",
+    "SphericalHarmonicsConfig",
     "binary_cross_entropy",
     "categorical_cross_entropy",
     "cosine_similarity_loss",
