@@ -121,14 +121,21 @@ def resolve_preset(
     """
     if preset not in presets:
         raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(presets)}")
-    return config_model.model_validate(_merge(presets[preset], overrides or {}))
+    return config_model.model_validate(merge_nested(presets[preset], overrides or {}))
 
 
-def _merge(base: dict, overrides: dict) -> dict:
+def merge_nested(base: dict, overrides: dict) -> dict:
+    """`base` with `overrides` merged in, nested dicts key by key; a dict naming another `type` (another
+    member of a discriminated union) replaces the one it overrides."""
     merged = dict(base)
     for key, value in overrides.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _merge(merged[key], value)
+        old = merged.get(key)
+        if (
+            isinstance(value, dict)
+            and isinstance(old, dict)
+            and value.get("type", old.get("type")) == old.get("type")
+        ):
+            merged[key] = merge_nested(old, value)
         else:
             merged[key] = value
     return merged

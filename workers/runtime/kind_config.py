@@ -1,12 +1,19 @@
 """What every kind's config has, under the same names: how many sampler actors, GPUs, and, for a kind that
 trains, the training loop and the report's sample counts. A kind's config subclasses one of these and adds
 its method's knobs; `extra="forbid"` makes a misspelt field an error naming it.
+
+A nested part given as a dict (in a preset, an override or the constructor) changes only the keys it
+names in the kind's default for that field: `{"grid": {"log2_table_size": 14}}` keeps the kind's grid
+levels and resolutions, and `{"train": {"steps": 30}}` its learning rate.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from workers.runtime.contract import merge_nested
 from workers.runtime.training import TrainConfig
 
 
@@ -15,6 +22,18 @@ class KindConfig(BaseModel):
 
     samplers: int = Field(1, ge=0, le=1024, description="Ray sampler actors; 0 makes batches in the driver")
     num_gpus: float = Field(0, ge=0, description="GPUs for the driver (used when the cluster has them)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _parts_update_the_kinds_defaults(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        given_parts = {
+            name: field.default.model_dump()
+            for name, field in cls.model_fields.items()
+            if name in data and isinstance(field.default, BaseModel)
+        }
+        return merge_nested(given_parts, data)
 
 
 class TrainedKindConfig(KindConfig):
