@@ -15,8 +15,9 @@ from __future__ import annotations
 import torch
 
 from tests.bench.common import BenchSection
+from workers.models.lsnif import KIND
 from workers.models.lsnif.artifact import LsnifArtifact
-from workers.models.lsnif.config import PRESETS, LsnifConfig
+from workers.models.lsnif.config import LsnifConfig
 from workers.models.lsnif.evaluate import (
     bvh_bytes_estimate,
     bvh_bytes_paper_table1,
@@ -42,18 +43,17 @@ IMAGE_SPP = 64
 HELD_OUT_RAYS = 1 << 15
 ASSETS = (("high_poly", "displaced_sphere"), ("dense_foliage", "leaves"), ("fur_patch", None))
 CURVE = (
-    ("paper low (H 10, width 64)", {"max_points": 10, "width": 64}),
+    ("paper low (H 10, width 64)", {"max_points": 10, "mlp": {"width": 64}}),
     ("paper high (H 18, width 128)", {}),
-    ("high, table 2^14", {"log2_table_size": 14}),
-    ("H 6, width 32", {"max_points": 6, "width": 32}),
+    ("high, table 2^14", {"grid": {"log2_table_size": 14}}),
+    ("H 6, width 32", {"max_points": 6, "mlp": {"width": 32}}),
 )
 
 
-def config(steps: int | None = None, **overrides) -> LsnifConfig:
+def config(steps: int | None = None, overrides: dict | None = None) -> LsnifConfig:
     """The `default` preset, with `steps` training steps (default: the preset's) and size overrides."""
-    base = LsnifConfig.model_validate(PRESETS["default"])
-    train = base.train.model_copy(update={"steps": steps or base.train.steps})
-    return base.model_copy(update={"train": train, **overrides})
+    train = {"train": {"steps": steps}} if steps else {}
+    return KIND.resolve_config("default", {**train, **(overrides or {})})
 
 
 def trained(scene, index: int, cfg: LsnifConfig) -> tuple[LsnifObject, ObjectRaySource, float]:
@@ -127,7 +127,7 @@ def run() -> list[BenchSection]:
     scene = get_builtin("high_poly")
     compiled = compile_scene(scene)
     for label, overrides in CURVE:
-        model, source, _ = trained(scene, 0, config(CURVE_STEPS, **overrides))
+        model, source, _ = trained(scene, 0, config(CURVE_STEPS, overrides))
         scores = held_out(model, source.prepared, HELD_OUT_RAYS)
         curve.add(
             setting=label,

@@ -19,6 +19,7 @@ from workers.models.lsnif.sampling import (
     training_rays,
 )
 from workers.models.lsnif.train import lsnif_loss
+from workers.nn.configs import HashGridConfig
 from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
 from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
@@ -70,11 +71,19 @@ def test_the_report_reference_must_converge_further_than_the_preview():
         LsnifConfig(evaluation_spp=16, reference_spp=16)
 
 
+def test_presets_change_the_sizes_not_the_networks_shape():
+    quick, default = (LsnifConfig.model_validate(PRESETS[name]) for name in ("quick", "default"))
+    assert (quick.grid.levels, quick.grid.features_per_level, quick.mlp.activation) == (2, 3, "leaky_relu")
+    assert (quick.grid.base_resolution, quick.grid.log2_table_size, quick.mlp.width) == (32, 14, 64)
+    assert (default.grid.base_resolution, default.grid.log2_table_size, default.mlp.width) == (64, 17, 128)
+
+
 def test_encoder_stores_only_vertices_near_occupied_voxels_and_folds_to_the_table_size(compiled):
     prepared = prepare_object(compiled, len(compiled.objects) - 1, 16)
     occupied = prepared.grid.occupied
-    big = VoxelGridEncoding(occupied, 1 << 20, 2, 3, 32, 2.0)
-    folded = VoxelGridEncoding(occupied, 256, 2, 3, 32, 2.0)
+    lattice = {"levels": 2, "features_per_level": 3, "base_resolution": 32, "per_level_scale": 2.0}
+    big = VoxelGridEncoding(occupied, HashGridConfig(**lattice, log2_table_size=20))
+    folded = VoxelGridEncoding(occupied, HashGridConfig(**lattice, log2_table_size=8))
     stored = [size for _, size in big.level_blocks]
     assert stored[0] < 33**3 and stored[1] < 65**3  # sparse: far fewer than the dense lattice
     assert [size for _, size in folded.level_blocks] == [256, 256]

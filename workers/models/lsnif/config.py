@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pydantic import Field
 
+from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
@@ -20,13 +21,12 @@ class LsnifConfig(TrainedKindConfig):
 
     voxel_resolution: int = Field(32, ge=1, le=256, description="V: voxels per side of an object's box")
     max_points: int = Field(18, ge=1, le=256, description="H: boundary points per ray fed to the MLP")
-    grid_levels: int = Field(2, ge=1, le=8)
-    grid_base_resolution: int = Field(64, ge=2)
-    grid_per_level_scale: float = Field(2.0, ge=1.0)
-    grid_features: int = Field(3, ge=1, le=16)
-    log2_table_size: int = Field(17, ge=8, le=24, description="M: feature rows per level (folded beyond)")
-    width: int = Field(128, ge=8, le=1024)
-    depth: int = Field(2, ge=1, le=8)
+    # The sparse grid's lattice and table (M = 2^log2_table_size rows per level, folded beyond; see
+    # `encoding`) and the MLP that reads the H points' concatenated features.
+    grid: HashGridConfig = HashGridConfig(
+        levels=2, features_per_level=3, log2_table_size=17, base_resolution=64, per_level_scale=2.0
+    )
+    mlp: MLPConfig = MLPConfig(width=128, depth=2, activation="leaky_relu")
     batch_size: int = Field(
         1 << 13, ge=64, description="rays drawn per step; those meeting no voxel are dropped"
     )
@@ -46,9 +46,8 @@ PRESETS: dict[str, dict] = {
     "quick": {
         "voxel_resolution": 16,
         "max_points": 12,
-        "grid_base_resolution": 32,
-        "log2_table_size": 14,
-        "width": 64,
+        "grid": {"base_resolution": 32, "log2_table_size": 14},
+        "mlp": {"width": 64},
         "batch_size": 2048,
         "train": {"steps": 60, "schedule": {"lr": 0.01}, "checkpoint_every": 30, "progress_every": 10},
         "evaluation_rays": 4096,

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from workers.nn.configs import HashGridConfig
 from workers.nn.encodings.grid import GridGeometry, outer_combine, vertex_pairs
 from workers.nn.encodings.hashgrid import INIT_RANGE
 from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
@@ -49,28 +50,25 @@ def occupied_vertices(occupied: np.ndarray, geometry: GridGeometry) -> list[Tens
 
 
 class VoxelGridEncoding(SparseHashGrid):
-    """`SparseHashGrid` over the vertices of occupied voxels, with at most `table_size` rows per level."""
+    """`SparseHashGrid` over the vertices of occupied voxels, on the lattice of `grid`, with at most the
+    table size 2^log2_table_size rows per level."""
 
-    def __init__(
-        self,
-        occupied: np.ndarray,
-        table_size: int,
-        n_levels: int = 2,
-        n_features_per_level: int = 3,
-        base_resolution: int = 64,
-        per_level_scale: float = 2.0,
-    ) -> None:
-        geometry = GridGeometry(3, n_levels, base_resolution, per_level_scale)
+    def __init__(self, occupied: np.ndarray, grid: HashGridConfig) -> None:
+        geometry = grid.geometry(3)
         super().__init__(
-            occupied_vertices(occupied, geometry), 3, n_features_per_level, base_resolution, per_level_scale
+            occupied_vertices(occupied, geometry),
+            3,
+            grid.features_per_level,
+            grid.base_resolution,
+            grid.per_level_scale,
         )
-        sizes = [min(size, table_size) for _, size in self.level_blocks]
+        self.table_size = 1 << grid.log2_table_size
+        sizes = [min(size, self.table_size) for _, size in self.level_blocks]
         self.level_blocks = [(sum(sizes[:level]), size) for level, size in enumerate(sizes)]
         self.table = nn.Parameter(
-            torch.empty(sum(sizes), n_features_per_level).uniform_(-INIT_RANGE, INIT_RANGE)
+            torch.empty(sum(sizes), grid.features_per_level).uniform_(-INIT_RANGE, INIT_RANGE)
         )
-        self.table_size = table_size
-        for level in range(n_levels):
+        for level in range(grid.levels):
             keys = self.level_keys(level)
             row_map = torch.full((self.geometry.vertices_per_side(level) ** 3,), -1, dtype=torch.int32)
             row_map[keys] = torch.remainder(torch.arange(keys.numel()), sizes[level]).to(torch.int32)

@@ -16,7 +16,6 @@ from torch import Tensor, nn
 
 from workers.models.lsnif.config import LsnifConfig
 from workers.models.lsnif.encoding import VoxelGridEncoding
-from workers.nn.mlp import MLP
 from workers.render.voxels import BoundaryPoints, VoxelGrid, boundary_points
 
 OUTPUTS_BEFORE_MATERIALS = 8
@@ -64,21 +63,9 @@ class LsnifObject(nn.Module):
         self.grid = grid
         self.max_points = config.max_points
         self.n_materials = n_materials
-        self.encoding = VoxelGridEncoding(
-            grid.occupied,
-            1 << config.log2_table_size,
-            config.grid_levels,
-            config.grid_features,
-            config.grid_base_resolution,
-            config.grid_per_level_scale,
-        )
-        self.mlp = MLP(
-            config.max_points * self.encoding.n_output_dims,
-            OUTPUTS_BEFORE_MATERIALS + n_materials,
-            width=config.width,
-            depth=config.depth,
-            activation="leaky_relu",
-            kaiming=True,
+        self.encoding = VoxelGridEncoding(grid.occupied, config.grid)
+        self.mlp = config.mlp.build(
+            config.max_points * self.encoding.n_output_dims, OUTPUTS_BEFORE_MATERIALS + n_materials
         )
 
     def forward(self, points: Tensor, valid: Tensor) -> Tensor:

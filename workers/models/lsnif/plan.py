@@ -58,9 +58,8 @@ def plan(scene: SceneRef, config: LsnifConfig) -> Plan:
         PlanItem(
             name="training",
             choice=f"{config.train.steps} steps of {config.batch_size} rays per network",
-            reason=f"V={config.voxel_resolution}, H={config.max_points}, grid {config.grid_levels} levels "
-            f"from {config.grid_base_resolution}, table 2^{config.log2_table_size}, "
-            f"MLP {config.depth}x{config.width}",
+            reason=f"V={config.voxel_resolution}, H={config.max_points}, sparse {config.grid.describe()}, "
+            f"{config.mlp.describe()}",
         )
     )
     instances = sum(c.instances for c in trained)
