@@ -9,6 +9,8 @@ when all are built, as in the paper), scale 2.
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor, nn
 
@@ -18,7 +20,12 @@ from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.spherical_harmonics import SphericalHarmonics
 from workers.nn.mlp import MLP
 
-MAX_LOG_THROUGHPUT = 20.0  # exp() of the log output is capped far above any physical throughput
+# Energy conservation bounds the integral of phi over w_i by the voxel's albedo (<= 1), so its mean over
+# uniform w_i, the training distribution, is at most 1/(4 pi); a mid-grey asset's is about 0.5/(4 pi).
+PRIOR_THROUGHPUT = 0.5 / (4 * math.pi)
+# exp() of the log output stays above 0 (a relative loss divides by it) and far below anything visible...
+MIN_LOG_THROUGHPUT = math.log(1e-6)
+MAX_LOG_THROUGHPUT = 20.0  # ... and far below infinity, above any physical throughput
 
 
 def _hash_grid(size: NetworkSize, octaves: int, coarsest: int) -> HashGrid:
@@ -33,6 +40,12 @@ def _hash_grid(size: NetworkSize, octaves: int, coarsest: int) -> HashGrid:
 
 
 class AppearanceNetwork(nn.Module):
+    """phi = the MLP's output (linear) or its exp (log). The last bias starts at the prior mean (its log),
+    so the log output starts near the targets, not at exp(0) = 1, 20x above them. The log output is clamped
+    to [MIN_LOG_THROUGHPUT, MAX_LOG_THROUGHPUT] in value only: the gradient passes the clamp (straight
+    through), so an output pushed below the floor is still pulled back up by its non-zero targets
+    (`train.positive_relative_l2` says why that pull never fades)."""
+
     def __init__(self, config: LodConfig, octaves: int, coarsest: int) -> None:
         super().__init__()
         self.log_output = config.appearance_output == "log"
@@ -41,12 +54,19 @@ class AppearanceNetwork(nn.Module):
         size = config.appearance
         n_in = 2 * self.directions.n_output_dims + self.position.n_output_dims
         self.mlp = MLP(n_in, 3, size.width, size.depth, activation="relu")
+        output_layer = self.mlp.layers[-2]  # the last Linear (the output activation is the identity)
+        nn.init.constant_(
+            output_layer.bias, math.log(PRIOR_THROUGHPUT) if self.log_output else PRIOR_THROUGHPUT
+        )
 
     def forward(self, centre: Tensor, wo: Tensor, wi: Tensor) -> Tensor:
         """phi (N, 3) for voxel centres in cube coordinates and unit directions (N, 3)."""
         features = torch.cat([self.position(centre), self.directions(wo), self.directions(wi)], dim=-1)
         raw = self.mlp(features)
-        return torch.exp(raw.clamp(max=MAX_LOG_THROUGHPUT)) if self.log_output else raw
+        if not self.log_output:
+            return raw
+        bounded = raw + (raw.clamp(MIN_LOG_THROUGHPUT, MAX_LOG_THROUGHPUT) - raw).detach()
+        return torch.exp(bounded)
 
 
 class VisibilityNetwork(nn.Module):
