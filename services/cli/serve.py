@@ -23,7 +23,6 @@ from services.api.auth import configured_tokens, generated_admin_token
 from services.api.grpc.server import with_grpc
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
-from services.cli.main import app
 
 RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
 
@@ -37,7 +36,6 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-@app.command("serve")
 def serve_command(
     host: Annotated[
         str, typer.Option(help="Address to listen on; a non-loopback one needs tokens.")

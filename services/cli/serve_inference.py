@@ -38,8 +38,10 @@ def serve_inference_command(
     ] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
 ) -> None:
-    """Serve trained artifacts: GET /v1/models, POST /v1/artifacts/{id}:query and :render (OpenAPI at
-    /docs), and the gRPC InferenceService. Tokens are the job server's (start `nbake serve` once)."""
+    """Serve trained artifacts for queries and renders, over REST and gRPC.
+
+    REST: GET /v1/models, POST /v1/artifacts/{id}:query and :render (OpenAPI at /docs); gRPC: the
+    InferenceService. Tokens are the job server's (start `nbake serve` once)."""
     try:
         settings = InferenceSettings.from_env(
             data_dir,

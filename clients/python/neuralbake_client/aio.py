@@ -8,13 +8,18 @@ from __future__ import annotations
 import asyncio
 import inspect
 import os
-from collections.abc import AsyncIterator, Awaitable, Callable
-from typing import Any
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from neuralbake_client.client import ArtifactRef, Client, JobRef, SceneRef
 from neuralbake_client.download import DownloadedFile
-from neuralbake_client.models import Asset, Job, JobEvent, JobList, Manifest, Progress
+from neuralbake_client.models import Asset, Job, JobEvent, JobList, Manifest, ModelInfo, Progress
 from neuralbake_client.retry import DEFAULT_RETRY, Retry
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from neuralbake_client.answers import QueryAnswer, RenderedImage
 
 _END = object()
 
@@ -23,9 +28,15 @@ class AsyncClient:
     """`async with AsyncClient(url, token) as client: job = await client.submit(...)`."""
 
     def __init__(
-        self, url: str, token: str | None = None, *, timeout: float = 30.0, retry: Retry = DEFAULT_RETRY
+        self,
+        url: str,
+        token: str | None = None,
+        *,
+        inference_url: str | None = None,
+        timeout: float = 30.0,
+        retry: Retry = DEFAULT_RETRY,
     ):
-        self.sync = Client(url, token, timeout=timeout, retry=retry)
+        self.sync = Client(url, token, inference_url=inference_url, timeout=timeout, retry=retry)
 
     async def __aenter__(self) -> AsyncClient:
         return self
@@ -85,3 +96,22 @@ class AsyncClient:
         self, artifact: ArtifactRef, dest: str | os.PathLike, names: list[str] | None = None
     ) -> list[DownloadedFile]:
         return await asyncio.to_thread(self.sync.download, artifact, dest, names)
+
+    async def models(self) -> list[ModelInfo]:
+        return await asyncio.to_thread(self.sync.models)
+
+    async def load(self, artifact: ArtifactRef) -> ModelInfo:
+        return await asyncio.to_thread(self.sync.load, artifact)
+
+    async def query(
+        self,
+        artifact: ArtifactRef,
+        arrays: Mapping[str, ArrayLike] | None = None,
+        params: dict[str, Any] | None = None,
+    ) -> QueryAnswer:
+        return await asyncio.to_thread(self.sync.query, artifact, arrays, params)
+
+    async def render(
+        self, artifact: ArtifactRef, camera: Mapping[str, Any] | None = None, params=None, **options: Any
+    ) -> RenderedImage:
+        return await asyncio.to_thread(self.sync.render, artifact, camera, params, **options)

@@ -4,30 +4,45 @@
 talks gRPC. Both give the same models and exceptions. Calls that a later attempt can fix (server
 unreachable, 503 / UNAVAILABLE) are retried with backoff; submissions carry an idempotency key, so a
 retried submission never queues the same job twice, and event streams resume after the last event seen.
+
+Queries and renders go to the inference service (`nbake serve-inference`, its own port), over the same
+kind of transport; its URL defaults to the job server's host at the inference service's default port.
+Its transports (and NumPy) are imported on first use, so job-only callers never load them.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from neuralbake_client.archive import upload_parts
 from neuralbake_client.download import DownloadedFile, download_file
 from neuralbake_client.errors import RETRYABLE, NeuralbakeError
-from neuralbake_client.models import Asset, Job, JobEvent, JobList, JobState, Manifest, Progress
+from neuralbake_client.models import Asset, Job, JobEvent, JobList, JobState, Manifest, ModelInfo, Progress
 from neuralbake_client.retry import DEFAULT_RETRY, Retry
-from neuralbake_client.transport_grpc import GrpcTransport
-from neuralbake_client.transport_http import HttpTransport
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from neuralbake_client.answers import QueryAnswer, RenderedImage
+    from neuralbake_client.inference_grpc import GrpcInference
+    from neuralbake_client.inference_http import HttpInference
+    from neuralbake_client.transport_grpc import GrpcTransport
+    from neuralbake_client.transport_http import HttpTransport
 
 JobRef = Job | str
 ArtifactRef = Job | Manifest | str
 SceneRef = str | os.PathLike | dict[str, Any]
+REST, GRPC = ("http", "https"), ("grpc", "grpcs")
+INFERENCE_PORTS = {"http": 8090, "https": 8090, "grpc": 50052, "grpcs": 50052}  # `nbake serve-inference`'s
+IMAGE_FORMATS = {"exr": "image/x-exr", "png": "image/png"}
 
 
 def job_id(job: JobRef) -> str:
@@ -44,23 +59,78 @@ def artifact_id(artifact: ArtifactRef) -> str:
     return artifact
 
 
-def transport_for(url: str, token: str | None, timeout: float) -> HttpTransport | GrpcTransport:
+def checked_scheme(url: str) -> str:
     scheme = urlsplit(url).scheme
-    if scheme in ("http", "https"):
+    if scheme not in REST + GRPC:
+        raise ValueError(f"{url!r}: use http(s)://host:port for REST or grpc(s)://host:port for gRPC")
+    return scheme
+
+
+# Each transport is imported only for the scheme in use: a REST caller never loads gRPC, nor a job-only
+# caller NumPy.
+
+
+def transport_for(url: str, token: str | None, timeout: float) -> HttpTransport | GrpcTransport:
+    if checked_scheme(url) in REST:
+        from neuralbake_client.transport_http import HttpTransport
+
         return HttpTransport(url, token, timeout)
-    if scheme in ("grpc", "grpcs"):
-        return GrpcTransport(urlsplit(url).netloc, token, timeout, secure=scheme == "grpcs")
-    raise ValueError(f"{url!r}: use http(s)://host:port for REST or grpc(s)://host:port for gRPC")
+    from neuralbake_client.transport_grpc import GrpcTransport
+
+    return GrpcTransport(urlsplit(url).netloc, token, timeout, secure=url.startswith("grpcs:"))
+
+
+def inference_transport_for(url: str, token: str | None, timeout: float) -> HttpInference | GrpcInference:
+    if checked_scheme(url) in REST:
+        from neuralbake_client.inference_http import HttpInference
+
+        return HttpInference(url, token, timeout)
+    from neuralbake_client.inference_grpc import GrpcInference
+
+    return GrpcInference(urlsplit(url).netloc, token, timeout, secure=url.startswith("grpcs:"))
+
+
+def default_inference_url(url: str) -> str:
+    """The job server's host and scheme at the inference service's default port (8090 REST, 50052 gRPC)."""
+    parts = urlsplit(url)
+    host = parts.hostname or "127.0.0.1"
+    host = f"[{host}]" if ":" in host else host
+    return f"{parts.scheme}://{host}:{INFERENCE_PORTS[checked_scheme(url)]}"
+
+
+def _as_list(value: Any) -> Any:
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON")
+
+
+def json_value(value: Any) -> Any:
+    """`value` with NumPy arrays and scalars (a camera position, say) made plain JSON."""
+    return json.loads(json.dumps(value, default=_as_list))
 
 
 class Client:
-    """The neuralbake job service. Use as a context manager (or call `close()`)."""
+    """The neuralbake job service and its inference service. Use as a context manager (or call `close()`).
+
+    `inference_url` is where `query`, `render`, `load` and `models` go (default: see
+    `default_inference_url`).
+    """
 
     def __init__(
-        self, url: str, token: str | None = None, *, timeout: float = 30.0, retry: Retry = DEFAULT_RETRY
+        self,
+        url: str,
+        token: str | None = None,
+        *,
+        inference_url: str | None = None,
+        timeout: float = 30.0,
+        retry: Retry = DEFAULT_RETRY,
     ):
         self.url, self.retry = url, retry
+        self.inference_url = inference_url or default_inference_url(url)
+        checked_scheme(self.inference_url)
         self.transport = transport_for(url, token, timeout)
+        self._token, self._timeout = token, timeout
+        self._inference: HttpInference | GrpcInference | None = None
 
     def __enter__(self) -> Client:
         return self
@@ -70,6 +140,15 @@ class Client:
 
     def close(self) -> None:
         self.transport.close()
+        if self._inference is not None:
+            self._inference.close()
+
+    @property
+    def inference(self) -> HttpInference | GrpcInference:
+        """The inference service's transport, opened on first use."""
+        if self._inference is None:
+            self._inference = inference_transport_for(self.inference_url, self._token, self._timeout)
+        return self._inference
 
     # ------------------------------------------------------------------ assets
 
@@ -196,3 +275,41 @@ class Client:
             download_file(self.transport, manifest.artifact_id, entry, folder, self.retry, on_bytes)
             for entry in entries
         ]
+
+    # ------------------------------------------------------------------ inference
+
+    def models(self) -> list[ModelInfo]:
+        """The models the inference service holds, least recently used (next to be evicted) first."""
+        return self.retry.call(lambda: self.inference.models())
+
+    def load(self, artifact: ArtifactRef) -> ModelInfo:
+        """Fetch, verify and load the artifact's model now, so its first query does not wait for it."""
+        return self.retry.call(lambda: self.inference.load(artifact_id(artifact)))
+
+    def query(
+        self,
+        artifact: ArtifactRef,
+        arrays: Mapping[str, ArrayLike] | None = None,
+        params: dict[str, Any] | None = None,
+    ) -> QueryAnswer:
+        """The kind's query: input arrays by name (e.g. `lsnif`: `origins`, `directions` (N, 3)), output
+        arrays by name (`answer["hit"]`) and `answer.meta`. Concurrent queries are batched by the server."""
+        ident, body = artifact_id(artifact), json_value(params or {})
+        return self.retry.call(lambda: self.inference.query(ident, body, arrays or {}))
+
+    def render(
+        self,
+        artifact: ArtifactRef,
+        camera: Mapping[str, Any] | None = None,
+        params: dict[str, Any] | None = None,
+        *,
+        image_format: str = "exr",
+    ) -> RenderedImage:
+        """An image of the artifact. `camera` (position, target, up, fov, width, height; for kinds that
+        render a view) travels as `params["camera"]`; `image_format` is `exr` (linear float32,
+        `image.pixels()`) or `png` (sRGB)."""
+        if image_format not in IMAGE_FORMATS:
+            raise ValueError(f"image_format {image_format!r}: use {' or '.join(IMAGE_FORMATS)}")
+        body = json_value({**(params or {}), **({"camera": camera} if camera is not None else {})})
+        ident, media_type = artifact_id(artifact), IMAGE_FORMATS[image_format]
+        return self.retry.call(lambda: self.inference.render(ident, body, media_type))

@@ -5,22 +5,11 @@ server's OpenAPI document), whichever transport (HTTP or gRPC) produced them.
 from __future__ import annotations
 
 from datetime import datetime
-from enum import StrEnum
 from typing import Any
 
 from pydantic import BaseModel, Field
 
-
-class JobState(StrEnum):
-    QUEUED = "QUEUED"
-    RUNNING = "RUNNING"
-    SUCCEEDED = "SUCCEEDED"
-    FAILED = "FAILED"
-    CANCELLED = "CANCELLED"
-
-    @property
-    def terminal(self) -> bool:
-        return self in (JobState.SUCCEEDED, JobState.FAILED, JobState.CANCELLED)
+from neuralbake_client.states import JobState
 
 
 class Job(BaseModel):
@@ -123,3 +112,13 @@ class Manifest(BaseModel):
 
     def names(self) -> list[str]:
         return [entry.name for entry in self.files]
+
+
+class ModelInfo(BaseModel):
+    """A model the inference service holds in memory (`operations`: `query`, `render`)."""
+
+    artifact_id: str
+    kind: str
+    operations: list[str]
+    bytes: int
+    device: str

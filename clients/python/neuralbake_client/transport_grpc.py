@@ -92,13 +92,15 @@ def struct(data: dict[str, Any]) -> struct_pb2.Struct:
     return message
 
 
+def open_channel(target: str, secure: bool, options: list[tuple[str, Any]] | None = None) -> grpc.Channel:
+    if secure:
+        return grpc.secure_channel(target, grpc.ssl_channel_credentials(), options)
+    return grpc.insecure_channel(target, options)
+
+
 class GrpcTransport:
     def __init__(self, target: str, token: str | None, timeout: float, secure: bool):
-        self.channel = (
-            grpc.secure_channel(target, grpc.ssl_channel_credentials())
-            if secure
-            else grpc.insecure_channel(target)
-        )
+        self.channel = open_channel(target, secure)
         self.metadata = (("authorization", f"Bearer {token}"),) if token else ()
         self.timeout = timeout
         self.jobs = jobs_pb2_grpc.JobServiceStub(self.channel)

@@ -38,7 +38,7 @@ class HttpTransport:
 
     # ------------------------------------------------------------------ plumbing
 
-    def _send(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
+    def send(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
         try:
             response = self.http.request(method, path, **kwargs)
         except httpx.TransportError as error:
@@ -53,27 +53,27 @@ class HttpTransport:
         for _, stream in parts:
             stream.seek(0)  # a retried upload starts again from the top
         files = [("files", (name, stream, "application/octet-stream")) for name, stream in parts]
-        return Asset.model_validate(self._send("POST", "/v1/assets", files=files).json())
+        return Asset.model_validate(self.send("POST", "/v1/assets", files=files).json())
 
     def get_asset(self, asset_id: str) -> Asset:
-        return Asset.model_validate(self._send("GET", f"/v1/assets/{asset_id}").json())
+        return Asset.model_validate(self.send("GET", f"/v1/assets/{asset_id}").json())
 
     # ------------------------------------------------------------------ jobs
 
     def submit(self, body: dict[str, Any], idempotency_key: str) -> Job:
-        response = self._send("POST", "/v1/jobs", json=body, headers={"Idempotency-Key": idempotency_key})
+        response = self.send("POST", "/v1/jobs", json=body, headers={"Idempotency-Key": idempotency_key})
         return Job.model_validate(response.json())
 
     def get_job(self, job_id: str) -> Job:
-        return Job.model_validate(self._send("GET", f"/v1/jobs/{job_id}").json())
+        return Job.model_validate(self.send("GET", f"/v1/jobs/{job_id}").json())
 
     def list_jobs(self, states: list[str], kind: str | None, cursor: str | None, limit: int) -> JobList:
         params: dict[str, Any] = {"state": states, "limit": limit}
         params |= {k: v for k, v in (("kind", kind), ("cursor", cursor)) if v}
-        return JobList.model_validate(self._send("GET", "/v1/jobs", params=params).json())
+        return JobList.model_validate(self.send("GET", "/v1/jobs", params=params).json())
 
     def cancel(self, job_id: str) -> Job:
-        return Job.model_validate(self._send("POST", f"/v1/jobs/{job_id}:cancel").json())
+        return Job.model_validate(self.send("POST", f"/v1/jobs/{job_id}:cancel").json())
 
     def events(self, job_id: str, after: int) -> Iterator[JobEvent]:
         """Server-Sent Events after `after` until the server ends the stream (after the final state)."""
@@ -100,7 +100,7 @@ class HttpTransport:
     # ------------------------------------------------------------------ artifacts
 
     def manifest(self, artifact_id: str) -> Manifest:
-        return Manifest.model_validate(self._send("GET", f"/v1/artifacts/{artifact_id}").json())
+        return Manifest.model_validate(self.send("GET", f"/v1/artifacts/{artifact_id}").json())
 
     def read_file(self, artifact_id: str, name: str, digest: str, offset: int) -> Iterator[bytes]:
         """The file's bytes from `offset` (a Range request, valid only while the digest matches)."""

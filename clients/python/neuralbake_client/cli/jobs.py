@@ -1,52 +1,33 @@
 """`nbake submit | jobs | show | watch | cancel | download`: the job service from a shell or a CI
-pipeline, built on the `neuralbake_client` SDK (the same calls a Python user makes).
+pipeline, built on the SDK (the same calls a Python user makes).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-import yaml
-from neuralbake_client import Client, Job, JobState
 from rich.progress import DownloadColumn, Progress, TransferSpeedColumn
 
-from services.cli.job_output import Output
-from services.cli.remote import (
+from neuralbake_client.cli.output import Output
+from neuralbake_client.cli.overrides import SetOption, parse_sets
+from neuralbake_client.cli.remote import (
     EXIT_BY_STATE,
     USAGE,
     JsonOption,
     TokenOption,
     UrlOption,
+    artifact_of,
     connect,
     exit_with,
     remote_errors,
 )
+from neuralbake_client.states import JobState
 
-JOB_PREFIX = "job-"
-
-
-def parse_sets(items: list[str]) -> dict[str, Any]:
-    """`key=value` overrides -> a config dict; values are YAML scalars (`32`, `0.5`, `true`), dotted keys
-    nest (`a.b=1` -> {"a": {"b": 1}})."""
-    config: dict[str, Any] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        if not sep or not key.strip():
-            exit_with(USAGE, f"error: --set: {item!r} is not key=value")
-        try:
-            value = yaml.safe_load(raw) if raw.strip() else ""
-        except yaml.YAMLError:
-            value = raw
-        *parents, leaf = key.strip().split(".")
-        node = config
-        for part in parents:
-            node = node.setdefault(part, {})
-            if not isinstance(node, dict):
-                exit_with(USAGE, f"error: --set: {key} conflicts with an earlier value")
-        node[leaf] = value
-    return config
+if TYPE_CHECKING:
+    from neuralbake_client.client import Client
+    from neuralbake_client.models import Job
 
 
 def scene_argument(scene: str) -> str | Path:
@@ -72,9 +53,7 @@ def submit_command(
     preset: Annotated[
         str | None, typer.Option(help="quick, default or paper (the server's default).")
     ] = None,
-    set_: Annotated[
-        list[str] | None, typer.Option("--set", help="A config override key=value; repeat.")
-    ] = None,
+    set_: SetOption = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Seed of every sampler.")] = None,
     priority: Annotated[int | None, typer.Option(help="Higher starts first.")] = None,
     wait: Annotated[bool, typer.Option("--wait", help="Follow the job; exit with its outcome.")] = False,
@@ -166,8 +145,7 @@ def download_command(
     """Download an artifact's files (resuming partial ones, verifying sha256)."""
     out = Output(json_lines)
     with remote_errors(), connect(url, token) as client:
-        target = client.get(artifact) if artifact.startswith(JOB_PREFIX) else artifact
-        manifest = client.manifest(target)
+        manifest = client.manifest(artifact_of(client, artifact))
         try:
             entries = [manifest.file(n) for n in name] if name else manifest.files
         except KeyError as error:

@@ -1,9 +1,12 @@
-"""How the job commands reach a server and how their outcome becomes an exit status.
+"""How the remote commands reach the servers and how their outcome becomes an exit status.
 
-The server and token come from `--url` / `--token`, else `NBAKE_URL` / `NBAKE_TOKEN`, else a TOML config
-file (`NBAKE_CONFIG`, default `~/.config/nbake/config.toml`, keys `url` and `token`). Exit statuses are
-what a pipeline branches on: 0 succeeded, 1 job failed, 2 usage or validation error, 3 cancelled,
-4 server unreachable or auth error.
+The job server and token come from `--url` / `--token`, else `NBAKE_URL` / `NBAKE_TOKEN`, else a TOML
+config file (`NBAKE_CONFIG`, default `~/.config/nbake/config.toml`, keys `url` and `token`); the inference
+service from `--inference-url`, else `NBAKE_INFERENCE_URL`, else the file's `inference_url`, else the job
+server's host at the inference service's default port. Exit statuses are what a pipeline branches on:
+0 succeeded, 1 job failed, 2 usage or validation error, 3 cancelled, 4 server unreachable or auth error.
+
+The SDK is imported when a command connects, not when `nbake` starts.
 """
 
 from __future__ import annotations
@@ -13,15 +16,14 @@ import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import typer
-from neuralbake_client import (
+
+from neuralbake_client.errors import (
     ApiError,
     ChecksumMismatch,
-    Client,
     ConnectionFailed,
-    JobState,
     NeuralbakeError,
     PermissionDenied,
     ServerError,
@@ -29,8 +31,12 @@ from neuralbake_client import (
     Unavailable,
 )
 
+if TYPE_CHECKING:
+    from neuralbake_client.client import Client
+
 SUCCEEDED, FAILED, USAGE, CANCELLED, UNREACHABLE = 0, 1, 2, 3, 4
-EXIT_BY_STATE = {JobState.SUCCEEDED: SUCCEEDED, JobState.FAILED: FAILED, JobState.CANCELLED: CANCELLED}
+EXIT_BY_STATE = {"SUCCEEDED": SUCCEEDED, "FAILED": FAILED, "CANCELLED": CANCELLED}  # by JobState
+JOB_PREFIX = "job-"
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_CONFIG = Path("~/.config/nbake/config.toml")
 
@@ -40,6 +46,16 @@ UrlOption = Annotated[
         "--url",
         help="http(s)://host:port (REST) or grpc(s)://host:port (gRPC). Env NBAKE_URL; default "
         f"from the config file, else {DEFAULT_URL}.",
+        show_default=False,
+    ),
+]
+InferenceUrlOption = Annotated[
+    str | None,
+    typer.Option(
+        "--inference-url",
+        help="The inference service (`nbake serve-inference`), http(s):// or grpc(s)://. Env "
+        "NBAKE_INFERENCE_URL or the config file; default: the job server's host at port 8090 (REST) or "
+        "50052 (gRPC).",
         show_default=False,
     ),
 ]
@@ -62,15 +78,28 @@ def config_file() -> dict:
         exit_with(USAGE, f"error: {path}: {error}")
 
 
-def connect(url: str | None, token: str | None) -> Client:
-    """A client for the server named by the flags, the environment or the config file (in that order)."""
+def connect(url: str | None, token: str | None, inference_url: str | None = None) -> Client:
+    """A client for the servers named by the flags, the environment or the config file (in that order)."""
+    from neuralbake_client.client import Client
+
     file = config_file()
     url = url or os.environ.get("NBAKE_URL") or file.get("url") or DEFAULT_URL
     token = token or os.environ.get("NBAKE_TOKEN") or file.get("token")
+    inference_url = inference_url or os.environ.get("NBAKE_INFERENCE_URL") or file.get("inference_url")
     try:
-        return Client(url, token)
+        return Client(url, token, inference_url=inference_url)
     except ValueError as error:
         exit_with(USAGE, f"error: --url: {error}")
+
+
+def artifact_of(client: Client, ref: str) -> str:
+    """An artifact id as given, or a job id's artifact."""
+    if not ref.startswith(JOB_PREFIX):
+        return ref
+    job = client.get(ref)
+    if job.artifact_id is None:
+        exit_with(USAGE, f"error: {ref} is {job.state} and has no artifact")
+    return job.artifact_id
 
 
 def exit_with(code: int, message: str) -> NoReturn:
