@@ -21,10 +21,39 @@ def _rgb(value) -> dict:
     return {"type": "rgb", "value": [float(x) for x in value]}
 
 
-def mitsuba_bsdf(material: spec.Material) -> dict:
+def _reflectance(value: spec.ColorOrTexture, base_dir: Path | None = None) -> dict:
+    """A colour, or a texture looked up with the same UV convention (workers/scene/textures.py)."""
+    match value:
+        case spec.CheckerTexture():
+            # Mitsuba's checkerboard has 2 x 2 cells per unit of UV, ours `scale` x `scale`.
+            return {
+                "type": "checkerboard",
+                "color0": _rgb(value.color0),
+                "color1": _rgb(value.color1),
+                "to_uv": _scalar_transform(np.diag([value.scale / 2, value.scale / 2, 1.0, 1.0])),
+            }
+        case spec.ImageTexture():
+            path = Path(value.path)
+            return {
+                "type": "bitmap",
+                "filename": str(path if path.is_absolute() or base_dir is None else base_dir / path),
+                "filter_type": "bilinear",
+                "wrap_mode": "repeat",
+            }
+        case _:
+            return _rgb(value)
+
+
+def _scalar_transform(matrix: np.ndarray):
+    import mitsuba as mi
+
+    return mi.ScalarTransform4f(np.asarray(matrix, dtype=float).tolist())
+
+
+def mitsuba_bsdf(material: spec.Material, base_dir: Path | None = None) -> dict:
     match material:
         case spec.Diffuse():
-            inner = {"type": "diffuse", "reflectance": _rgb(material.reflectance)}
+            inner = {"type": "diffuse", "reflectance": _reflectance(material.reflectance, base_dir)}
         case spec.Conductor() if material.roughness == 0:
             inner = {"type": "conductor", "material": "none", "specular_reflectance": _rgb(material.specular)}
         case spec.Conductor():
@@ -35,13 +64,21 @@ def mitsuba_bsdf(material: spec.Material) -> dict:
                 "alpha": float(material.roughness),
                 "specular_reflectance": _rgb(material.specular),
             }
+        case spec.Plastic() if material.roughness == 0:
+            inner = {
+                "type": "plastic",
+                "int_ior": float(material.ior),
+                "ext_ior": 1.0,
+                "diffuse_reflectance": _reflectance(material.diffuse, base_dir),
+            }
         case spec.Plastic():
             inner = {
                 "type": "roughplastic",
                 "distribution": "ggx",
-                "alpha": float(max(material.roughness, 1e-4)),
+                "alpha": float(material.roughness),
                 "int_ior": float(material.ior),
-                "diffuse_reflectance": _rgb(material.diffuse),
+                "ext_ior": 1.0,
+                "diffuse_reflectance": _reflectance(material.diffuse, base_dir),
             }
         case spec.Dielectric() if material.roughness == 0:
             return {"type": "dielectric", "int_ior": float(material.ior), "ext_ior": 1.0}

@@ -5,6 +5,7 @@ import pytest
 
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from workers.render.bsdf import SurfaceBatch, bsdf_code, eval_bsdf, sample_bsdf
+from workers.render.bsdfs.plastic import coat
 from workers.render.sampling import square_to_uniform_sphere
 
 N = 400_000
@@ -86,6 +87,17 @@ def test_diffuse_white_furnace_is_exact():
     assert est == pytest.approx(np.ones(3), rel=0.01)
 
 
+def weight_bound(kind, alpha, ior=1.5):
+    """The largest f |cos| / pdf a white surface's sampler may return."""
+    if kind == "dielectric":
+        return ior**2  # leaving glass scales radiance by eta^2
+    if kind == "plastic":
+        # The base lobe is base T_o T_i / (eta^2 (1 - R_int)) cos / pi, sampled with probability at least
+        # T_o / (1 - T_o + T_o) (the coat's probability is clamped to >= 0.05).
+        return 1.0 / (0.95 * ior**2 * (1.0 - coat(alpha, ior).internal_reflectance))
+    return 1.0
+
+
 @pytest.mark.parametrize("alpha", [1e-4, 1.0])
 @pytest.mark.parametrize("kind", ["conductor", "plastic", "dielectric"])
 @pytest.mark.parametrize("theta", [0.0, 89.99, 90.0])
@@ -99,5 +111,5 @@ def test_extreme_roughness_and_grazing_angles_stay_finite(kind, alpha, theta):
         f_cos, pdf2 = eval_bsdf(s, wo, wi)
         for a in (wi, weight, pdf, f_cos, pdf2):
             assert np.isfinite(a).all()
-        bound = 1.5**2 if kind == "dielectric" else 1.0  # leaving glass scales radiance by eta^2
+        bound = weight_bound(kind, alpha)
         assert (weight >= 0).all() and (weight <= bound + 1e-6).all()
