@@ -5,7 +5,8 @@ only when a name is not one of ours, so `nbake show` never scans the installed p
 
 from __future__ import annotations
 
-import click
+from typing import Any
+
 import typer
 from typer.core import TyperGroup
 
@@ -16,11 +17,11 @@ from neuralbake_client.cli.render import SceneOrArtifact, render_command
 
 
 class Nbake(TyperGroup):
-    def list_commands(self, ctx: click.Context) -> list[str]:
+    def list_commands(self, ctx: typer.Context) -> list[str]:
         ours = super().list_commands(ctx)
         return [*ours, *(name for name in plugin_commands() if name not in ours)]
 
-    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+    def get_command(self, ctx: typer.Context, name: str) -> Any:
         command = super().get_command(ctx, name)
         if command is None and (ref := plugin_commands().get(name)) is not None:
             return LazyCommand(ref)

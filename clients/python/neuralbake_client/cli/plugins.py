@@ -15,8 +15,8 @@ from functools import cache
 from importlib.metadata import entry_points
 from typing import Any
 
-import click
 import typer
+from typer.core import TyperCommand
 
 ENTRY_POINT_GROUP = "neuralbake.cli"
 
@@ -29,7 +29,7 @@ class CommandRef:
     target: str
     summary: str  # what `nbake --help` shows without importing the target
 
-    def load(self) -> click.Command:
+    def load(self) -> TyperCommand:
         module, _, function = self.target.partition(":")
         app = typer.Typer(add_completion=False)
         app.command(self.name)(getattr(importlib.import_module(module), function))
@@ -55,7 +55,7 @@ def scene_render() -> CommandRef | None:
     return next((p.scene_render for p in installed() if p.scene_render is not None), None)
 
 
-class LazyCommand(click.Command):
+class LazyCommand(TyperCommand):
     """A plugin's command as `nbake --help` lists it; running it imports and runs the real one."""
 
     def __init__(self, ref: CommandRef):
@@ -63,6 +63,6 @@ class LazyCommand(click.Command):
         self.ref = ref
 
     def make_context(
-        self, info_name: str | None, args: list[str], parent: click.Context | None = None, **extra: Any
-    ) -> click.Context:
+        self, info_name: str | None, args: list[str], parent: typer.Context | None = None, **extra: Any
+    ) -> typer.Context:
         return self.ref.load().make_context(info_name, args, parent, **extra)

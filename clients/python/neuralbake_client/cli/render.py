@@ -9,7 +9,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any
 
-import click
 import typer
 import yaml
 from typer.core import TyperCommand
@@ -59,12 +58,12 @@ class SceneOrArtifact(TyperCommand):
     """Runs the remote render for an artifact (or no target, e.g. `--help`), the local one for a scene."""
 
     def make_context(
-        self, info_name: str | None, args: list[str], parent: click.Context | None = None, **extra: Any
-    ) -> click.Context:
+        self, info_name: str | None, args: list[str], parent: typer.Context | None = None, **extra: Any
+    ) -> typer.Context:
         takes_value = {
             name
             for p in self.params
-            if isinstance(p, click.Option) and not p.is_flag and not p.count
+            if p.param_type_name == "option" and not p.is_flag and not p.count
             for name in p.opts
         }
         target = first_positional(args, takes_value)
