@@ -20,8 +20,11 @@ Bounds, and why:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
+from PIL import Image
 
 from tests.support.mitsuba_scene import render_mitsuba
 from workers.render.render import RenderSettings, render
@@ -42,26 +45,31 @@ def block_means(image: np.ndarray) -> np.ndarray:
     return image.reshape(n, BLOCK, n, BLOCK, 3).mean(axis=(1, 3))
 
 
-def compare(scene: spec.SceneSpec, spp: int, max_depth: int, tmp_path):
-    compiled = compile_scene(scene)
-    ours = np.stack(
-        [
-            block_means(
-                render(
-                    compiled, RenderSettings(spp=spp, width=SIZE, height=SIZE, max_depth=max_depth, seed=s)
-                ).image.astype(np.float64)
-            )
-            for s in range(SEEDS)
-        ]
+def render_ours(
+    scene: spec.SceneSpec, spp: int, max_depth: int, base_dir=None
+) -> Callable[[int], np.ndarray]:
+    compiled = compile_scene(scene, base_dir)
+    settings = dict(spp=spp, width=SIZE, height=SIZE, max_depth=max_depth)
+    return lambda seed: render(compiled, RenderSettings(**settings, seed=seed)).image.astype(np.float64)
+
+
+def render_exported(scene: spec.SceneSpec, spp: int, max_depth: int, workdir, base_dir=None):
+    """Mitsuba rendering our compiled scene (tests/support/mitsuba_scene.py)."""
+    compiled = compile_scene(scene, base_dir)
+    return lambda seed: render_mitsuba(compiled, workdir, spp, max_depth, seed=seed, width=SIZE, height=SIZE)
+
+
+def compare(scene: spec.SceneSpec, spp: int, max_depth: int, tmp_path, base_dir=None):
+    compare_renders(
+        render_ours(scene, spp, max_depth, base_dir),
+        render_exported(scene, spp, max_depth, tmp_path / "mi", base_dir),
     )
-    theirs = np.stack(
-        [
-            block_means(
-                render_mitsuba(compiled, tmp_path / "mi", spp, max_depth, seed=s, width=SIZE, height=SIZE)
-            )
-            for s in range(SEEDS)
-        ]
-    )
+
+
+def compare_renders(ours_at: Callable[[int], np.ndarray], theirs_at: Callable[[int], np.ndarray]):
+    """Two renderers, each a seed -> (SIZE, SIZE, 3) image, agree up to noise (module docstring)."""
+    ours = np.stack([block_means(ours_at(s)) for s in range(SEEDS)])
+    theirs = np.stack([block_means(theirs_at(s)) for s in range(SEEDS)])
     mean_o, mean_m = ours.mean(0), theirs.mean(0)
     se = np.sqrt(ours.var(0, ddof=1) / SEEDS + theirs.var(0, ddof=1) / SEEDS)
     lit = mean_m > 1e-3 * mean_m.max()
@@ -90,16 +98,17 @@ def test_cornell_glossy_agrees_with_mitsuba(tmp_path):
     compare(cornell_glossy(), spp=32, max_depth=8, tmp_path=tmp_path)
 
 
+def ball(name: str, material: str, x: float, radius: float = 0.5) -> spec.SceneObject:
+    return spec.SceneObject(
+        name=name,
+        shape=spec.SphereShape(center=(x, radius, 0), radius=radius, subdivisions=4),
+        material=material,
+    )
+
+
 def env_lit_comparison_scene() -> spec.SceneSpec:
-    """Diffuse, rough-metal and rough-glass spheres on a ground plane under a rotated real HDRI."""
-
-    def ball(name, material, x):
-        return spec.SceneObject(
-            name=name,
-            shape=spec.SphereShape(center=(x, 0.5, 0), radius=0.5, subdivisions=4),
-            material=material,
-        )
-
+    """Diffuse, rough-metal, rough-glass, rough- and smooth-plastic spheres on a ground plane under a
+    rotated real HDRI."""
     return spec.SceneSpec(
         name="env_lit_comparison",
         materials={
@@ -107,17 +116,101 @@ def env_lit_comparison_scene() -> spec.SceneSpec:
             "clay": spec.Diffuse(reflectance=(0.7, 0.4, 0.2)),
             "metal": spec.Conductor(roughness=0.2, specular=(0.9, 0.9, 0.9)),
             "frosted": spec.Dielectric(ior=1.5, roughness=0.3),
+            "rough_plastic": spec.Plastic(diffuse=(0.2, 0.5, 0.7), roughness=0.3),
+            "glossy_plastic": spec.Plastic(diffuse=(0.8, 0.2, 0.2), roughness=0.0, ior=1.6),
         },
         objects=[
-            ground(6.0),
-            ball("clay", "clay", -1.2),
-            ball("metal", "metal", 0.0),
-            ball("frosted", "frosted", 1.2),
+            ground(8.0),
+            ball("clay", "clay", -2.2, 0.45),
+            ball("metal", "metal", -1.1, 0.45),
+            ball("frosted", "frosted", 0.0, 0.45),
+            ball("rough_plastic", "rough_plastic", 1.1, 0.45),
+            ball("glossy_plastic", "glossy_plastic", 2.2, 0.45),
         ],
         environment=spec.EnvironmentMap(builtin="courtyard", rotate=(0, 60, 0)),
-        camera=spec.Camera(position=(0, 1.6, 4.5), target=(0, 0.4, 0), fov=35),
+        camera=spec.Camera(position=(0, 2.0, 5.5), target=(0, 0.3, 0), fov=45),
     )
 
 
 def test_environment_lit_scene_agrees_with_mitsuba(tmp_path):
     compare(env_lit_comparison_scene(), spp=16, max_depth=6, tmp_path=tmp_path)
+
+
+def plastic_comparison_scene() -> spec.SceneSpec:
+    """Four plastic spheres filling the frame (smooth to rough, two indices) under a rotated HDRI."""
+    spheres = [
+        (-0.55, 0.55, 0.0, 1.5),
+        (0.55, 0.55, 0.1, 1.5),
+        (-0.55, -0.55, 0.3, 1.5),
+        (0.55, -0.55, 0.6, 1.8),
+    ]
+    return spec.SceneSpec(
+        name="plastic_comparison",
+        materials={
+            f"plastic_{i}": spec.Plastic(diffuse=(0.7, 0.4, 0.2), roughness=roughness, ior=ior)
+            for i, (_, _, roughness, ior) in enumerate(spheres)
+        },
+        objects=[
+            spec.SceneObject(
+                name=f"sphere_{i}",
+                shape=spec.SphereShape(center=(x, y, 0), radius=0.5, subdivisions=5),
+                material=f"plastic_{i}",
+            )
+            for i, (x, y, _, _) in enumerate(spheres)
+        ],
+        environment=spec.EnvironmentMap(builtin="courtyard", rotate=(0, 60, 0)),
+        camera=spec.Camera(position=(0, 0, 4.0), target=(0, 0, 0), fov=32),
+    )
+
+
+def test_plastic_agrees_with_mitsuba(tmp_path):
+    compare(plastic_comparison_scene(), spp=16, max_depth=4, tmp_path=tmp_path)
+
+
+def lights_and_textures_scene() -> spec.SceneSpec:
+    """A point light, a directional light and a procedural sky; checker-textured diffuse ground and
+    plastic, an image-textured (PNG, sRGB) wall, a slightly rough plastic (alpha 0.05)."""
+    checker = spec.CheckerTexture(color0=(0.8, 0.75, 0.7), color1=(0.15, 0.2, 0.3), scale=6)
+    return spec.SceneSpec(
+        name="lights_and_textures",
+        materials={
+            "ground": spec.Diffuse(reflectance=checker),
+            "wall": spec.Diffuse(reflectance=spec.ImageTexture(path="wall.png")),
+            "checker_plastic": spec.Plastic(diffuse=checker.model_copy(update={"scale": 4}), roughness=0.0),
+            "satin_plastic": spec.Plastic(diffuse=(0.6, 0.6, 0.2), roughness=0.05),
+        },
+        objects=[
+            spec.SceneObject(
+                name="ground",
+                shape=spec.ProceduralShape(generator="ground_plane", params={"size": 6.0, "uv_tiles": 2.0}),
+                material="ground",
+            ),
+            spec.SceneObject(
+                name="wall",
+                shape=spec.RectangleShape(),
+                material="wall",
+                transform=spec.Transform(translate=(0, 1.0, -1.5), scale=(2.0, 1.0, 1.0)),
+            ),
+            ball("checker_plastic", "checker_plastic", -0.7),
+            ball("satin_plastic", "satin_plastic", 0.7),
+        ],
+        lights=[
+            spec.PointLight(position=(1.5, 2.5, 1.5), intensity=(6.0, 5.0, 4.0)),
+            spec.DirectionalLight(direction=(-0.5, -1.0, -0.3), irradiance=(1.0, 1.1, 1.3)),
+        ],
+        environment=spec.EnvironmentMap(
+            procedural="sky", params={"sun_irradiance": 0.0, "sun_azimuth": 120.0}, scale=0.5
+        ),
+        camera=spec.Camera(position=(0, 1.8, 4.5), target=(0, 0.6, 0), fov=40),
+    )
+
+
+def write_wall_texture(folder) -> None:
+    """A coarse 8 x 4 texture of distinct colours: a flipped or shifted lookup changes the image."""
+    rng = np.random.default_rng(0)
+    Image.fromarray(rng.integers(20, 235, size=(4, 8, 3), dtype=np.uint8)).save(folder / "wall.png")
+
+
+def test_lights_textures_and_procedural_sky_agree_with_mitsuba(tmp_path):
+    write_wall_texture(tmp_path)
+    compare(lights_and_textures_scene(), spp=16, max_depth=6, tmp_path=tmp_path, base_dir=tmp_path)

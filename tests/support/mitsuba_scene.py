@@ -1,7 +1,8 @@
 """Export a compiled SceneSpec to a Mitsuba 3 scene dictionary (scalar_rgb), for comparisons.
 
 Geometry goes through PLY files of the compiled world-space triangles, so both renderers see
-exactly the same triangles and shading normals. Opaque materials are wrapped in `twosided`,
+exactly the same triangles, shading normals and UVs (textures map to Mitsuba's `checkerboard` and
+`bitmap`). Opaque materials are wrapped in `twosided`,
 matching our renderer's two-sided convention. The film uses a box filter so that a pixel is the
 plain average of its samples, as in our renderer.
 """
@@ -129,13 +130,14 @@ def mitsuba_scene_dict(
         for k, (lo, hi) in enumerate(obj.triangle_ranges):
             tris = scene.positions[lo:hi].reshape(-1, 3)
             normals = scene.shading_normals[lo:hi].reshape(-1, 3)
+            uv = trimesh.visual.TextureVisuals(uv=scene.uvs[lo:hi].reshape(-1, 2))
             faces = np.arange(len(tris)).reshape(-1, 3)
             path = workdir / f"{obj.name}_{k}.ply"
-            trimesh.Trimesh(tris, faces, vertex_normals=normals, process=False).export(path)
+            trimesh.Trimesh(tris, faces, vertex_normals=normals, visual=uv, process=False).export(path)
             entry = {
                 "type": "ply",
                 "filename": str(path),
-                "bsdf": mitsuba_bsdf(scene.spec.materials[obj.material]),
+                "bsdf": mitsuba_bsdf(scene.spec.materials[obj.material], scene.base_dir),
             }
             if source.emission is not None:
                 if source.two_sided_emission:
