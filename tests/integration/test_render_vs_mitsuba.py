@@ -28,11 +28,11 @@ from PIL import Image
 
 from tests.support.mitsuba_scene import render_mitsuba
 from workers.render.render import RenderSettings, render
-from workers.scene import spec
+from workers.scene import shapes, spec
 from workers.scene.builtin import cornell_box, cornell_glossy, ground
 from workers.scene.compile import compile_scene
 
-pytest.importorskip("mitsuba")
+mi = pytest.importorskip("mitsuba")
 pytestmark = pytest.mark.mitsuba
 
 SEEDS = 8
@@ -91,6 +91,70 @@ def compare_renders(ours_at: Callable[[int], np.ndarray], theirs_at: Callable[[i
 
 def test_cornell_box_agrees_with_mitsuba(tmp_path):
     compare(cornell_box(), spp=32, max_depth=8, tmp_path=tmp_path)
+
+
+MITSUBA_CORNELL_NAMES = {
+    "floor": "floor",
+    "ceiling": "ceiling",
+    "back": "back",
+    "green_wall": "green-wall",
+    "red_wall": "red-wall",
+    "light": "light",
+    "small_box": "small-box",
+    "large_box": "large-box",
+}
+
+
+def test_cornell_box_is_mitsubas_cornell_box():
+    """`cornell_box` claims to be `mitsuba.cornell_box()`: shapes, transforms, reflectances, light, camera."""
+    mi.set_variant("scalar_rgb")
+    theirs, ours = mi.cornell_box(), cornell_box()
+    assert {o.name for o in ours.objects} == set(MITSUBA_CORNELL_NAMES)
+    assert {k for k, v in theirs.items() if isinstance(v, dict) and "to_world" in v} - {"sensor"} == set(
+        MITSUBA_CORNELL_NAMES.values()
+    )
+    unit_shapes = {"rectangle": shapes.rectangle(), "box": shapes.box()}
+    for obj in ours.objects:
+        entry = theirs[MITSUBA_CORNELL_NAMES[obj.name]]
+        assert entry["type"] == {"rectangle": "rectangle", "box": "cube"}[obj.shape.type], obj.name
+        np.testing.assert_allclose(obj.transform.to_matrix(), np.array(entry["to_world"].matrix), atol=1e-6)
+        reflectance = theirs[entry["bsdf"]["id"]]["reflectance"]["value"]
+        np.testing.assert_allclose(ours.materials[obj.material].reflectance, reflectance, err_msg=obj.name)
+        emitted = entry["emitter"]["radiance"]["value"] if "emitter" in entry else None
+        assert obj.emission == (tuple(emitted) if emitted else None), obj.name
+        assert not obj.two_sided_emission
+        # The unit shapes themselves: the same corners, and the same outward faces.
+        mesh = unit_shapes[obj.shape.type]
+        loaded = mi.traverse(mi.load_dict({"type": entry["type"]}))
+        if "vertex_positions" in loaded:  # the cube is a mesh; Mitsuba's rectangle is analytic
+            corners = np.array(loaded["vertex_positions"]).reshape(-1, 3)
+            assert set(map(tuple, np.unique(corners, axis=0))) == set(
+                map(tuple, np.unique(mesh.vertices, axis=0))
+            )
+        else:
+            np.testing.assert_allclose(mesh.vertices[:, :2], [[-1, -1], [1, -1], [1, 1], [-1, 1]])
+            np.testing.assert_allclose(mesh.normals, np.tile([0, 0, 1], (4, 1)))
+    sensor, camera = theirs["sensor"], ours.camera
+    look_at = mi.ScalarTransform4f().look_at(origin=camera.position, target=camera.target, up=camera.up)
+    np.testing.assert_allclose(np.array(look_at.matrix), np.array(sensor["to_world"].matrix), atol=1e-6)
+    assert camera.fov == sensor["fov"]
+    assert (camera.width, camera.height) == (sensor["film"]["width"], sensor["film"]["height"])
+    assert camera.width == camera.height  # so fov_axis "smaller" is our vertical fov
+
+
+def test_cornell_box_agrees_with_mitsuba_loading_its_own_cornell_box():
+    """Mitsuba renders the scene it builds itself (analytic rectangles, its cube), not our export."""
+    mi.set_variant("scalar_rgb")
+    spp, max_depth = 32, 8
+
+    def theirs(seed: int) -> np.ndarray:
+        scene = mi.cornell_box()
+        scene["integrator"]["max_depth"] = max_depth
+        scene["sensor"]["film"] |= {"width": SIZE, "height": SIZE, "rfilter": {"type": "box"}}
+        scene["sensor"]["sampler"]["sample_count"] = spp
+        return np.array(mi.render(mi.load_dict(scene), spp=spp, seed=seed), dtype=np.float64)[..., :3]
+
+    compare_renders(render_ours(cornell_box(), spp, max_depth), theirs)
 
 
 def test_cornell_glossy_agrees_with_mitsuba(tmp_path):
