@@ -199,3 +199,13 @@ def test_installed_console_script_prints_json_lines(tmp_path):
     assert Path(done["preview"]).is_file()
     assert set(done["aovs"]) == set(AOV_NAMES)
     assert all(Path(p).is_file() for p in done["aovs"].values())
+
+
+@pytest.mark.parametrize("scene", ["cornell_box", EXAMPLE_SCENE], ids=["cornell_box", "example"])
+def test_thread_count_changes_no_bit_of_the_image(tmp_path, scene):
+    """Work items are seeded by (seed, pass, tile) and summed in a fixed order (workers/render/render.py):
+    96 pixels wide makes several 64-pixel tiles for two threads to share."""
+    for threads in ("1", "2"):
+        render_ok(scene, tmp_path / f"t{threads}.exr", "--width", "96", "--spp", "4", "--threads", threads)
+    assert (tmp_path / "t1.exr").read_bytes() == (tmp_path / "t2.exr").read_bytes()
+    assert (tmp_path / "t1.png").read_bytes() == (tmp_path / "t2.png").read_bytes()
