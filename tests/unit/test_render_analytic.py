@@ -58,7 +58,8 @@ def sphere_pixels(image: np.ndarray, tracer: PathTracer) -> np.ndarray:
         (spec.Diffuse(reflectance=(0.8, 0.5, 0.2)), (0.8, 0.5, 0.2)),
         (spec.Conductor(roughness=0.0, specular=(0.9, 0.6, 0.3)), (0.9, 0.6, 0.3)),
         (spec.Dielectric(ior=1.5, roughness=0.0), (1.0, 1.0, 1.0)),
-        (spec.Plastic(diffuse=(1.0, 1.0, 1.0), roughness=0.0), None),
+        (spec.Plastic(diffuse=(1.0, 1.0, 1.0), roughness=0.0), (1.0, 1.0, 1.0)),  # F + (1 - F), exactly
+        (spec.Plastic(diffuse=(1.0, 1.0, 1.0), roughness=0.3), None),
     ],
 )
 def test_white_furnace_convex_object(material, expected_albedo):
@@ -70,9 +71,9 @@ def test_white_furnace_convex_object(material, expected_albedo):
     px = sphere_pixels(image, tracer)
     assert np.isfinite(image).all()
     mean, se = px.mean(0), px.std(0) / np.sqrt(len(px) * 64) * 8  # pixels are correlated at edges: generous
-    if expected_albedo is None:  # plastic: energy-conserving, never more than L
+    if expected_albedo is None:  # rough plastic: its single-scattering coat loses energy (~0.69 at 0.3)
         assert np.all(mean <= radiance * (1 + 1e-3))
-        assert np.all(mean > 0.8 * radiance)
+        assert np.all(mean > 0.6 * radiance)
     else:
         np.testing.assert_allclose(mean, np.asarray(expected_albedo) * radiance, atol=max(3 * se.max(), 2e-3))
 
