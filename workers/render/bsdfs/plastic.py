@@ -94,18 +94,21 @@ def coat(alpha: float, ior: float) -> Coat:
     return Coat(ior, table, float(2.0 * np.mean(inside * cosines)))
 
 
+def _coat_groups(s: SurfaceBatch):
+    """(coat, row mask) for each (alpha, ior) present: one pass per coat, as a scene has few of them."""
+    todo = np.ones(len(s.alpha), bool)
+    while todo.any():
+        first = int(np.argmax(todo))
+        rows = todo & (s.alpha == s.alpha[first]) & (s.ior == s.ior[first])
+        todo &= ~rows
+        yield coat(float(s.alpha[first]), float(s.ior[first])), rows
+
+
 def _coat_response(s: SurfaceBatch, *cosines: np.ndarray):
     """Per row: the coat's transmittance at each of `cosines`, and its internal reflectance."""
-    n = len(s.alpha)
-    if n == 0 or ((s.alpha == s.alpha[0]).all() and (s.ior == s.ior[0]).all()):
-        groups = [((s.alpha[0], s.ior[0]), slice(None))] if n else []
-    else:
-        pairs, inverse = np.unique(np.stack([s.alpha, s.ior], axis=1), axis=0, return_inverse=True)
-        groups = [(pair, np.flatnonzero(inverse.ravel() == k)) for k, pair in enumerate(pairs)]
-    transmittances = [np.empty(n) for _ in cosines]
-    internal = np.empty(n)
-    for (alpha, ior), rows in groups:
-        c = coat(float(alpha), float(ior))
+    transmittances = [np.empty(len(s.alpha)) for _ in cosines]
+    internal = np.empty(len(s.alpha))
+    for c, rows in _coat_groups(s):
         for t, cos in zip(transmittances, cosines, strict=True):
             t[rows] = c.transmittance(cos[rows])
         internal[rows] = c.internal_reflectance
