@@ -28,7 +28,7 @@ def positive_relative_l2(prediction: Tensor, target: Tensor, scale: float = RELA
     dL/dr = 2 (p - t) p / (p^2 + s^2). Throughputs are ~0.05, below s, where that gradient is ~2 p (p - t)
     / s^2: it fades with p, so once the first steps overshoot (from exp(0) = 1, 20x the targets) the pull
     back up vanishes exponentially with r, drops below Adam's eps, and phi stays 0 (a scanned asset trained
-    to phi = 3e-26, every LoD black). With sg(p) (sg(p) + s) the loss is the same relative L2 above s, and
+    to phi = 3e-26, every LoD black). With sg(p) (sg(p) + s) the loss is that relative L2 well above s, and
     dL/dr = 2 (p - t) / (p + s): below s, r gets the gradient a linear output gets there, a pull of 2 t / s
     that never fades however far p falls, while targets of 0 push by at most 2 p / s. The normaliser still
     depends on the prediction alone, so the expected gradient is zero exactly at p = E[t] (unbiased on
