@@ -66,7 +66,8 @@ def directions(n: int, seed: int) -> torch.Tensor:
     return v / v.norm(dim=1, keepdim=True)
 
 
-@pytest.mark.parametrize("output", ["linear", "log"])
+# The log output is the default and the one that collapsed; linear, the comparison, runs with `make test-all`.
+@pytest.mark.parametrize("output", [pytest.param("linear", marks=pytest.mark.slow), "log"])
 def test_training_on_a_dark_closed_object_learns_the_mean_throughput(output):
     config = small_config(output)
     spec = dark_blob()
