@@ -43,7 +43,7 @@ from workers.scene.spec import (
 LEAK_SPP = 16
 LEAK_SIZE = 48
 # The default table and a colliding one: hash collisions are what optimal thresholds repair (Fig. 9, 10).
-LEAK_TABLES = (("2^17", {}), ("2^8", {"visibility": {"log2_table_size": 8}}))
+LEAK_TABLES = (("2^17", {}), ("2^8", {"visibility": {"grid": {"log2_table_size": 8}}}))
 
 
 def menger_level_4():

@@ -43,7 +43,7 @@ def dark_blob() -> SceneSpec:
 
 
 def small_config(output: str) -> LodConfig:
-    small = {"features_per_level": 2, "log2_table_size": 14, "width": 64, "depth": 2}
+    small = {"grid": {"features_per_level": 2, "log2_table_size": 14}, "mlp": {"width": 64, "depth": 2}}
     return LodConfig(
         objects=["blob"],
         finest_resolution=32,

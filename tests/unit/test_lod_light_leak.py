@@ -49,13 +49,14 @@ STEPS = 120
 
 
 def leak_config() -> LodConfig:
-    small = {"features_per_level": 2, "width": 64, "depth": 2}
+    small, mlp = {"features_per_level": 2}, {"width": 64, "depth": 2}
     return LodConfig(
         objects=["box"],
         finest_resolution=16,
         coarsest_resolution=8,
-        appearance={**small, "log2_table_size": 14},
-        visibility={**small, "log2_table_size": 8},  # hash collisions (see the module docstring)
+        appearance={"grid": {**small, "log2_table_size": 14}, "mlp": mlp},
+        # a 2^8 table: hash collisions (see the module docstring)
+        visibility={"grid": {**small, "log2_table_size": 8}, "mlp": mlp},
         sh_degree=4,
         batch_size=2048,
         train={"steps": STEPS, "schedule": {"lr": 0.005}, "checkpoint_every": STEPS, "progress_every": STEPS},

@@ -12,22 +12,26 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from workers.nn.configs import HashTableConfig, MLPConfig
+from workers.nn.encodings.grid import GridGeometry
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
 
-class NetworkSize(BaseModel):
-    """A hash grid (one level per LoD, base = the coarsest resolution, scale 2) and a ReLU MLP."""
+class NetworkConfig(BaseModel):
+    """One of the asset's networks: a hash table on the lattice the LoDs derive (one level per octave from
+    the coarsest LoD's resolution, scale 2, plus `extra_levels` finer than LoD 0) and a ReLU MLP."""
 
     model_config = ConfigDict(extra="forbid")
 
-    features_per_level: Literal[2, 4, 8] = 4
-    log2_table_size: int = Field(19, ge=8, le=24)
-    width: int = Field(128, ge=8, le=1024)
-    depth: int = Field(4, ge=1, le=8)
+    grid: HashTableConfig = HashTableConfig(features_per_level=4, log2_table_size=19)
+    mlp: MLPConfig = MLPConfig(width=128, depth=4)
     extra_levels: int = Field(
         0, ge=0, le=2, description="hash-grid levels finer than LoD 0 (resolution doubling each)"
     )
+
+    def lattice(self, octaves: int, coarsest: int) -> GridGeometry:
+        return GridGeometry(3, octaves + self.extra_levels, coarsest, 2.0)
 
 
 def _power_of_two(value: int) -> int:
@@ -48,8 +52,8 @@ class LodConfig(TrainedKindConfig):
         description="camera distances the asset will be seen from (scene camera's fov and width); the plan "
         "builds only the LoDs whose voxels match a pixel at one of them. Empty: every LoD.",
     )
-    appearance: NetworkSize = NetworkSize(features_per_level=4)
-    visibility: NetworkSize = NetworkSize(features_per_level=4)
+    appearance: NetworkConfig = NetworkConfig()
+    visibility: NetworkConfig = NetworkConfig()
     sh_degree: int = Field(8, ge=1, le=8)
     # The paper learns phi directly, its reference code in log space. Log once trained to black (FLIP
     # ~0.95: any asset, seed-dependent) until its start and loss were fixed (`AppearanceNetwork`,
@@ -109,8 +113,14 @@ class LodConfig(TrainedKindConfig):
 PRESETS: dict[str, dict] = {
     "quick": {
         "finest_resolution": 32,
-        "appearance": {"features_per_level": 2, "log2_table_size": 14, "width": 64, "depth": 2},
-        "visibility": {"features_per_level": 2, "log2_table_size": 14, "width": 64, "depth": 2},
+        "appearance": {
+            "grid": {"features_per_level": 2, "log2_table_size": 14},
+            "mlp": {"width": 64, "depth": 2},
+        },
+        "visibility": {
+            "grid": {"features_per_level": 2, "log2_table_size": 14},
+            "mlp": {"width": 64, "depth": 2},
+        },
         "sh_degree": 4,
         "batch_size": 2048,
         "train": {"steps": 60, "schedule": {"lr": 0.005}, "checkpoint_every": 30, "progress_every": 10},
@@ -120,14 +130,14 @@ PRESETS: dict[str, dict] = {
         "evaluation_max_height": 48,
     },
     "default": {
-        "appearance": {"features_per_level": 4, "log2_table_size": 17},
-        "visibility": {"features_per_level": 4, "log2_table_size": 17},
+        "appearance": {"grid": {"features_per_level": 4, "log2_table_size": 17}},
+        "visibility": {"grid": {"features_per_level": 4, "log2_table_size": 17}},
         "threshold_samples": 128,
     },
     "paper": {
         "finest_resolution": 512,
-        "appearance": {"features_per_level": 4, "log2_table_size": 19},
-        "visibility": {"features_per_level": 8, "log2_table_size": 19},
+        "appearance": {"grid": {"features_per_level": 4, "log2_table_size": 19}},
+        "visibility": {"grid": {"features_per_level": 8, "log2_table_size": 19}},
         "batch_size": 1 << 16,
         "train": {"steps": 10000, "schedule": {"lr": 0.005}, "checkpoint_every": 500, "progress_every": 50},
         "threshold_samples": 1000,

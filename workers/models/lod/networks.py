@@ -14,11 +14,9 @@ import math
 import torch
 from torch import Tensor, nn
 
-from workers.models.lod.config import LodConfig, NetworkSize
+from workers.models.lod.config import LodConfig
 from workers.nn.encodings.composite import SharedInputsEncoding
-from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.spherical_harmonics import SphericalHarmonics
-from workers.nn.mlp import MLP
 
 # Energy conservation bounds the integral of phi over w_i by the voxel's albedo (<= 1), so its mean over
 # uniform w_i, the training distribution, is at most 1/(4 pi); a mid-grey asset's is about 0.5/(4 pi).
@@ -26,17 +24,6 @@ PRIOR_THROUGHPUT = 0.5 / (4 * math.pi)
 # exp() of the log output stays above 0 (a relative loss divides by it) and far below anything visible...
 MIN_LOG_THROUGHPUT = math.log(1e-6)
 MAX_LOG_THROUGHPUT = 20.0  # ... and far below infinity, above any physical throughput
-
-
-def _hash_grid(size: NetworkSize, octaves: int, coarsest: int) -> HashGrid:
-    return HashGrid(
-        n_input_dims=3,
-        n_levels=octaves + size.extra_levels,
-        n_features_per_level=size.features_per_level,
-        log2_hashmap_size=size.log2_table_size,
-        base_resolution=coarsest,
-        per_level_scale=2.0,
-    )
 
 
 class AppearanceNetwork(nn.Module):
@@ -50,10 +37,10 @@ class AppearanceNetwork(nn.Module):
         super().__init__()
         self.log_output = config.appearance_output == "log"
         self.directions = SphericalHarmonics(config.sh_degree)
-        self.position = _hash_grid(config.appearance, octaves, coarsest)
         size = config.appearance
+        self.position = size.grid.build_on(size.lattice(octaves, coarsest))
         n_in = 2 * self.directions.n_output_dims + self.position.n_output_dims
-        self.mlp = MLP(n_in, 3, size.width, size.depth, activation="relu")
+        self.mlp = size.mlp.build(n_in, 3)
         output_layer = self.mlp.layers[-2]  # the last Linear (the output activation is the identity)
         nn.init.constant_(
             output_layer.bias, math.log(PRIOR_THROUGHPUT) if self.log_output else PRIOR_THROUGHPUT
@@ -72,9 +59,9 @@ class AppearanceNetwork(nn.Module):
 class VisibilityNetwork(nn.Module):
     def __init__(self, config: LodConfig, octaves: int, coarsest: int) -> None:
         super().__init__()
-        self.points = SharedInputsEncoding(_hash_grid(config.visibility, octaves, coarsest), n_inputs=2)
         size = config.visibility
-        self.mlp = MLP(self.points.n_output_dims, 1, size.width, size.depth, activation="relu")
+        self.points = SharedInputsEncoding(size.grid.build_on(size.lattice(octaves, coarsest)), n_inputs=2)
+        self.mlp = size.mlp.build(self.points.n_output_dims, 1)
 
     def forward(self, p_o: Tensor, p_i: Tensor) -> Tensor:
         """Logits (N,) that the segments between boundary points (cube coordinates) are unoccluded."""

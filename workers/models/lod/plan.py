@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workers.models.lod.config import LodConfig, NetworkSize
+from workers.models.lod.config import LodConfig, NetworkConfig
 from workers.render.voxels import padded_bounds
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.errors import SceneError
@@ -119,18 +119,16 @@ def choose_resolutions(scene: SceneSpec, config: LodConfig, extent: float) -> li
 
 
 def parameter_count(
-    size: NetworkSize, octaves: int, coarsest: int, n_inputs: int, n_outputs: int, encoded_points: int = 1
+    size: NetworkConfig, octaves: int, coarsest: int, n_inputs: int, n_outputs: int, encoded_points: int = 1
 ) -> int:
     """Trainable parameters of a hash grid (one level per octave) plus its MLP, which sees `n_inputs`
     other features and the grid's features of `encoded_points` points."""
-    rows = sum(
-        min(2**size.log2_table_size, (coarsest * 2**level + 1) ** 3)
-        for level in range(octaves + size.extra_levels)
-    )
-    n_in = n_inputs + encoded_points * (octaves + size.extra_levels) * size.features_per_level
-    layers = [n_in] + [size.width] * size.depth + [n_outputs]
+    levels, grid = octaves + size.extra_levels, size.grid
+    rows = sum(min(2**grid.log2_table_size, (coarsest * 2**level + 1) ** 3) for level in range(levels))
+    n_in = n_inputs + encoded_points * levels * grid.features_per_level
+    layers = [n_in] + [size.mlp.width] * size.mlp.depth + [n_outputs]
     mlp = sum((a + 1) * b for a, b in itertools.pairwise(layers))
-    return rows * size.features_per_level + mlp
+    return rows * grid.features_per_level + mlp
 
 
 def octaves(resolutions: list[int]) -> int:
@@ -160,11 +158,10 @@ def plan(scene: SceneRef, config: LodConfig) -> Plan:
             name="networks",
             choice=f"appearance {appearance:,} + visibility {visibility:,} parameters "
             f"({2 * (appearance + visibility) / 1e6:.2f} MB in float16)",
-            reason=f"hash grids of {n_oct} levels from {resolutions[-1]}^3, tables 2^"
-            f"{config.appearance.log2_table_size}/2^{config.visibility.log2_table_size}, MLPs "
-            f"{config.appearance.depth}x{config.appearance.width} and "
-            f"{config.visibility.depth}x{config.visibility.width}; sparsity per level is measured when "
-            f"the job voxelises and reported with the artifact",
+            reason=f"hash grids of {n_oct} levels from {resolutions[-1]}^3; appearance: "
+            f"{config.appearance.grid.describe()}, {config.appearance.mlp.describe()}; visibility: "
+            f"{config.visibility.grid.describe()}, {config.visibility.mlp.describe()}; sparsity per level "
+            "is measured when the job voxelises and reported with the artifact",
         )
     )
     seconds = config.train.steps * config.batch_size / TRAINING_SAMPLES_PER_SECOND
