@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 from pydantic import BaseModel
 
 from workers.nn.metrics import flip, psnr, relative_mse
@@ -138,6 +139,10 @@ class Report(BaseModel):
                 label=f"{self.kind} ({self.model.label})",
             )
             axes.set(xscale="log", yscale="log", xlabel="seconds per frame", ylabel=title, title=title)
+            for axis in (axes.xaxis, axes.yaxis):  # 1-2-5 labels: a decade alone may hold every point
+                axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                axis.set_major_formatter(FormatStrFormatter("%g"))
+                axis.set_minor_formatter(NullFormatter())
             axes.grid(True, which="both", alpha=0.3)
         axes.legend(fontsize=7)
         buffer = io.BytesIO()
