@@ -18,7 +18,7 @@ from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.server import GrpcServer
 from services.inference import images
 from services.inference.errors import MalformedBody
-from services.inference.service import ModelInfo
+from services.inference.service import ModelInfo, server_timing
 from services.inference.state import InferenceState
 from services.inference.wire import ArrayHeader, array_bytes, decode_array
 from workers.models.registry import QUERY, RENDER
@@ -81,6 +81,7 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
     def Render(self, request, context):
         params = json_format.MessageToDict(request.params)
         _, answer = self.service.call(request.artifact_id, RENDER, params, {})
+        context.set_trailing_metadata((("server-timing", server_timing(answer)),))
         media_type = images.media_type_for(request.media_type)
         return inference_pb2.RenderResponse(
             media_type=media_type, data=images.encode(answer.arrays["image"], media_type)

@@ -25,7 +25,15 @@ from services.inference.loader import Loaded, load_artifact
 from services.inference.metrics import InferenceMetrics
 from services.inference.settings import InferenceSettings
 from services.jobs.errors import JobServiceError
-from workers.models.registry import Answer
+from workers.models.registry import RENDER, Answer
+
+FRAME_SECONDS = "frame_seconds"  # in a render's meta: the model's time for the frame
+
+
+def server_timing(answer: Answer) -> str:
+    """The W3C Server-Timing value of a render's frame time: `frame;dur=<ms>`, sent by REST as a header
+    and by gRPC as metadata, which clients print."""
+    return f"frame;dur={answer.meta[FRAME_SECONDS] * 1000:.3f}"
 
 
 class ModelInfo(BaseModel):
@@ -85,10 +93,18 @@ class InferenceService:
 
     @staticmethod
     def _answer(loaded: Loaded, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
+        """The model's answer; a render's also says how long the model took to make it (its frame time)."""
+        start = time.perf_counter()
         try:
-            return loaded.model.answer(operation, params, arrays)
+            answer = loaded.model.answer(operation, params, arrays)
         except ValueError as error:  # a kind refuses input it cannot answer (e.g. an unknown layer)
+            field, colon, detail = str(error).partition(": ")  # "params.level: ..." names its field
+            if colon and field.startswith("params.") and " " not in field:
+                raise InvalidQuery(detail, field) from None
             raise InvalidQuery(str(error)) from None
+        if operation != RENDER:
+            return answer
+        return Answer(answer.arrays, {**answer.meta, FRAME_SECONDS: time.perf_counter() - start})
 
     def _count_batch(self, rows: int, requests: int) -> None:
         self.metrics.batch_rows.observe(rows)

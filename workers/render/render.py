@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.scene.compile import CompiledScene
+from workers.scene.spec import Camera
 
 MAX_PATHS_PER_ITEM = 1 << 16
 AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission", "path_length")
@@ -134,10 +135,12 @@ def render(
     scene: CompiledScene | PathTracer,
     settings: RenderSettings | None = None,
     progress: Callable[[RenderProgress], None] | None = None,
+    view: Camera | None = None,
 ) -> RenderResult:
+    """An image of the scene through `view` (default: the scene camera)."""
     settings = settings or RenderSettings()
     tracer = scene if isinstance(scene, PathTracer) else PathTracer(scene)
-    camera = PinholeCamera(tracer.scene.spec.camera, settings.width, settings.height)
+    camera = PinholeCamera(view or tracer.scene.spec.camera, settings.width, settings.height)
     plan = plan_render(camera, settings)
     accum = ImageAccumulator(plan, settings.aovs)
     start = time.perf_counter()

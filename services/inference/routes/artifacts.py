@@ -15,6 +15,7 @@ from services.api.auth import require
 from services.api.problems import PROBLEM_RESPONSES
 from services.inference import images, wire
 from services.inference.errors import MalformedBody
+from services.inference.service import server_timing
 from services.inference.state import StateDep
 from workers.models.registry import QUERY, RENDER
 
@@ -103,9 +104,10 @@ async def query(artifact_id: str, request: Request, state: StateDep) -> Response
 async def render(
     artifact_id: str, request: Request, state: StateDep, body: RenderBody | None = None
 ) -> Response:
-    """An image of the artifact, for kinds that produce images (`render`: its stored layers)."""
+    """An image of the artifact, for kinds that make one (a path-traced view takes `params.camera`:
+    position, target, up, fov, width, height); `Server-Timing: frame;dur=<ms>` says how long it took."""
     params = body.params if body else {}
     _, answer = await run_in_threadpool(state.service.call, artifact_id, RENDER, params, {})
     media_type = images.media_type_for(request.headers.get("accept"))
     data = await run_in_threadpool(images.encode, answer.arrays["image"], media_type)
-    return Response(data, media_type=media_type)
+    return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})

@@ -1,5 +1,6 @@
 """A `lod` artifact: the sparse grid with its thresholds and both networks in one safetensors file (the
-networks in float16, as the paper stores them), plus a JSON manifest (config, objects, LoDs).
+networks in float16, as the paper stores them), a JSON manifest (config, objects, LoDs) and the scene
+around the asset (`workers.scene.portable`: the asset's objects as stand-ins, whose place the LoD takes).
 
 `load` rebuilds everything exactly, and `aggregate` hands the path tracer the asset at any built LoD.
 """
@@ -10,6 +11,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import safetensors.numpy
 import torch
 
@@ -18,6 +20,8 @@ from workers.models.lod.grid import LodGrid
 from workers.models.lod.networks import LodNetworks
 from workers.models.lod.plan import octaves
 from workers.models.lod.traversal import LodAggregate
+from workers.scene.compile import CompiledScene
+from workers.scene.portable import portable_scene, save_scene
 
 MANIFEST = "lod.json"
 WEIGHTS = "lod.safetensors"
@@ -47,7 +51,8 @@ def build_networks(config: LodConfig, grid: LodGrid) -> LodNetworks:
     return LodNetworks(config, octaves(grid.resolutions), grid.resolutions[-1])
 
 
-def save(folder: Path, asset: LodAsset) -> dict[str, tuple[str, str]]:
+def save(folder: Path, asset: LodAsset, scene: CompiledScene) -> dict[str, tuple[str, str]]:
+    """Write the artifact of `asset`, prefiltered from `scene`; artifact name -> (path, media type)."""
     folder.mkdir(parents=True, exist_ok=True)
     tensors = dict(asset.grid.arrays())
     tensors.update(
@@ -60,7 +65,13 @@ def save(folder: Path, asset: LodAsset) -> dict[str, tuple[str, str]]:
     manifest = {"kind": "lod", "config": asset.config.model_dump(mode="json"), "objects": asset.objects}
     manifest["resolutions"] = asset.grid.resolutions
     (folder / MANIFEST).write_text(json.dumps(manifest, indent=2))
-    return {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON)}
+    local_bounds = {
+        g.name: np.stack([g.mesh.vertices.min(0), g.mesh.vertices.max(0)])
+        for g in scene.objects
+        if g.name in asset.objects
+    }
+    files = save_scene(folder, portable_scene(scene.spec, local_bounds))
+    return {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON), **files}
 
 
 def load(folder: Path) -> LodAsset:

@@ -1,14 +1,20 @@
-"""Serving a `lod` artifact: where world-space rays first scatter in the asset at a chosen LoD, and, given
-incident directions, the prefiltered throughput phi(w_o, w_i) of the voxel they scatter in.
+"""Serving a `lod` artifact.
 
-That is what a renderer needs to use the LoD in place of the asset (`traversal.LodAggregate` is the same
-code the path tracer runs); traversal here is deterministic (no stochastic termination), so the answer
-for a ray does not depend on the batch it was merged into.
+`query`: where world-space rays first scatter in the asset at a chosen LoD, and, given incident
+directions, the prefiltered throughput phi(w_o, w_i) of the voxel they scatter in. That is what a renderer
+needs to use the LoD in place of the asset (`traversal.LodAggregate` is the same code the path tracer
+runs); traversal here is deterministic (no stochastic termination), so the answer for a ray does not
+depend on the batch it was merged into.
+
+`render`: the asset at a LoD, path-traced in the scene the artifact keeps or alone under a grey sky
+(`workers.runtime.view_render`). Without `level`, the LoD is the one whose voxel is about a pixel at the
+camera's distance from the asset, as `plan` chooses LoDs for `view_distances`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
@@ -17,7 +23,29 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.lod.artifact import LodAsset, load
-from workers.models.registry import QUERY, Answer, ArraySpec, Operation
+from workers.models.lod.plan import resolution_at
+from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
+from workers.render.embree import SubsetRayScene
+from workers.render.integrator import PathTracer
+from workers.runtime.view_render import (
+    NEUTRAL,
+    SCENE,
+    ViewRender,
+    refuse_missing_scene,
+    render_view,
+    scene_bytes,
+)
+from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.portable import (
+    StoredScene,
+    framing_camera,
+    load_scene,
+    neutral_scene,
+    standin_shape,
+)
+from workers.scene.spec import Camera, Diffuse, SceneObject
+
+STANDIN = "lod asset"
 
 
 class LodQuery(BaseModel):
@@ -27,15 +55,73 @@ class LodQuery(BaseModel):
     optimal_thresholds: bool = True
 
 
-class LodModel:
-    def __init__(self, asset: LodAsset, device: str) -> None:
-        self.asset = asset
-        asset.networks.to(device)
-        self.nbytes = asset.network_bytes() + asset.grid.storage_bytes()
+class LodRender(ViewRender):
+    level: int | None = Field(
+        None, ge=0, description="the LoD (0 = finest built); default: a voxel is about a pixel"
+    )
+    optimal_thresholds: bool = True
 
-    def answer(self, operation: str, params: LodQuery, arrays: dict[str, np.ndarray]) -> Answer:
-        if params.level >= self.asset.grid.levels:
+
+@dataclass
+class _View:
+    """A scene to render the asset in: its triangles other than the asset's, and its default camera."""
+
+    scene: CompiledScene
+    others: SubsetRayScene
+    camera: Camera
+
+
+def _view(scene: CompiledScene, asset_objects: list[str], camera: Camera) -> _View:
+    asset = [o.index for o in scene.objects if o.name in asset_objects]
+    others = np.flatnonzero(~np.isin(scene.object_ids, asset))
+    return _View(scene, SubsetRayScene(scene.positions, others), camera)
+
+
+class LodModel:
+    def __init__(self, asset: LodAsset, stored: StoredScene, device: str) -> None:
+        self.asset, self.stored = asset, stored
+        asset.networks.to(device)
+        grid = asset.grid
+        self.bounds = np.stack([grid.lo, grid.lo + grid.extent])
+        neutral = neutral_scene(
+            [SceneObject(name=STANDIN, shape=standin_shape(self.bounds), material=STANDIN)],
+            {STANDIN: Diffuse()},
+        )
+        self.views = {NEUTRAL: _view(compile_scene(neutral), [STANDIN], framing_camera(self.bounds))}
+        if stored.spec is not None:
+            self.views[SCENE] = _view(compile_scene(stored.spec), list(stored.standins), stored.spec.camera)
+        scenes = sum(scene_bytes(v.scene) for v in self.views.values())
+        self.nbytes = asset.network_bytes() + grid.storage_bytes() + scenes
+
+    def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
+        if operation == RENDER:
+            return self._render(params)
+        return self._query(params, arrays)
+
+    def _checked_level(self, level: int) -> int:
+        if level >= self.asset.grid.levels:
             raise ValueError(f"params.level: this artifact has LoDs 0..{self.asset.grid.levels - 1}")
+        return level
+
+    def level_for(self, camera: Camera) -> int:
+        """The LoD whose voxel is about one pixel of `camera` at its distance from the asset's centre."""
+        grid = self.asset.grid
+        distance = float(np.linalg.norm(self.bounds.mean(0) - np.asarray(camera.position)))
+        return grid.resolutions.index(resolution_at(camera, distance, grid.extent, grid.resolutions))
+
+    def _render(self, params: LodRender) -> Answer:
+        if params.background == SCENE:
+            refuse_missing_scene(self.stored)
+        view = self.views[params.background]
+        camera = params.camera.over(view.camera)
+        level = self.level_for(camera) if params.level is None else self._checked_level(params.level)
+        aggregate = self.asset.aggregate(level, params.optimal_thresholds)
+        tracer = PathTracer(view.scene, intersector=view.others, aggregate=aggregate)
+        image = render_view(tracer, params, camera).image
+        return Answer({"image": image}, {"level": level, "resolution": self.asset.grid.resolutions[level]})
+
+    def _query(self, params: LodQuery, arrays: dict[str, np.ndarray]) -> Answer:
+        self._checked_level(params.level)
         aggregate = self.asset.aggregate(params.level, params.optimal_thresholds, stochastic=False)
         origins, directions = arrays["origins"], arrays["directions"]
         directions = directions / np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
@@ -69,11 +155,12 @@ class LodInference:
                 "incident": ArraySpec("float64", (None, 3), required=False),
             },
             batched=True,
-        )
+        ),
+        RENDER: Operation(params=LodRender),
     }
 
     def load(self, folder: Path, device: str) -> LodModel:
-        return LodModel(load(folder), device)
+        return LodModel(load(folder), load_scene(folder), device)
 
 
 INFERENCE = LodInference()

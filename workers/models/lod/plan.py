@@ -20,7 +20,7 @@ from workers.runtime.contract import Plan, PlanItem
 from workers.scene.errors import SceneError
 from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
-from workers.scene.spec import SceneSpec
+from workers.scene.spec import Camera, SceneSpec
 
 TRAINING_SAMPLES_PER_SECOND = 60_000.0  # voxel samples per second, one idle 2-core CPU, default sizes
 THRESHOLD_SAMPLES_PER_SECOND = 300_000.0
@@ -104,18 +104,22 @@ def choose_resolutions(scene: SceneSpec, config: LodConfig, extent: float) -> li
     allowed = config.resolutions
     if not config.view_distances:
         return [(r, "every LoD (no view_distances given)") for r in allowed]
-    camera = scene.camera
     wanted: dict[int, list[float]] = {}
     for distance in config.view_distances:
-        footprint = 2 * distance * math.tan(math.radians(camera.fov) / 2) / camera.height
-        ideal = extent / max(footprint, 1e-300)
-        best = min(allowed, key=lambda r: abs(math.log2(r) - math.log2(max(ideal, 1e-300))))
-        wanted.setdefault(best, []).append(distance)
+        wanted.setdefault(resolution_at(scene.camera, distance, extent, allowed), []).append(distance)
     return [
         (r, f"a voxel is about a pixel at distance {', '.join(f'{d:g}' for d in wanted[r])}")
         for r in allowed
         if r in wanted
     ]
+
+
+def resolution_at(camera: Camera, distance: float, extent: float, allowed: list[int]) -> int:
+    """The resolution of `allowed` nearest (in octaves) to the one whose voxel, in a cube of side `extent`,
+    covers about one pixel of `camera` at `distance`."""
+    footprint = 2 * distance * math.tan(math.radians(camera.fov) / 2) / camera.height
+    ideal = extent / max(footprint, 1e-300)
+    return min(allowed, key=lambda r: abs(math.log2(r) - math.log2(max(ideal, 1e-300))))
 
 
 def parameter_count(

@@ -66,7 +66,7 @@ class LodMethod:
             on_level=lambda level: (ctx.raise_if_cancelled(), ctx.log(f"thresholds of LoD {level} done")),
         )  # fmt: skip
         asset = LodAsset(config, chosen.names, grid, networks)
-        files = artifact.save(ctx.output_dir, asset)
+        files = artifact.save(ctx.output_dir, asset, scene)
 
         ctx.log("measuring every LoD against path tracing")
         levels = evaluate_levels(

@@ -1,7 +1,8 @@
 """An LSNIF artifact: per trained object its voxels, feature table and MLP (safetensors, the table and the
 MLP in float16 as the paper's sizes assume; see `LsnifObject.round_to_storage`), plus a JSON
 manifest with the config, the material lists and the instance mapping (which scene objects use which
-network, with their transforms at training time).
+network, with their transforms at training time) and the materials' definitions, and the scene the
+objects were trained in (`workers.scene.portable`: objects read from files become stand-ins).
 
 The grid's vertex keys are not stored: they follow from the voxels (see `encoding`). Loading rebuilds
 each object exactly, and `intersector` places the networks wherever a scene puts the same-named objects,
@@ -17,12 +18,15 @@ from pathlib import Path
 import numpy as np
 import safetensors.numpy
 import torch
+from pydantic import TypeAdapter
 
 from workers.models.lsnif.config import LsnifConfig
 from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
 from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.render.voxels import VoxelGrid
 from workers.scene.compile import CompiledScene
+from workers.scene.portable import portable_scene, reads_file, save_scene, untextured
+from workers.scene.spec import Material, SceneSpec
 
 MANIFEST = "lsnif.json"
 SAFETENSORS = "application/vnd.neuralbake.safetensors"
@@ -59,8 +63,11 @@ def import_object(tensors: dict[str, np.ndarray], resolution: int, n_materials: 
     return model.eval()
 
 
-def save(folder: Path, config: LsnifConfig, models: dict[str, LsnifObject], placements: dict) -> dict:
-    """Write `objects/<name>.safetensors` and the manifest; returns artifact name -> (path, media type).
+def save(
+    folder: Path, config: LsnifConfig, models: dict[str, LsnifObject], placements: dict, scene: SceneSpec
+) -> dict:
+    """Write `objects/<name>.safetensors`, the manifest and the scene; returns artifact name -> (path,
+    media type).
 
     `placements`: object name -> {"materials": [...], "instances": [4x4 matrices as lists]}.
     """
@@ -73,9 +80,17 @@ def save(folder: Path, config: LsnifConfig, models: dict[str, LsnifObject], plac
     manifest = {
         "config": config.model_dump(mode="json"),
         "objects": {name: {"file": f"objects/{name}.safetensors", **placements[name]} for name in models},
+        "materials": {
+            name: untextured(scene.materials[name]).model_dump(mode="json")
+            for name in sorted({m for p in placements.values() for m in p["materials"]})
+        },
     }
     (folder / MANIFEST).write_text(json.dumps(manifest, indent=2))
     files[MANIFEST] = (str(folder / MANIFEST), JSON)
+    from_files = {
+        o.name: models[o.name].grid.bounds for o in scene.objects if o.name in models and reads_file(o)
+    }
+    files.update(save_scene(folder, portable_scene(scene, from_files)))
     return files
 
 
@@ -85,6 +100,7 @@ class LsnifArtifact:
     models: dict[str, LsnifObject]
     materials: dict[str, list[str]]  # object name -> material names, by the network's material index
     instances: dict[str, list[np.ndarray]]  # object name -> local-to-world matrices at training time
+    material_specs: dict[str, Material]  # the definitions of the materials' names, without textures
 
     def intersector(self, scene: CompiledScene, robust: bool = True) -> NeuralIntersector:
         """Embree for the scene's other objects, these networks for every instance of same-named ones."""
@@ -109,4 +125,5 @@ def load(folder: Path | str) -> LsnifArtifact:
         models[name] = import_object(tensors, config.voxel_resolution, len(entry["materials"]), config)
         materials[name] = entry["materials"]
         instances[name] = [np.asarray(m, np.float64) for m in entry["instances"]]
-    return LsnifArtifact(config, models, materials, instances)
+    specs = TypeAdapter(dict[str, Material]).validate_python(manifest.get("materials", {}))
+    return LsnifArtifact(config, models, materials, instances, specs)

@@ -1,10 +1,15 @@
-"""Serving an `lsnif` artifact: closest hits of world-space rays against every trained object, placed at
-the instances it was trained with.
+"""Serving an `lsnif` artifact.
 
-The artifact holds networks, not the scene around them, so the query reuses the path tracer's
-`NeuralIntersector` over an empty triangle set: its broad phase, instance-local rays and one batched
-inference call per network are exactly what the renderer runs. Each instance gets an empty triangle
-range at its own index, so a hit's `prim` names the instance that was hit.
+`query`: closest hits of world-space rays against every trained object, placed at the instances it was
+trained with. It reuses the path tracer's `NeuralIntersector` over an empty triangle set: its broad
+phase, instance-local rays and one batched inference call per network are exactly what the renderer
+runs. Each instance gets an empty triangle range at its own index, so a hit's `prim` names the instance
+that was hit.
+
+`render`: the trained objects path-traced with LSNIF answering secondary and shadow rays, in the scene
+the artifact keeps or alone under a grey sky (`workers.runtime.view_render`). Camera rays go to the
+scene's triangles, as the paper rasterises them, when the artifact keeps them, and to the networks
+otherwise (`camera_rays`). Without triangles, the networks draw the silhouettes.
 """
 
 from __future__ import annotations
@@ -12,14 +17,30 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.lsnif.artifact import LsnifArtifact, load
 from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
-from workers.models.registry import QUERY, Answer, ArraySpec, Operation
+from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
+from workers.render.embree import RayScene
+from workers.render.integrator import PathTracer
+from workers.render.intersector import Intersector
+from workers.runtime.view_render import (
+    NEUTRAL,
+    SCENE,
+    ViewRender,
+    refuse_missing_scene,
+    render_view,
+    scene_bytes,
+)
+from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.portable import StoredScene, framing_camera, load_scene, neutral_scene, standin_shape
+from workers.scene.spec import Camera, Diffuse, SceneObject, Transform
+
+TRIANGLES, LSNIF = "triangles", "lsnif"
 
 
 class RayQuery(BaseModel):
@@ -36,10 +57,41 @@ class _NoTriangles:
     positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3), np.float32))
 
 
-class LsnifModel:
-    """An artifact's networks on `device`, answering world-space ray queries."""
+class LsnifRender(ViewRender):
+    camera_rays: Literal["triangles", "lsnif"] | None = Field(
+        None, description="what answers camera rays; default: the triangles when the artifact keeps them"
+    )
 
-    def __init__(self, artifact: LsnifArtifact, device: str) -> None:
+
+@dataclass
+class _View:
+    """A scene with the networks in it; `triangles` answers camera rays when it holds the objects' own."""
+
+    scene: CompiledScene
+    networks: Intersector
+    triangles: Intersector | None
+    camera: Camera
+
+
+def _neutral_spec(artifact: LsnifArtifact) -> tuple[list[SceneObject], dict]:
+    """The trained objects as stand-ins at their training placements, and their materials."""
+    objects = [
+        SceneObject(
+            name=name,
+            shape=standin_shape(model.grid.bounds),
+            material=artifact.materials[name][0],
+            instances=[Transform(matrix=m.tolist()) for m in artifact.instances[name]],
+        )
+        for name, model in sorted(artifact.models.items())
+    ]
+    names = {m for ms in artifact.materials.values() for m in ms}
+    return objects, {name: artifact.material_specs.get(name, Diffuse()) for name in sorted(names)}
+
+
+class LsnifModel:
+    """An artifact's networks on `device`, answering world-space ray queries and renders."""
+
+    def __init__(self, artifact: LsnifArtifact, stored: StoredScene, device: str) -> None:
         self.objects = sorted(artifact.models)
         self.materials = sorted({m for names in artifact.materials.values() for m in names})
         instances, self.instance_object = [], []
@@ -54,11 +106,45 @@ class LsnifModel:
                 self.instance_object.append(number)
         self.instance_object = np.array(self.instance_object, np.int32)
         self.intersector = NeuralIntersector(_NoTriangles(), instances)
+        self.stored = stored
+        self.views = {NEUTRAL: self._neutral_view(artifact)}
+        if stored.spec is not None:
+            scene = compile_scene(stored.spec)
+            own = not set(stored.standins) & set(artifact.models)
+            triangles = RayScene(scene.positions) if own else None
+            self.views[SCENE] = _View(scene, artifact.intersector(scene), triangles, stored.spec.camera)
         tensors = [t for m in artifact.models.values() for t in (*m.parameters(), *m.buffers())]
         voxels = sum(m.grid.occupied.nbytes for m in artifact.models.values())
-        self.nbytes = sum(t.numel() * t.element_size() for t in tensors) + voxels
+        scenes = sum(scene_bytes(v.scene) for v in self.views.values())
+        self.nbytes = sum(t.numel() * t.element_size() for t in tensors) + voxels + scenes
+
+    def _neutral_view(self, artifact: LsnifArtifact) -> _View:
+        scene = compile_scene(neutral_scene(*_neutral_spec(artifact)))
+        bounds = np.stack([i.world_bounds for i in self.intersector.instances])
+        camera = framing_camera(np.stack([bounds[:, 0].min(0), bounds[:, 1].max(0)]))
+        return _View(scene, artifact.intersector(scene), None, camera)
 
     def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
+        if operation == RENDER:
+            return self._render(params)
+        return self._query(arrays)
+
+    def _render(self, params: LsnifRender) -> Answer:
+        if params.background == SCENE:
+            refuse_missing_scene(self.stored)
+        view = self.views[params.background]
+        camera_rays = params.camera_rays or (TRIANGLES if view.triangles is not None else LSNIF)
+        if camera_rays == TRIANGLES and view.triangles is None:
+            raise ValueError(
+                "params.camera_rays: this view holds no triangles of the trained objects (their meshes "
+                "are not in the artifact); ask for camera_rays: lsnif"
+            )
+        primary = view.triangles if camera_rays == TRIANGLES else None
+        tracer = PathTracer(view.scene, intersector=view.networks, primary=primary)
+        camera = params.camera.over(view.camera)
+        return Answer({"image": render_view(tracer, params, camera).image}, {"camera_rays": camera_rays})
+
+    def _query(self, arrays: dict[str, np.ndarray]) -> Answer:
         hits = self.intersector.intersect(arrays["origins"], arrays["directions"])
         hit = hits.found
         instance = np.maximum(hits.prim, 0)
@@ -84,11 +170,12 @@ class LsnifInference:
                 "directions": ArraySpec("float64", (None, 3)),
             },
             batched=True,
-        )
+        ),
+        RENDER: Operation(params=LsnifRender),
     }
 
     def load(self, folder: Path, device: str) -> LsnifModel:
-        return LsnifModel(load(folder), device)
+        return LsnifModel(load(folder), load_scene(folder), device)
 
 
 INFERENCE = LsnifInference()

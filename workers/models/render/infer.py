@@ -2,6 +2,10 @@
 
 `query` returns whole layers, or with `pixels` (N, 2) as (x, y) only those pixels' values; `render`
 returns one layer as the image. Nothing is traced: the artifact is the reference image a job made.
+
+`render` accepts `params.camera`, so that one call renders an artifact of any kind, but it has only the
+view its job rendered. The artifact does not record that view, so a camera's position, target, up and
+fov are not checked. A width or height other than the stored image's is refused.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
+from workers.runtime.view_render import CameraParams
 from workers.scene.image_io import read_exr_channels
 
 MAIN_LAYER = "image"
@@ -29,6 +34,9 @@ class LayerRender(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     layer: str = Field(MAIN_LAYER, description="`image` (radiance) or a G-buffer such as `albedo`")
+    camera: CameraParams = Field(
+        default_factory=CameraParams, description="the stored view only: a size, if given, must be its own"
+    )
 
 
 def _read_layer(path: Path) -> np.ndarray:
@@ -49,9 +57,23 @@ class RenderModel:
             )
         return self.layers[name]
 
+    def _stored_view(self, params: LayerRender) -> np.ndarray:
+        image = self._layer(params.layer, "layer")
+        height, width = image.shape[:2]
+        for field, asked, stored in (
+            ("width", params.camera.width, width),
+            ("height", params.camera.height, height),
+        ):
+            if asked is not None and asked != stored:
+                raise ValueError(
+                    f"params.camera.{field}: this artifact holds one {width}x{height} view; it cannot be "
+                    f"rendered at {field} {asked}"
+                )
+        return image
+
     def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
         if operation == RENDER:
-            return Answer(arrays={"image": self._layer(params.layer, "layer")})
+            return Answer(arrays={"image": self._stored_view(params)})
         names = params.layers or sorted(self.layers)
         chosen = {name: self._layer(name, "layers") for name in names}
         pixels = arrays.get("pixels")
