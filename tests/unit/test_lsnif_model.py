@@ -249,9 +249,9 @@ def test_artifact_round_trip_answers_identically(tmp_path, compiled):
     assert stored["grid.table"].dtype == np.float16 and stored["mlp.layers.0.weight"].dtype == np.float16
     assert model.size_bytes() == sum(v.nbytes for v in stored.values())  # counts what the file holds
     files = artifact.save(
-        tmp_path, QUICK, {"ball": model}, {"ball": {"materials": ["white"], "instances": []}}
+        tmp_path, QUICK, {"ball": model}, {"ball": {"materials": ["white"], "instances": []}}, compiled.spec
     )
-    assert set(files) == {"objects/ball.safetensors", "lsnif.json"}
+    assert set(files) == {"objects/ball.safetensors", "lsnif.json", "scene.json"}
     loaded = artifact.load(tmp_path)
     rng = np.random.default_rng(5)
     origins, directions = rng.normal(size=(300, 3)), rng.normal(size=(300, 3))

@@ -12,7 +12,7 @@ so moved or re-instanced objects need no retraining.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -100,7 +100,8 @@ class LsnifArtifact:
     models: dict[str, LsnifObject]
     materials: dict[str, list[str]]  # object name -> material names, by the network's material index
     instances: dict[str, list[np.ndarray]]  # object name -> local-to-world matrices at training time
-    material_specs: dict[str, Material]  # the definitions of the materials' names, without textures
+    # the definitions of the material names, without textures (a neutral render's materials)
+    material_specs: dict[str, Material] = field(default_factory=dict)
 
     def intersector(self, scene: CompiledScene, robust: bool = True) -> NeuralIntersector:
         """Embree for the scene's other objects, these networks for every instance of same-named ones."""
