@@ -1,9 +1,12 @@
 """A `lod` artifact served by `nbake serve-inference`: first scattering events of rays at a chosen LoD and
 the voxels' prefiltered throughput, equal to the kind's in-process `infer`; requests with and without
-the optional `incident` input arriving together are answered separately, each correctly."""
+the optional `incident` input arriving together are answered separately, each correctly. Renders of the
+asset at a LoD, in the scene the artifact keeps or alone, equal the in-process ones; the LoD follows the
+camera's distance when none is asked for; an artifact without its scene renders only alone."""
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
@@ -14,14 +17,21 @@ from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import decode_binary
 from tests.integration.test_inference_server import (
+    SMALL_VIEW,
     Server,
     binary_query,
+    exr_pixels,
+    frame_ms,
     install_tokens,
+    rendered_in_process,
     run_and_publish,
     start_server,
 )
-from workers.models.lod.infer import LodQuery
+from workers.models.lod.infer import LodQuery, LodRender
+from workers.models.registry import get_inference
 from workers.scene.builtin import get_builtin
+from workers.scene.portable import StoredScene, load_scene, save_scene
+from workers.scene.spec import Camera
 
 
 @pytest.fixture(scope="module")
@@ -88,3 +98,60 @@ def test_requests_with_and_without_optional_inputs_are_not_merged(server):
             assert set(answer) == set(reference)
             for name, value in reference.items():
                 np.testing.assert_array_equal(answer[name], value, err_msg=name)
+
+
+def test_lod_renders_a_chosen_lod_in_its_scene_or_alone(server):
+    artifact = server.lsnif  # the fixture's lod artifact
+    views = [
+        SMALL_VIEW | {"level": 0},
+        SMALL_VIEW | {"level": 2},
+        SMALL_VIEW | {"level": 2, "background": "neutral"},
+    ]
+    images = []
+    with server.client() as client:
+        for params in views:
+            response = client.post(f"/v1/artifacts/{artifact.artifact_id}:render", json={"params": params})
+            assert response.status_code == 200, response.text
+            assert frame_ms(response) > 0
+            images.append(exr_pixels(response.content, server.data_dir))
+            np.testing.assert_array_equal(
+                images[-1], rendered_in_process(artifact, params), err_msg=str(params)
+            )
+        too_fine = client.post(
+            f"/v1/artifacts/{artifact.artifact_id}:render", json={"params": SMALL_VIEW | {"level": 3}}
+        )
+        assert too_fine.status_code == 422 and too_fine.json()["field"] == "params.level"
+    assert not np.array_equal(images[0], images[1]) and not np.array_equal(images[1], images[2])
+    assert images[2][0, 0] == pytest.approx([0.5, 0.5, 0.5])  # the grey sky behind the asset alone
+
+
+def test_the_lod_follows_the_camera_distance(server):
+    """A voxel of the chosen LoD is about a pixel: 32^3 near, 8^3 far away (as `plan` picks LoDs)."""
+    model = server.lsnif.in_process()
+    centre = model.bounds.mean(0)
+    away = np.array([0.0, 0.3, 1.0]) / np.linalg.norm([0.0, 0.3, 1.0])
+
+    def camera(distance: float, height: int) -> dict:
+        return {"position": tuple(centre + distance * away), "target": tuple(centre), "height": height}
+
+    assert [model.level_for(Camera(**camera(d, 32))) for d in (0.5, 4.0, 60.0)] == [0, 1, 2]
+    assert model.level_for(Camera(**camera(4.0, 8))) == 2  # fewer, larger pixels
+    near = {"camera": camera(0.5, 16) | {"width": 16}, "spp": 1}
+    answer = model.answer("render", LodRender.model_validate(near), {})
+    assert answer.meta["level"] == model.level_for(Camera(**camera(0.5, 16))) == 0
+
+
+def test_an_artifact_without_its_scene_renders_the_asset_alone(server, tmp_path):
+    folder = tmp_path / "lod"
+    shutil.copytree(server.lsnif.folder, folder)
+    reason = "the scene reads files from the job's folder (objects[0].shape.path)"
+    save_scene(folder, StoredScene(None, reason=reason))
+    assert load_scene(folder).spec is None
+    model = get_inference("lod").load(folder, "cpu")
+    with pytest.raises(
+        ValueError, match=r"params.background: .*objects\[0\]\.shape\.path.*background: neutral"
+    ):
+        model.answer("render", LodRender.model_validate(SMALL_VIEW), {})
+    alone = model.answer("render", LodRender.model_validate(SMALL_VIEW | {"background": "neutral"}), {})
+    expected = rendered_in_process(server.lsnif, SMALL_VIEW | {"background": "neutral"})
+    np.testing.assert_array_equal(alone.arrays["image"], expected)

@@ -293,11 +293,87 @@ def test_render_artifact_returns_its_stored_images(server):
         whole = client.post(f"/v1/artifacts/{artifact_id}:query", json={"params": {"layers": ["albedo"]}})
         assert whole.status_code == 200 and whole.json()["arrays"]["albedo"]["shape"] == [24, 32, 3]
 
-        unsupported = client.post(f"/v1/artifacts/{server.lsnif.artifact_id}:render")
-        assert unsupported.status_code == 400
-        assert "'lsnif' artifact, which does not support render" in unsupported.json()["detail"]
         layer = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": {"layer": "nope"}})
         assert layer.status_code == 422 and "albedo" in layer.json()["detail"]
+
+
+def test_render_artifact_takes_a_camera_of_its_own_size_only(server):
+    artifact_id = server.render.artifact_id
+    stored = read_exr(server.render.folder / "image.exr")
+    with server.client() as client:
+        own = {"position": [0, 1, 4], "width": 32, "height": 24}
+        response = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": {"camera": own}})
+        assert response.status_code == 200, response.text
+        np.testing.assert_array_equal(exr_pixels(response.content, server.data_dir), stored)
+        assert frame_ms(response) >= 0
+        other = {"camera": {"width": 64}}
+        refused = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": other})
+        assert refused.status_code == 422 and refused.json()["field"] == "params.camera.width"
+        assert "one 32x24 view" in refused.json()["detail"]
+
+
+# ---------------------------------------------------------------------------------------------- renders
+
+SMALL_VIEW = {"camera": {"width": 16, "height": 12}, "spp": 2}
+
+
+def frame_ms(response: httpx.Response) -> float:
+    """The frame time of a render, from its `Server-Timing: frame;dur=<ms>` header."""
+    name, _, duration = response.headers["server-timing"].partition(";dur=")
+    assert name == "frame"
+    return float(duration)
+
+
+def exr_pixels(content: bytes, folder: Path) -> np.ndarray:
+    path = folder / "answer.exr"
+    path.write_bytes(content)
+    return read_exr(path)
+
+
+def rendered_in_process(artifact: Artifact, params: dict) -> np.ndarray:
+    spec = get_inference(artifact.kind).operations["render"]
+    return artifact.in_process().answer("render", spec.params.model_validate(params), {}).arrays["image"]
+
+
+def test_lsnif_renders_its_objects_in_their_scene_or_alone(server):
+    artifact_id = server.lsnif.artifact_id
+    views = {
+        "scene, camera rays on triangles": SMALL_VIEW,
+        "scene, camera rays on lsnif": SMALL_VIEW | {"camera_rays": "lsnif"},
+        "neutral background": SMALL_VIEW | {"background": "neutral"},
+    }
+    images = {}
+    with server.client() as client:
+        for name, params in views.items():
+            response = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": params})
+            assert response.status_code == 200, f"{name}: {response.text}"
+            assert frame_ms(response) > 0
+            images[name] = exr_pixels(response.content, server.data_dir)
+            assert images[name].shape == (12, 16, 3)
+            expected_image = rendered_in_process(server.lsnif, params)
+            np.testing.assert_array_equal(images[name], expected_image, err_msg=name)
+        for field, params in (
+            ("params.camera_rays", views["neutral background"] | {"camera_rays": "triangles"}),
+            ("params.camera", {"camera": {"position": [0, 0, 0], "target": [0, 0, 0]}}),
+            ("params.spp", {"spp": 0}),
+        ):
+            response = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": params})
+            assert response.status_code == 422 and response.json()["field"] == field, response.text
+    scene, lsnif_primary, neutral = images.values()
+    assert not np.array_equal(scene, lsnif_primary)  # the networks, not the triangles, drew the objects
+    assert not np.array_equal(scene, neutral)
+
+
+def test_render_frame_time_travels_as_grpc_metadata(server):
+    request = inference_pb2.RenderRequest(artifact_id=server.lsnif.artifact_id, media_type="image/png")
+    request.params.update(SMALL_VIEW | {"spp": 1})
+    with grpc.insecure_channel(server.grpc_target) as channel:
+        stub = inference_pb2_grpc.InferenceServiceStub(channel)
+        auth = (("authorization", f"Bearer {TOKENS['read']}"),)
+        reply, call = stub.Render.with_call(request, metadata=auth, timeout=60)
+    assert reply.media_type == "image/png" and reply.data.startswith(b"\x89PNG")
+    timing = dict(call.trailing_metadata())["server-timing"]
+    assert timing.startswith("frame;dur=") and float(timing.removeprefix("frame;dur=")) > 0
 
 
 # ---------------------------------------------------------------------------------------------- cache
