@@ -115,8 +115,10 @@ def test_load_models_query_and_render(client, server):
     assert whole["albedo"].shape == (32, 32, 3)
 
     image = client.render(artifact)
-    assert image.media_type == "image/x-exr"
+    assert image.media_type == "image/x-exr" and image.frame_time_s is not None and image.frame_time_s >= 0
     np.testing.assert_array_equal(image.pixels(), server.stored)
+    own_view = client.render(artifact, camera={"position": [0, 1, 4.0], "width": 32, "height": 32})
+    np.testing.assert_array_equal(own_view.pixels(), server.stored)  # a render artifact has one view
     png = client.render(artifact, params={"layer": "albedo"}, image_format="png")
     assert png.media_type == "image/png" and png.data.startswith(b"\x89PNG")
 
@@ -127,9 +129,9 @@ def test_inference_errors_are_typed(client, server):
         client.render(artifact, params={"layer": "nope"})
     assert unknown_layer.value.status == 422 and "albedo" in unknown_layer.value.detail
     camera = {"position": np.array([0, 1, 4.0]), "target": [0, 1, 0], "fov": 40, "width": 8, "height": 8}
-    with pytest.raises(InvalidRequest) as no_view:  # the camera travels as params.camera
+    with pytest.raises(InvalidRequest) as other_size:  # the camera travels as params.camera
         client.render(artifact, camera=camera)
-    assert no_view.value.field == "params.camera"
+    assert other_size.value.field == "params.camera.width"
     with pytest.raises(InvalidRequest) as bad_shape:
         client.query(artifact, {"pixels": np.zeros((4, 3), np.int64)})
     assert bad_shape.value.field == "arrays.pixels"
@@ -217,7 +219,10 @@ def test_nbake_render_writes_exr_and_png(env, server, tmp_path):
     with Image.open(tmp_path / "albedo.png") as opened:
         assert opened.size == (32, 32)
 
+    assert line["frame_time_ms"] >= 0
     camera = nbake(env, "render", artifact, "--camera", "{position: [0, 1, 4]}", "-o", tmp_path / "v.png")
-    assert camera.returncode == 2 and "params.camera" in camera.stderr
+    assert camera.returncode == 0, camera.stderr
+    resized = nbake(env, "render", artifact, "--camera", "{width: 8, height: 8}", "-o", tmp_path / "v.png")
+    assert resized.returncode == 2 and "params.camera.width" in resized.stderr
     unreachable = env | {"NBAKE_INFERENCE_URL": f"http://127.0.0.1:{free_port()}"}
     assert nbake(unreachable, "render", artifact, "-o", tmp_path / "x.exr").returncode == 4
