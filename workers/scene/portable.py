@@ -40,7 +40,7 @@ NEUTRAL_RADIANCE = 0.5  # a grey sky lighting the model from every direction
 NEUTRAL_SUN = DirectionalLight(direction=(0.4, -1.0, -0.6), irradiance=(2.0, 2.0, 2.0))
 UNTEXTURED_BASE = (0.5, 0.5, 0.5)
 # An icosahedron's inradius over its circumradius: the stand-in's triangles enclose its bounding sphere.
-ICOSAHEDRON_INRADIUS = 0.7947
+ICOSAHEDRON_INRADIUS = math.sqrt((5 + 2 * math.sqrt(5)) / 15)  # 0.7947
 FRAMING_DIRECTION = np.array([0.45, 0.35, 1.0])  # from the model's centre towards a default camera
 
 
@@ -80,7 +80,7 @@ def file_references(spec: SceneSpec) -> list[str]:
     fields = [f"objects[{i}].shape.path" for i, obj in enumerate(spec.objects) if reads_file(obj)]
     for name, material in spec.materials.items():
         fields += [
-            f"materials.{name}.{field}"
+            f"materials.{name}.{field}.path"
             for field in ("reflectance", "diffuse")
             if isinstance(getattr(material, field, None), ImageTexture)
         ]
