@@ -5,8 +5,15 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+import safetensors.torch
+
 from workers.driver.jobs import JobEvent, JobOutcome, JobSpec, run_job
 from workers.models.registry import get_kind
+from workers.runtime import training_state
+from workers.runtime.checkpoints import CheckpointStore
+from workers.runtime.contract import JobContext, imported
+from workers.runtime.pipeline import Trainable, round_to_storage
+from workers.scene.reference import SceneRef
 from workers.scene.spec import SceneSpec
 
 
@@ -19,9 +26,11 @@ def run_kind_job(
     preset: str = "quick",
     seed: int = 0,
     events: list[JobEvent] | None = None,
+    cancel_after_step: int | None = None,
 ) -> tuple[JobSpec, JobOutcome]:
     """A `kind` job of `preset` + `overrides` on `scene`, checkpoints in folder/checkpoints and the artifact's
-    files in folder/out; its events are appended to `events`."""
+    files in folder/out; its events are appended to `events`. With `cancel_after_step`, a user cancels the
+    job when it reports progress at or past that step (it stops at its next progress report)."""
     config = get_kind(kind).resolve_config(preset, overrides or {})
     spec = JobSpec(
         job_id=f"{kind}-{seed}",
@@ -32,5 +41,36 @@ def run_kind_job(
         checkpoint_dir=str(folder / "checkpoints"),
         output_dir=str(folder / "out"),
     )
-    sink = events.append if events is not None else (lambda event: None)
-    return spec, run_job(spec, sink, threading.Event())
+    cancel = threading.Event()
+
+    def sink(event: JobEvent) -> None:
+        if events is not None:
+            events.append(event)
+        if cancel_after_step is not None and event.type == "progress" and event.step >= cancel_after_step:
+            cancel.set()
+
+    return spec, run_job(spec, sink, cancel)
+
+
+def trained_models(spec: JobSpec) -> list[Trainable]:
+    """The job's trainables as its kind builds them, holding the weights of their last checkpoints rounded
+    to their stored precision, as the pipeline holds them when the method exports: what the artifact was
+    written from."""
+    kind = get_kind(spec.kind)
+    ctx = JobContext(
+        job_id=spec.job_id,
+        scene=SceneRef.from_json(spec.scene, spec.scene_dir),
+        config=kind.config_model.model_validate(spec.config),
+        seed=spec.seed,
+        output_dir=Path(spec.output_dir),
+        checkpoints=CheckpointStore(spec.checkpoint_dir),
+    )
+    trainables = imported(kind.method)().trainables(ctx)
+    for trainable in trainables:
+        store = ctx.checkpoints.sub(trainable.name) if trainable.name else ctx.checkpoints
+        files = store.load(store.latest())
+        trainable.model.load_state_dict(safetensors.torch.load(files[training_state.MODEL_FILE]))
+        if trainable.stored_dtype is not None:
+            round_to_storage(trainable.model, trainable.stored_dtype)
+        trainable.model.eval()
+    return trainables

@@ -61,7 +61,6 @@ def test_hdr_images_and_tonemaps(image):
 def test_accepts_tensors_and_rejects_mismatched_shapes(image):
     t = torch.from_numpy(image).requires_grad_()
     assert psnr(t, t * 0.9) == pytest.approx(psnr(image, image * 0.9))
-    assert math.isfinite(flip(t, torch.full_like(t, float("nan"))))
     with pytest.raises(ValueError):
         psnr(image, image[:-1])
     with pytest.raises(ValueError):
@@ -86,6 +85,22 @@ def test_flip_mean_over_a_mask():
     mask = np.zeros((16, 24), bool)
     mask[8:] = True
     assert flip(image, worse, mask=mask) < flip(image, worse) < flip(image, worse, mask=~mask)
-    assert flip(image, worse, mask=np.zeros_like(mask)) == 0.0
+    assert math.isnan(flip(image, worse, mask=np.zeros_like(mask)))  # no pixel measured is no score
     with pytest.raises(ValueError, match="mask shape"):
         flip(image, worse, mask=mask[:4])
+
+
+METRICS = [psnr, ssim, dssim, flip, mape, relative_mse]
+
+
+@pytest.mark.parametrize("metric", METRICS, ids=lambda m: m.__name__)
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+@pytest.mark.parametrize("which", ["test", "reference"])
+def test_a_non_finite_pixel_makes_every_metric_nan(image, metric, bad, which):
+    """A broken render must not score finite: clamping and tonemaps would turn NaN or inf into plausible
+    values (before, FLIP of an all-NaN frame was that of a black one)."""
+    broken = image.copy()
+    broken[3, 5, 1] = bad
+    pair = (image, broken) if which == "test" else (broken, image)
+    assert math.isnan(metric(*pair))
+    assert math.isnan(metric(*(torch.from_numpy(x) for x in pair)))

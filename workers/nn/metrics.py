@@ -3,6 +3,9 @@
 LDR metrics (PSNR, SSIM, LDR FLIP) see images through a defined tonemap: by default "srgb", i.e. clamp to
 [0, 1] and apply the sRGB curve, which is what a PNG preview shows. HDR FLIP and the relative errors work
 on the linear values.
+
+An image with a NaN or infinite pixel has no error to measure: every metric of it is NaN, so a broken
+render can never look finite (or, after clamping, black and nearly right) in a report.
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ def _as_tensor(image: ImageLike) -> Tensor:
     tensor = torch.as_tensor(np.asarray(image.detach().cpu() if isinstance(image, Tensor) else image))
     if tensor.dim() != 3:
         raise ValueError(f"expected an image (H, W, C), got shape {tuple(tensor.shape)}")
-    return torch.nan_to_num(tensor.to(torch.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    tensor = tensor.to(torch.float64)
+    return tensor.where(torch.isfinite(tensor), math.nan)  # inf too: tonemaps and clamps would hide it
 
 
 def _pair(reference: ImageLike, test: ImageLike) -> tuple[Tensor, Tensor]:
@@ -35,6 +39,11 @@ def _pair(reference: ImageLike, test: ImageLike) -> tuple[Tensor, Tensor]:
     if ref.shape != tst.shape:
         raise ValueError(f"image shapes differ: {tuple(ref.shape)} vs {tuple(tst.shape)}")
     return ref, tst
+
+
+def _finite(*images: Tensor) -> bool:
+    """No NaN pixel: metrics that clamp, or hand the images to flip-evaluator, check this first."""
+    return all(bool(torch.isfinite(image).all()) for image in images)
 
 
 def _tonemapped(reference: ImageLike, test: ImageLike, tonemap: str) -> tuple[Tensor, Tensor]:
@@ -47,6 +56,8 @@ def _tonemapped(reference: ImageLike, test: ImageLike, tonemap: str) -> tuple[Te
 def psnr(reference: ImageLike, test: ImageLike, peak: float = 1.0, tonemap: str = "srgb") -> float:
     """Peak signal-to-noise ratio in dB after `tonemap`, capped at MAX_PSNR_DB."""
     ref, tst = _tonemapped(reference, test, tonemap)
+    if not _finite(ref, tst):
+        return math.nan
     mse = max(float(((ref - tst) ** 2).mean()), peak**2 * 10 ** (-MAX_PSNR_DB / 10))
     return 10 * math.log10(peak**2 / mse)
 
@@ -54,7 +65,7 @@ def psnr(reference: ImageLike, test: ImageLike, peak: float = 1.0, tonemap: str 
 def ssim(a: ImageLike, b: ImageLike, tonemap: str = "srgb") -> float:
     """Mean SSIM after `tonemap` (1 for identical images)."""
     ref, tst = _tonemapped(a, b, tonemap)
-    return float(ssim_index(ref, tst))
+    return float(ssim_index(ref, tst)) if _finite(ref, tst) else math.nan
 
 
 def dssim(a: ImageLike, b: ImageLike, tonemap: str = "srgb") -> float:
@@ -71,6 +82,8 @@ def flip(reference: ImageLike, test: ImageLike, hdr: bool = True, mask: np.ndarr
     peak is below HDR_MIN_PEAK has no exposure range to choose from and is compared in LDR mode.
     """
     ref, tst = _pair(reference, test)
+    if not _finite(ref, tst):
+        return math.nan
     if hdr and float(ref.max()) < HDR_MIN_PEAK:
         hdr = False  # flip-evaluator ends the whole process when an HDR reference is (nearly) black
     ref, tst = (x.clamp(min=0.0) if hdr else x.clamp(0.0, 1.0) for x in (ref, tst))
@@ -82,7 +95,7 @@ def flip(reference: ImageLike, test: ImageLike, hdr: bool = True, mask: np.ndarr
     mask = np.asarray(mask, bool)
     if mask.shape != ref.shape[:2]:
         raise ValueError(f"mask shape {mask.shape} does not match the images' {tuple(ref.shape[:2])}")
-    return float(np.asarray(error_map).reshape(mask.shape)[mask].mean()) if mask.any() else 0.0
+    return float(np.asarray(error_map).reshape(mask.shape)[mask].mean()) if mask.any() else math.nan
 
 
 def mape(reference: ImageLike, test: ImageLike, eps: float = 1e-2) -> float:

@@ -21,7 +21,7 @@ import torch
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
-from pydantic import BaseModel
+from pydantic import BaseModel, ConfigDict
 
 from workers.nn.metrics import flip, psnr, relative_mse
 from workers.runtime.training import TrainResult
@@ -32,8 +32,15 @@ PLOT_FILE = "speed_error.png"
 MEDIA_TYPES = {REPORT_FILE: "application/json", PLOT_FILE: "image/png"}
 
 
+# JSON has no NaN: figures that are NaN (the FLIP of a NaN frame, a mean over nothing) are written as the
+# string "NaN", which reads back as NaN, rather than as null, which does not read back as a float.
+NAN_AS_STRING = ConfigDict(ser_json_inf_nan="strings")
+
+
 class ImageError(BaseModel):
     """Error of one image against the reference path tracer's converged image."""
+
+    model_config = NAN_AS_STRING
 
     flip: float
     psnr: float
@@ -58,6 +65,8 @@ class TimedImage:
 
 
 class SpeedErrorPoint(BaseModel):
+    model_config = NAN_AS_STRING
+
     label: str
     seconds_per_frame: float
     error: ImageError
@@ -73,6 +82,8 @@ class SpeedErrorPoint(BaseModel):
 
 class Report(BaseModel):
     """Speed, memory and error of one trained model, stored as JSON next to its weights."""
+
+    model_config = NAN_AS_STRING
 
     kind: str
     training_seconds: float

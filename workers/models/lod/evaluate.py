@@ -112,7 +112,7 @@ def evaluate_levels(
     asset_only = asset_tracer(scene, asset.objects)  # one BVH of the asset for every mask
     common_mask = asset_mask(scene, asset_only, common_w, common_h)
     traced = timed_render(reference_tracer, common)
-    traced_length = _masked_mean(traced.aovs["path_length"][..., 0], common_mask)
+    traced_length = masked_mean(traced.aovs["path_length"][..., 0], common_mask)
     figures, frame = [], None
     for level in range(asset.grid.levels):
         w, h = matched_size(scene, asset, level, config.evaluation_max_height)
@@ -142,7 +142,7 @@ def evaluate_levels(
                 flip_without_light_sampling=flip(reference, without_nee.image, mask=mask),
                 seconds=timing.seconds,
                 path_tracing_seconds=traced.seconds,
-                mean_path_length=_masked_mean(timing.aovs["path_length"][..., 0], common_mask),
+                mean_path_length=masked_mean(timing.aovs["path_length"][..., 0], common_mask),
                 path_tracing_mean_path_length=traced_length,
             )
         )
@@ -155,5 +155,7 @@ def evaluate_levels(
     return LevelEvaluation(figures, views[common_w, common_h], frame)
 
 
-def _masked_mean(values: np.ndarray, mask: np.ndarray) -> float:
-    return float(values[mask].mean()) if mask.any() else 0.0
+def masked_mean(values: np.ndarray, mask: np.ndarray) -> float:
+    """The mean of `values` where `mask` holds; NaN where it never does (no pixel sees the asset: nothing
+    was measured, which must not read as a perfect score)."""
+    return float(values[mask].mean()) if mask.any() else float("nan")

@@ -43,13 +43,16 @@ class LsnifConfig(TrainedKindConfig):
 
 
 PRESETS: dict[str, dict] = {
+    # `quick` trains models measurably better than trivial (the integration test's gates): on the
+    # instanced ball, held-out occlusion in voxels 0.78 / 0.83 / 0.97 at 30 / 60 / 150 steps against 0.78
+    # for "always miss", normal error 44 -> 24 degrees from 60 to 150 steps (seeds 0, 3, 7 alike).
     "quick": {
         "voxel_resolution": 16,
         "max_points": 12,
         "grid": {"base_resolution": 32, "log2_table_size": 14},
         "mlp": {"width": 64},
         "batch_size": 2048,
-        "train": {"steps": 60, "schedule": {"lr": 0.01}, "checkpoint_every": 30, "progress_every": 10},
+        "train": {"steps": 150, "schedule": {"lr": 0.01}, "checkpoint_every": 50, "progress_every": 10},
         "evaluation_rays": 4096,
         "preview_size": 32,
         "evaluation_spp": 4,

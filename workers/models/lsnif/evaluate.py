@@ -50,8 +50,13 @@ def bvh_bytes_paper_table1(triangles: int) -> int:
 
 @dataclass
 class HeldOut:
+    """Held-out figures of one object. A mean over an empty set is NaN, never a perfect 0: a model that
+    never hits has no normal error to report, not a zero one."""
+
     occlusion_accuracy: float
     occlusion_accuracy_in_voxels: float  # on the rays that meet an occupied voxel (the network's work)
+    hit_rate: float  # fraction of rays the model reports a hit for ...
+    reference_hit_rate: float  # ... and Embree does: "always miss" scores 1 - this in occlusion accuracy
     normal_error_deg: float  # mean angle between predicted and reference normals where both hit
     distance_error: float  # mean |t - t_ref| / box diagonal where both hit
     lsnif_rays_per_s: float
@@ -74,15 +79,20 @@ def held_out(model: LsnifObject, prepared: PreparedObject, n: int) -> HeldOut:
     cosine = np.clip(np.sum(prediction.normal[both] * labels.normal[both], axis=1), -1.0, 1.0)
     diagonal = float(np.linalg.norm(prepared.grid.hi - prepared.grid.lo))
     return HeldOut(
-        occlusion_accuracy=float(np.mean(correct)),
-        occlusion_accuracy_in_voxels=float(np.mean(correct[reach])) if reach.any() else 1.0,
-        normal_error_deg=float(np.degrees(np.arccos(cosine)).mean()) if both.any() else 0.0,
-        distance_error=float(np.abs(prediction.t[both] - labels.t[both]).mean() / diagonal)
-        if both.any()
-        else 0.0,
+        occlusion_accuracy=_mean(correct),
+        occlusion_accuracy_in_voxels=_mean(correct[reach]),
+        hit_rate=_mean(prediction.hit),
+        reference_hit_rate=_mean(labels.hit),
+        normal_error_deg=_mean(np.degrees(np.arccos(cosine))),
+        distance_error=_mean(np.abs(prediction.t[both] - labels.t[both])) / diagonal,
         lsnif_rays_per_s=n / max(lsnif_seconds, 1e-9),
         embree_rays_per_s=n / max(embree_seconds, 1e-9),
     )
+
+
+def _mean(values: np.ndarray) -> float:
+    """The mean, NaN (without numpy's warning) over no values."""
+    return float(np.mean(values)) if values.size else float("nan")
 
 
 @dataclass
