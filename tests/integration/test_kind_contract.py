@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from tests.support.jobs import run_kind_job
+from tests.support.quality import report_failures
 from workers.models.registry import get_inference, get_kind, kind_names
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.contract import JobContext, imported
@@ -65,7 +66,7 @@ def test_a_trained_model_is_reported_against_path_tracing_of_its_view(example_jo
     assert report.parameter_bytes > 0 and report.training_samples > 0
     assert {"report.json", "speed_error.png", "preview.png"} <= set(outcome.files)
     # The quality gate: a model that renders black, NaN or noise worse than one path per pixel fails here.
-    assert not report.worse_than_one_spp, report.warnings()
+    assert report_failures(report) == {}
     assert outcome.warnings == [] and outcome.metrics["worse_than_one_spp"] == 0.0
 
 
