@@ -1,6 +1,6 @@
 """The report's quality gate (`tests.support.quality.report_failures`, which every kind's integration test
-runs) on frames with injected faults: a NaN frame and a black one fail it, a good one passes, and a NaN
-figure survives the report's JSON."""
+runs) on frames with injected faults: a NaN frame and a black one fail it, a good one passes; a NaN
+figure survives the report's JSON, and a mean over no pixel is NaN."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tests.support.quality import REPORT_CHECKS, report_failures
+from workers.models.lod.evaluate import masked_mean
 from workers.runtime.report import Report, TimedImage, build_report
 from workers.runtime.training import TrainResult
 
@@ -57,3 +58,9 @@ def test_a_nan_figure_reads_back_as_nan(tmp_path):
     read = Report.read(str(tmp_path))
     assert math.isnan(read.model.error.flip) and math.isnan(read.method_metrics["normal_error_deg"])
     assert read.worse_than_one_spp
+
+
+def test_a_mean_over_no_pixel_is_nan_not_a_perfect_score():
+    values = np.ones((4, 4))
+    assert masked_mean(values, values > 0) == 1.0
+    assert math.isnan(masked_mean(values, values < 0))
