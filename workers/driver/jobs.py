@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import math
 import threading
 import time
 import traceback
@@ -152,7 +153,9 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
         state="succeeded",
         files={name: path for name, (path, _) in output.files.items()},
         media_types={name: media_type for name, (_, media_type) in output.files.items()},
-        metrics=output.metrics,
+        # A figure over an empty set (an asset no pixel sees) is NaN in the report and absent here: the
+        # artifact's manifest is canonical JSON, which has no NaN.
+        metrics={name: value for name, value in output.metrics.items() if math.isfinite(value)},
         warnings=output.warnings,
     )
 
