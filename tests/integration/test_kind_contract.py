@@ -52,10 +52,9 @@ def test_the_artifact_loads_through_the_inference_service(example_job):
     assert loaded.nbytes > 0
 
 
+@pytest.mark.parametrize("example_job", TRAINING_KINDS, indirect=True)
 def test_a_trained_model_is_reported_against_path_tracing_of_its_view(example_job):
     kind, out, outcome = example_job
-    if kind.method is None:
-        pytest.skip(f"{kind.name} trains no model")
     config = kind.resolve_config("quick", kind.example.overrides)
     report = Report.read(str(out))
     assert report.kind == kind.name
