@@ -15,6 +15,7 @@ frame); the others (dielectrics) see both sides and use the sign of wo.z to know
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -57,21 +58,23 @@ class MaterialParameters:
     roughness: float = 0.0  # reported in the `roughness` AOV (1 for a Lambertian surface)
 
 
-class BSDF:
+class BSDF(ABC):
     """A family of BSDFs over `SurfaceBatch` rows of its own code (module docstring: conventions)."""
 
     two_sided: ClassVar[bool] = True
     delta_when_smooth: ClassVar[bool] = False  # alpha = 0 leaves only delta lobes (no light sampling)
 
+    @abstractmethod
     def parameters(self, material: Any) -> MaterialParameters:
         """The rows' parameters of a scene material (`workers.scene.spec`) of this family."""
-        raise NotImplementedError
 
+    @abstractmethod
     def eval(self, s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
+        """f |cos theta_i| and the pdf of sampling wi, per row (local frames)."""
 
+    @abstractmethod
     def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
-        raise NotImplementedError
+        """wi, weight f |cos| / pdf, pdf and whether the sampled lobe is a delta, per row."""
 
 
 class _Registry:
