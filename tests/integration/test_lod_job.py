@@ -14,14 +14,18 @@ import numpy as np
 import pytest
 import torch
 
-from tests.support.jobs import run_kind_job, trained_models
+from tests.support.jobs import (
+    assert_resumes_to_the_uninterrupted_weights,
+    progress_steps,
+    run_kind_job,
+    trained_models,
+)
 from tests.support.quality import LOD_CHECKS, asset_radiance, lod_failures, prefixed, report_failures
 from workers.driver.jobs import JobEvent, JobOutcome, JobSpec
 from workers.models.lod import artifact
 from workers.models.lod.evaluate import evaluate_levels, lod_tracer
 from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
-from workers.runtime import training_state
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
@@ -66,10 +70,6 @@ def job(tmp_path_factory) -> Job:
 @pytest.fixture(scope="module")
 def scene():
     return compile_scene(sponge())
-
-
-def progress_steps(events: list[JobEvent]) -> list[int]:
-    return [e.step for e in events if e.type == "progress"]
 
 
 def level_figures(figures: dict[str, float], scene, asset, level: int) -> dict[str, float]:
@@ -130,17 +130,9 @@ def test_the_artifact_answers_as_the_trained_networks(job):
 
 
 def test_a_job_stopped_mid_training_resumes_to_the_uninterrupted_weights(job, tmp_path):
-    every = CONFIG.train.checkpoint_every
-    stopped = run(tmp_path, cancel_after_step=every + 1)
-    assert stopped.outcome.state == "cancelled"
-    assert every < progress_steps(stopped.events)[-1] < CONFIG.train.steps
-
-    resumed = run(tmp_path)
-    assert resumed.outcome.state == "succeeded", resumed.outcome.error
-    assert progress_steps(resumed.events)[0] == every + CONFIG.train.progress_every  # not step 10 again
-    final = f"step-{CONFIG.train.steps:09d}/{training_state.MODEL_FILE}"
-    for weights in (f"checkpoints/{final}", "out/lod.safetensors"):
-        assert (resumed.folder / weights).read_bytes() == (job.folder / weights).read_bytes(), weights
+    assert_resumes_to_the_uninterrupted_weights(
+        run, job.folder, tmp_path, CONFIG.train, ["checkpoints/{final}", "out/lod.safetensors"]
+    )
 
 
 def test_every_level_renders_in_the_path_tracer(job, scene):

@@ -13,7 +13,12 @@ import numpy as np
 import pytest
 import torch
 
-from tests.support.jobs import run_kind_job, trained_models
+from tests.support.jobs import (
+    assert_resumes_to_the_uninterrupted_weights,
+    progress_steps,
+    run_kind_job,
+    trained_models,
+)
 from tests.support.quality import LSNIF_CHECKS, lsnif_failures, prefixed, report_failures
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.driver.jobs import JobEvent, JobOutcome, JobSpec
@@ -23,7 +28,6 @@ from workers.models.lsnif.sampling import training_rays
 from workers.models.registry import get_kind
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.runtime import training_state
 from workers.runtime.report import Report
 from workers.scene.compile import compile_scene
 from workers.scene.spec import SceneSpec, Transform
@@ -66,10 +70,6 @@ def ball(job):
     (trainable,) = trained_models(job.spec)
     assert trainable.name == "ball"
     return trainable
-
-
-def progress_steps(events: list[JobEvent]) -> list[int]:
-    return [e.step for e in events if e.type == "progress"]
 
 
 def test_quick_lsnif_job_trains_exports_and_reports(job):
@@ -130,17 +130,9 @@ def test_the_artifact_answers_as_the_trained_network(job, ball):
 
 
 def test_a_job_stopped_mid_training_resumes_to_the_uninterrupted_weights(job, tmp_path):
-    every = CONFIG.train.checkpoint_every
-    stopped = run(tmp_path, cancel_after_step=every + 1)
-    assert stopped.outcome.state == "cancelled"
-    assert every < progress_steps(stopped.events)[-1] < CONFIG.train.steps
-
-    resumed = run(tmp_path)
-    assert resumed.outcome.state == "succeeded", resumed.outcome.error
-    assert progress_steps(resumed.events)[0] == every + CONFIG.train.progress_every  # not step 10 again
-    final = f"step-{CONFIG.train.steps:09d}/{training_state.MODEL_FILE}"
-    for weights in (f"checkpoints/ball/{final}", "out/objects/ball.safetensors"):
-        assert (resumed.folder / weights).read_bytes() == (job.folder / weights).read_bytes(), weights
+    assert_resumes_to_the_uninterrupted_weights(
+        run, job.folder, tmp_path, CONFIG.train, ["checkpoints/ball/{final}", "out/objects/ball.safetensors"]
+    )
 
 
 def test_the_artifact_serves_a_scene_whose_instances_moved(job):

@@ -74,3 +74,26 @@ def trained_models(spec: JobSpec) -> list[Trainable]:
             round_to_storage(trainable.model, trainable.stored_dtype)
         trainable.model.eval()
     return trainables
+
+
+def progress_steps(events: list[JobEvent]) -> list[int]:
+    return [e.step for e in events if e.type == "progress"]
+
+
+def assert_resumes_to_the_uninterrupted_weights(
+    run, uninterrupted: Path, folder: Path, train, weights: list[str]
+):
+    """A job cancelled just past its first checkpoint and run again in `folder` resumes there (not from
+    step 0) and ends with the same bytes in `weights` (paths under the job folder; "{final}" stands for the
+    last checkpoint's model file) as the uninterrupted job in `uninterrupted`. `run(folder, **options)`
+    returns an object with `outcome` and `events`."""
+    every = train.checkpoint_every
+    stopped = run(folder, cancel_after_step=every + 1)
+    assert stopped.outcome.state == "cancelled"
+    assert every < progress_steps(stopped.events)[-1] < train.steps
+    resumed = run(folder)
+    assert resumed.outcome.state == "succeeded", resumed.outcome.error
+    assert progress_steps(resumed.events)[0] == every + train.progress_every  # not the first steps again
+    final = f"step-{train.steps:09d}/{training_state.MODEL_FILE}"
+    for name in (w.format(final=final) for w in weights):
+        assert (folder / name).read_bytes() == (uninterrupted / name).read_bytes(), name
