@@ -20,6 +20,7 @@ from workers.models.lsnif.sampling import (
 )
 from workers.models.lsnif.train import lsnif_loss
 from workers.nn.configs import HashGridConfig
+from workers.nn.encodings.grid import pytorch_path_on_cpu
 from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
 from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
@@ -98,6 +99,10 @@ def test_encoder_stores_only_vertices_near_occupied_voxels_and_folds_to_the_tabl
     searched.table.data.copy_(big.table.data)
     points = torch.rand(2000, 3)
     torch.testing.assert_close(big(points), searched(points), rtol=0, atol=0)
+    # The CPU kernels read folded rows through the row map as the PyTorch path does.
+    with pytorch_path_on_cpu():
+        reference = folded(points)
+    torch.testing.assert_close(folded(points), reference, rtol=1e-6, atol=1e-6)
 
 
 def test_only_filled_slots_are_encoded_and_empty_ones_feed_zeros(compiled):
@@ -235,7 +240,12 @@ def test_intersector_places_scaled_and_rotated_instances_like_embree(compiled):
     np.testing.assert_allclose(ours.t[both], reference.t[both], atol=0.01)
     assert np.all(ours.surface.material[neural] == material[0])
     other = ~neural & ~ball
-    np.testing.assert_array_equal(ours.prim[other], reference.prim[other])
+    # Rays that leave the instances meet the same surfaces at the same distance. Where a ray crosses an
+    # edge two triangles tie, and which one Embree reports depends on the ray's exact origin.
+    np.testing.assert_array_equal(ours.prim[other] >= 0, reference.prim[other] >= 0)
+    met = other & (reference.prim >= 0)
+    np.testing.assert_allclose(ours.t[met], reference.t[met], rtol=1e-5)
+    assert (ours.prim[other] == reference.prim[other]).mean() > 0.99
     blocked = hybrid.occluded(origins, directions, np.full(4000, 0.5))
     expected = embree.occluded(origins, directions, np.full(4000, 0.5))
     assert (blocked == expected).mean() > 0.97
