@@ -5,10 +5,11 @@ from __future__ import annotations
 import itertools
 import math
 
+import numba
 import pytest
 import torch
 
-from workers.nn.encodings.grid import GridGeometry, corner_offsets, interpolate_grid
+from workers.nn.encodings.grid import GridGeometry, corner_offsets, interpolate_grid, pytorch_path_on_cpu
 from workers.nn.encodings.hashgrid import HASH_PRIMES, HashGrid
 from workers.nn.encodings.hashgrid_reference import reference_hashgrid_encode
 
@@ -147,7 +148,7 @@ def test_gradcheck_table_and_inputs_dense_and_hashed_levels(n_dims):
     points = torch.tensor([[0.31, 0.47, 0.83], [0.62, 0.12, 0.27]], dtype=torch.float64)[:, :n_dims]
 
     def encode(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
-        return interpolate_grid(x, table, grid.geometry, grid.level_blocks, grid.corner_rows)
+        return interpolate_grid(x, table, grid.geometry, grid.level_blocks, grid)
 
     assert torch.autograd.gradcheck(encode, (points.requires_grad_(), grid.table))
 
@@ -165,3 +166,40 @@ def test_leading_batch_dimensions_are_kept():
     assert grid(torch.rand(4, 5, 3, dtype=torch.float64)).shape == (4, 5, grid.n_output_dims)
     with pytest.raises(ValueError):
         grid(torch.rand(4, 2, dtype=torch.float64))
+
+
+@pytest.mark.parametrize("n_dims", [2, 3, 4])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_cpu_kernels_equal_the_pytorch_path(n_dims, dtype):
+    """The fused CPU kernels and the PyTorch path (the one CUDA runs) agree on values and gradients."""
+    grid = small_grid(n_dims, dtype)
+    points = torch.rand(500, n_dims, dtype=dtype, generator=torch.Generator().manual_seed(3))
+    upstream = torch.randn(500, grid.n_output_dims, dtype=dtype)
+
+    def run() -> tuple[torch.Tensor, ...]:
+        x = points.clone().requires_grad_()
+        out = grid(x)
+        return (out, *torch.autograd.grad((out * upstream).sum(), (grid.table, x)))
+
+    kernels = run()
+    with pytorch_path_on_cpu():
+        pytorch = run()
+    tolerance = 1e-5 if dtype == torch.float32 else 1e-12
+    for a, b in zip(kernels, pytorch, strict=True):
+        assert torch.allclose(a, b, atol=tolerance, rtol=tolerance)
+
+
+def test_cpu_kernels_give_the_same_bits_whatever_the_thread_count():
+    grid = HashGrid(3, n_levels=6, log2_hashmap_size=12, base_resolution=4)
+    points = torch.rand(5000, 3, generator=torch.Generator().manual_seed(4), requires_grad=True)
+    results = []
+    previous = numba.get_num_threads()
+    try:
+        for threads in (1, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(threads)
+            out = grid(points)
+            results.append((out, *torch.autograd.grad(out.square().sum(), (grid.table, points))))
+    finally:
+        numba.set_num_threads(previous)
+    for a, b in zip(*results, strict=True):
+        assert torch.equal(a, b)

@@ -7,7 +7,7 @@ import itertools
 import pytest
 import torch
 
-from workers.nn.encodings.grid import GridGeometry, interpolate_grid
+from workers.nn.encodings.grid import GridGeometry, interpolate_grid, pytorch_path_on_cpu
 from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.sparse_hashgrid import SparseHashGrid, vertices_touched
 
@@ -78,7 +78,7 @@ def test_gradcheck_sparse_grid():
     points = torch.tensor([[0.31, 0.47, 0.22], [0.62, 0.12, 0.27]], dtype=torch.float64, requires_grad=True)
 
     def encode(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
-        return interpolate_grid(x, table, sparse.geometry, sparse.level_blocks, sparse.corner_rows)
+        return interpolate_grid(x, table, sparse.geometry, sparse.level_blocks, sparse)
 
     assert torch.autograd.gradcheck(encode, (points, sparse.table))
 
@@ -101,3 +101,32 @@ def test_invalid_vertex_sets_are_rejected():
         SparseHashGrid([torch.tensor([[0, 0, 17]])], 3, base_resolution=16)
     with pytest.raises(ValueError):
         SparseHashGrid([torch.zeros(0, 3, dtype=torch.long)], 3)
+
+
+def test_cpu_kernels_equal_the_pytorch_path_with_missing_corners():
+    sparse, _ = sparse_with_holes()
+    points = torch.rand(400, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(5))
+
+    def run() -> tuple[torch.Tensor, ...]:
+        x = points.clone().requires_grad_()
+        out = sparse(x)
+        return (out, *torch.autograd.grad(out.sin().sum(), (sparse.table, x)))
+
+    kernels = run()
+    with pytorch_path_on_cpu():
+        pytorch = run()
+    for a, b in zip(kernels, pytorch, strict=True):
+        assert torch.allclose(a, b, atol=1e-12)
+
+
+def test_loaded_keys_reach_the_cpu_kernels():
+    """load_state_dict copies keys into the buffers in place; the kernels must read the new ones."""
+    side = GridGeometry(3, 1, 4, 2.0).vertices_per_side(0)
+    plane = all_vertices(side, 3)
+    low = SparseHashGrid([plane[plane[:, 2] == 1]], 3, base_resolution=4).double()
+    high = SparseHashGrid([plane[plane[:, 2] == 3]], 3, base_resolution=4).double()
+    high.table.data.uniform_(-1, 1)
+    points = torch.rand(200, 3, dtype=torch.float64)
+    low(points)  # builds the kernels' arrays from the old keys
+    low.load_state_dict(high.state_dict())
+    assert torch.equal(low(points), high(points))

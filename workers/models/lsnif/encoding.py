@@ -23,6 +23,7 @@ from torch import Tensor, nn
 
 from workers.nn.configs import HashGridConfig
 from workers.nn.encodings.grid import GridGeometry, outer_combine, vertex_pairs
+from workers.nn.encodings.grid_kernels import RowRule
 from workers.nn.encodings.hashgrid import INIT_RANGE
 from workers.nn.encodings.sparse_hashgrid import SparseHashGrid
 
@@ -73,6 +74,9 @@ class VoxelGridEncoding(SparseHashGrid):
             row_map = torch.full((self.geometry.vertices_per_side(level) ** 3,), -1, dtype=torch.int32)
             row_map[keys] = torch.remainder(torch.arange(keys.numel()), sizes[level]).to(torch.int32)
             self.register_buffer(f"row_map_{level}", row_map, persistent=False)
+
+    def kernel_lookups(self) -> tuple[RowRule, list[Tensor]]:
+        return RowRule.ROW_MAP, [getattr(self, f"row_map_{level}") for level in range(self.geometry.n_levels)]
 
     def corner_rows(self, level: int, cell: Tensor) -> tuple[Tensor, Tensor]:
         side = self.geometry.vertices_per_side(level)

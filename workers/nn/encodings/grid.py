@@ -2,27 +2,44 @@
 
 Both grids store one feature vector per integer lattice vertex and interpolate the 2^d corners of the
 cell holding a point. They differ only in how a corner becomes a table row, so the interpolation and
-its fast CPU backward live here once and take that mapping (a `CornerLookup`) as an argument.
+its backward live here once and take that mapping (a `CornerIndex`) as an argument. On the CPU the
+fused kernels of `grid_kernels.py` do the work; elsewhere (CUDA) a PyTorch path does.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
+from typing import Protocol
 
+import numpy as np
 import torch
 from torch import Tensor
 from torch.autograd.function import once_differentiable
 from torch.nn import functional as F
 
-CornerLookup = Callable[[int, Tensor], tuple[Tensor, Tensor | None]]
-"""(level, cell origins [N, d] int64) -> (rows [N, 2^d] int64 within the level's block of the table,
-stored-corner mask [N, 2^d] or None).
+from workers.nn.encodings import grid_kernels
+from workers.nn.encodings.grid_kernels import KernelIndexing
 
-Corners are ordered by `outer_combine`: bit i of the corner number, counted from the most significant
-of d bits, is the offset along dimension i.
-"""
+
+class CornerIndex(Protocol):
+    """How a grid maps the corners of a cell to rows of its table, in the two forms the paths need."""
+
+    def corner_rows(self, level: int, cell: Tensor) -> tuple[Tensor, Tensor | None]:
+        """(level, cell origins [N, d] int64) -> (rows [N, 2^d] int64 within the level's block of the
+        table, stored-corner mask [N, 2^d] or None).
+
+        Corners are ordered by `outer_combine`: bit i of the corner number, counted from the most
+        significant of d bits, is the offset along dimension i.
+        """
+        ...
+
+    def kernel_indexing(self) -> KernelIndexing:
+        """The same mapping as flat arrays for the CPU kernels."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -101,20 +118,78 @@ def _weight_gradients(fraction: Tensor) -> list[Tensor]:
 
 
 def _level_rows_and_weights(
-    x: Tensor, geometry: GridGeometry, level: int, lookup: CornerLookup, dtype: torch.dtype
+    x: Tensor, geometry: GridGeometry, level: int, index: CornerIndex, dtype: torch.dtype
 ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
     cell, fraction = cell_and_fraction(x, geometry.scale(level))
     fraction = fraction.to(dtype)
-    rows, stored = lookup(level, cell)
+    rows, stored = index.corner_rows(level, cell)
     weights = outer_combine(_linear_factors(fraction), torch.mul)
     if stored is not None:
         weights = weights * stored
     return rows, weights, fraction, stored
 
 
+_CPU_KERNELS = ContextVar("grid_cpu_kernels", default=True)
+
+
+@contextmanager
+def pytorch_path_on_cpu() -> Iterator[None]:
+    """Run the PyTorch path on the CPU too: the peer the kernels are tested and benchmarked against."""
+    token = _CPU_KERNELS.set(False)
+    try:
+        yield
+    finally:
+        _CPU_KERNELS.reset(token)
+
+
+def _uses_kernels(x: Tensor, table: Tensor) -> bool:
+    return (
+        _CPU_KERNELS.get()
+        and x.device.type == "cpu"
+        and x.dtype == table.dtype
+        and x.dtype in (torch.float32, torch.float64)
+    )
+
+
+@dataclass(frozen=True)
+class _KernelArguments:
+    """The per-level arrays every CPU kernel takes after its point arrays, in the kernels' order."""
+
+    starts: np.ndarray
+    scales: np.ndarray
+    sides: np.ndarray
+    indexing: KernelIndexing
+
+    @staticmethod
+    def of(
+        geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex, dtype
+    ) -> _KernelArguments:
+        levels = range(geometry.n_levels)
+        return _KernelArguments(
+            starts=np.asarray([start for start, _ in blocks], dtype=np.int64),
+            scales=np.asarray([geometry.scale(level) for level in levels], dtype=dtype),
+            sides=np.asarray([geometry.vertices_per_side(level) for level in levels], dtype=np.int64),
+            indexing=index.kernel_indexing(),
+        )
+
+    def __iter__(self):
+        i = self.indexing
+        yield from (
+            self.starts,
+            self.scales,
+            self.sides,
+            i.primes,
+            i.rules,
+            i.sizes,
+            i.lookup_starts,
+            i.lookup,
+        )
+
+
 class _GridInterpolation(torch.autograd.Function):
-    """Interpolates with a fused weighted gather (`embedding_bag`); the backward scatters with
-    `index_add_` (int64 rows), several times faster on CPU than autograd's embedding backward.
+    """Interpolates all levels. On the CPU the fused kernels of `grid_kernels` compute each point's
+    rows, weights and sums in one pass. Elsewhere a fused weighted gather (`embedding_bag`) per level
+    does, and the backward scatters with `index_add_` (int64 rows).
 
     Rows and weights are recomputed in the backward rather than saved: at 2^18 points and 16 levels they
     would hold ~400 MB, and recomputing them costs less than a third of the backward.
@@ -127,50 +202,69 @@ class _GridInterpolation(torch.autograd.Function):
         table: Tensor,
         geometry: GridGeometry,
         blocks: list[tuple[int, int]],
-        lookup: CornerLookup,
+        index: CornerIndex,
     ) -> Tensor:
         n_points, n_features = x.shape[0], table.shape[1]
+        ctx.save_for_backward(x, table)
+        ctx.geometry, ctx.blocks, ctx.index = geometry, blocks, index
+        if _uses_kernels(x, table):
+            out = table.new_zeros(n_points, geometry.n_levels * n_features)
+            points = x.detach().numpy()
+            arguments = _KernelArguments.of(geometry, blocks, index, points.dtype)
+            grid_kernels.grid_forward(points, table.detach().numpy(), *arguments, out.numpy())
+            return out
         out = table.new_empty(n_points, geometry.n_levels, n_features)
         for level, (start, size) in enumerate(blocks):
-            rows, weights, _, _ = _level_rows_and_weights(x, geometry, level, lookup, table.dtype)
+            rows, weights, _, _ = _level_rows_and_weights(x, geometry, level, index, table.dtype)
             out[:, level] = F.embedding_bag(
                 rows, table.narrow(0, start, size), per_sample_weights=weights, mode="sum"
             )
-        ctx.save_for_backward(x, table)
-        ctx.geometry, ctx.blocks, ctx.lookup = geometry, blocks, lookup
         return out.flatten(1)
 
     @staticmethod
     @once_differentiable
     def backward(ctx, grad_out: Tensor) -> tuple[Tensor | None, Tensor | None, None, None, None]:
         x, table = ctx.saved_tensors
-        geometry: GridGeometry = ctx.geometry
-        n_points, n_features = x.shape[0], table.shape[1]
-        grad_out = grad_out.reshape(n_points, geometry.n_levels, n_features)
         grad_x = torch.zeros_like(x) if ctx.needs_input_grad[0] else None
         grad_table = torch.zeros_like(table) if ctx.needs_input_grad[1] else None
-        for level, (start, size) in enumerate(ctx.blocks):
-            rows, weights, fraction, stored = _level_rows_and_weights(
-                x, geometry, level, ctx.lookup, table.dtype
-            )
-            grad_level = grad_out[:, level]
+        if _uses_kernels(x, table):
+            points = x.detach().numpy()
+            arguments = _KernelArguments.of(ctx.geometry, ctx.blocks, ctx.index, points.dtype)
+            grad = grad_out.to(table.dtype).contiguous().numpy()
             if grad_table is not None:
-                contributions = weights[..., None] * grad_level[:, None, :]
-                grad_table.narrow(0, start, size).index_add_(
-                    0, rows.view(-1), contributions.view(-1, n_features)
-                )
+                grid_kernels.grid_backward_table(points, grad, *arguments, grad_table.numpy())
             if grad_x is not None:
-                level_table = table.narrow(0, start, size)
-                for dim, slope in enumerate(_weight_gradients(fraction)):
-                    if stored is not None:
-                        slope = slope * stored
-                    along = F.embedding_bag(rows, level_table, per_sample_weights=slope, mode="sum")
-                    grad_x[:, dim] += ((along * grad_level).sum(-1) * geometry.scale(level)).to(x.dtype)
+                grid_kernels.grid_backward_input(
+                    points, table.detach().numpy(), grad, *arguments, grad_x.numpy()
+                )
+        else:
+            _backward_torch(ctx, x, table, grad_out, grad_x, grad_table)
         return grad_x, grad_table, None, None, None
 
 
+def _backward_torch(
+    ctx, x: Tensor, table: Tensor, grad_out: Tensor, grad_x: Tensor | None, grad_table: Tensor | None
+) -> None:
+    geometry: GridGeometry = ctx.geometry
+    n_points, n_features = x.shape[0], table.shape[1]
+    grad_out = grad_out.reshape(n_points, geometry.n_levels, n_features)
+    for level, (start, size) in enumerate(ctx.blocks):
+        rows, weights, fraction, stored = _level_rows_and_weights(x, geometry, level, ctx.index, table.dtype)
+        grad_level = grad_out[:, level]
+        if grad_table is not None:
+            contributions = weights[..., None] * grad_level[:, None, :]
+            grad_table.narrow(0, start, size).index_add_(0, rows.view(-1), contributions.view(-1, n_features))
+        if grad_x is not None:
+            level_table = table.narrow(0, start, size)
+            for dim, slope in enumerate(_weight_gradients(fraction)):
+                if stored is not None:
+                    slope = slope * stored
+                along = F.embedding_bag(rows, level_table, per_sample_weights=slope, mode="sum")
+                grad_x[:, dim] += ((along * grad_level).sum(-1) * geometry.scale(level)).to(x.dtype)
+
+
 def interpolate_grid(
-    x: Tensor, table: Tensor, geometry: GridGeometry, blocks: list[tuple[int, int]], lookup: CornerLookup
+    x: Tensor, table: Tensor, geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex
 ) -> Tensor:
     """Encode points x [..., d] (clamped to [0, 1]^d) into [..., n_levels * n_features], level-major.
 
@@ -179,6 +273,6 @@ def interpolate_grid(
     """
     if x.shape[-1] != geometry.n_dims:
         raise ValueError(f"expected inputs with {geometry.n_dims} coordinates, got shape {tuple(x.shape)}")
-    flat = x.reshape(-1, geometry.n_dims).clamp(0.0, 1.0)
-    out = _GridInterpolation.apply(flat, table, geometry, blocks, lookup)
+    flat = x.reshape(-1, geometry.n_dims).clamp(0.0, 1.0).contiguous()
+    out = _GridInterpolation.apply(flat, table, geometry, blocks, index)
     return out.view(*x.shape[:-1], out.shape[-1])

@@ -6,6 +6,7 @@ import torch
 from torch import Tensor, nn
 
 from workers.nn.encodings.grid import GridGeometry, interpolate_grid, outer_combine, vertex_pairs
+from workers.nn.encodings.grid_kernels import KernelIndexing, RowRule
 
 HASH_PRIMES = (1, 2654435761, 805459861, 3674653429)
 """The spatial-hash primes of instant-ngp, one per input dimension."""
@@ -72,6 +73,15 @@ class HashGrid(nn.Module):
         strides = side ** torch.arange(n_dims, device=cell.device)
         return outer_combine(vertex_pairs(cell, strides), torch.add), None
 
+    def kernel_indexing(self) -> KernelIndexing:
+        levels = range(self.geometry.n_levels)
+        return KernelIndexing.build(
+            rules=[RowRule.HASHED if self.is_hashed(level) else RowRule.LINEAR for level in levels],
+            sizes=[size for _, size in self.level_blocks],
+            lookups=[None for _ in levels],
+            primes=HASH_PRIMES[: self.geometry.n_dims],
+        )
+
     def forward(self, x: Tensor) -> Tensor:
         """Encode x [..., d] in [0, 1]^d (clamped) into [..., n_levels * n_features_per_level]."""
-        return interpolate_grid(x, self.table, self.geometry, self.level_blocks, self.corner_rows)
+        return interpolate_grid(x, self.table, self.geometry, self.level_blocks, self)

@@ -21,6 +21,7 @@ from workers.nn.encodings.grid import (
     outer_combine,
     vertex_pairs,
 )
+from workers.nn.encodings.grid_kernels import KernelIndexing, RowRule
 from workers.nn.encodings.hashgrid import INIT_RANGE
 
 
@@ -100,6 +101,24 @@ class SparseHashGrid(nn.Module):
         rows = torch.searchsorted(keys, query.reshape(-1)).clamp_(max=keys.numel() - 1).view_as(query)
         return rows, keys[rows] == query
 
+    def kernel_lookups(self) -> tuple[RowRule, list[Tensor]]:
+        """The row rule of every level and its lookup tensor (here the sorted keys)."""
+        return RowRule.SORTED_KEYS, [self.level_keys(level) for level in range(self.geometry.n_levels)]
+
+    def kernel_indexing(self) -> KernelIndexing:
+        """Flat arrays for the CPU kernels, rebuilt only when a lookup tensor changes (load_state_dict
+        copies into the buffers in place, which bumps their version)."""
+        rule, lookups = self.kernel_lookups()
+        stamp = tuple((t.data_ptr(), t._version) for t in lookups)
+        if getattr(self, "_kernel_stamp", None) != stamp:
+            self._kernel_indexing = KernelIndexing.build(
+                rules=[rule] * len(lookups),
+                sizes=[size for _, size in self.level_blocks],
+                lookups=[t.cpu().numpy() for t in lookups],
+            )
+            self._kernel_stamp = stamp
+        return self._kernel_indexing
+
     def forward(self, x: Tensor) -> Tensor:
         """Encode x [..., d] in [0, 1]^d (clamped) into [..., n_levels * n_features_per_level]."""
-        return interpolate_grid(x, self.table, self.geometry, self.level_blocks, self.corner_rows)
+        return interpolate_grid(x, self.table, self.geometry, self.level_blocks, self)
