@@ -1,13 +1,21 @@
-"""Neural toolkit throughput: hash grid against its straightforward reference, MLP against matmul peak."""
+"""Neural toolkit throughput: the hash grid's CPU kernels against its PyTorch path and a straightforward
+reference, the kernels' first-run compile time, and the MLP against matmul peak."""
 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import nullcontext
 from functools import partial
 
 import torch
 
 from tests.bench.common import BenchSection, median_seconds
+from workers.nn.encodings.grid import pytorch_path_on_cpu
 from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.hashgrid_reference import reference_hashgrid_encode
 from workers.nn.mlp import MLP
@@ -30,6 +38,11 @@ def _forward_backward(encode, grid: HashGrid, x: torch.Tensor):
     return run
 
 
+def _timed(fn, kernels: bool) -> float:
+    with nullcontext() if kernels else pytorch_path_on_cpu():
+        return median_seconds(fn, repeats=3)
+
+
 def bench_hashgrid() -> BenchSection:
     section = BenchSection("hash grid 3D (16 levels x 2 features, table 2^19): points/s")
     grid = _instant_ngp_grid()
@@ -37,15 +50,56 @@ def bench_hashgrid() -> BenchSection:
     torch.manual_seed(0)
     for n in HASHGRID_POINT_COUNTS:
         x = torch.rand(n, 3)
-        with torch.no_grad():
-            fast_fwd = median_seconds(partial(grid, x), repeats=3)
-            ref_fwd = median_seconds(partial(reference, x), repeats=3)
-        fast_fb = median_seconds(_forward_backward(grid, grid, x), repeats=3)
-        ref_fb = median_seconds(_forward_backward(reference, grid, x), repeats=3)
-        for mode, fast, ref in (("forward", fast_fwd, ref_fwd), ("forward+backward", fast_fb, ref_fb)):
-            section.add(points=n, mode=mode, fast_pts_s=n / fast, reference_pts_s=n / ref, speedup=ref / fast)
+        figures = {}
+        for path, encode, kernels in (
+            ("kernels", grid, True),
+            ("pytorch", grid, False),
+            ("reference", reference, False),
+        ):
+            with torch.no_grad():
+                figures[path, "forward"] = _timed(partial(encode, x), kernels)
+            figures[path, "forward+backward"] = _timed(_forward_backward(encode, grid, x), kernels)
+        for mode in ("forward", "forward+backward"):
+            kernels, pytorch, ref = (figures[path, mode] for path in ("kernels", "pytorch", "reference"))
+            section.add(
+                points=n,
+                mode=mode,
+                kernels_pts_s=n / kernels,
+                pytorch_pts_s=n / pytorch,
+                reference_pts_s=n / ref,
+                kernels_over_pytorch=pytorch / kernels,
+            )
+    section.notes.append("kernels = workers/nn/encodings/grid_kernels.py (Numba, the CPU path)")
+    section.notes.append("pytorch = the same interpolation as per-level tensor operations (the CUDA path)")
     section.notes.append("reference = loops over corners, plain indexing, autograd backward (same formula)")
-    section.notes.append(f"torch threads: {torch.get_num_threads()}")
+    section.notes.append(f"torch threads: {torch.get_num_threads()}; wall-clock medians of 3")
+    return section
+
+
+_FIRST_CALL = """
+import time, torch
+from tests.bench.bench_nn import _instant_ngp_grid
+grid, x = _instant_ngp_grid(), torch.rand(4096, 3, requires_grad=True)
+start = time.perf_counter()
+grid(x).sum().backward()
+print(time.perf_counter() - start)
+"""
+
+
+def bench_kernel_compile() -> BenchSection:
+    """The kernels compile once per machine (Numba's on-disk cache); a fresh cache pays it once."""
+    section = BenchSection("hash grid CPU kernels: first call in a new process (forward + backward)")
+    with tempfile.TemporaryDirectory() as cache:
+        for state in ("empty cache (compiles)", "warm cache (loads)"):
+            start = time.perf_counter()
+            first_call = subprocess.run(
+                [sys.executable, "-c", _FIRST_CALL],
+                env={**os.environ, "NUMBA_CACHE_DIR": cache},
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout
+            section.add(cache=state, first_call_s=float(first_call), process_s=time.perf_counter() - start)
     return section
 
 
@@ -88,4 +142,4 @@ def bench_mlp() -> BenchSection:
 
 
 def run() -> list[BenchSection]:
-    return [bench_hashgrid(), bench_mlp()]
+    return [bench_hashgrid(), bench_kernel_compile(), bench_mlp()]
