@@ -74,16 +74,16 @@ export function speedErrorPlot(report, metric, title) {
     const cx = x(point.seconds_per_frame), cy = y(point.error[metric]);
     const tip = h("svg:title", {}, `${point.label}: ${formatSeconds(point.seconds_per_frame)}, ${title} ${formatNumber(point.error[metric])}`);
     if (role === "traced") {
-      svg.append(h("svg:circle", { cx, cy, r: 3.5, class: "traced", "data-label": point.label }, tip));
+      svg.append(h("svg:circle", { cx, cy, r: 3.5, class: "traced", "data-point": point.label }, tip));
       svg.append(h("svg:text", { x: cx + 5, y: cy - 5, class: "point-label" }, point.label));
     } else if (role === "equal") {
-      svg.append(h("svg:rect", { x: cx - 5, y: cy - 5, width: 10, height: 10, class: "equal" }, tip));
+      svg.append(h("svg:rect", { x: cx - 5, y: cy - 5, width: 10, height: 10, class: "equal", "data-point": point.label }, tip));
     } else {
       const star = Array.from({ length: 10 }, (_, i) => {
         const r = i % 2 ? 3.5 : 9, a = (Math.PI * i) / 5 - Math.PI / 2;
         return `${cx + r * Math.cos(a)},${cy + r * Math.sin(a)}`;
       }).join(" ");
-      svg.append(h("svg:polygon", { points: star, class: "model" }, tip));
+      svg.append(h("svg:polygon", { points: star, class: "model", "data-point": point.label }, tip));
     }
   }
   const legend = [
@@ -93,7 +93,7 @@ export function speedErrorPlot(report, metric, title) {
   ];
   legend.forEach(([role, text], i) => {
     const ly = MARGIN.top + 12 + i * 14;
-    svg.append(h("svg:circle", { cx: x1 - 8, cy: ly - 4, r: 4, class: role }));
+    svg.append(h("svg:circle", { cx: x1 - 8, cy: ly - 4, r: 4, class: `legend-mark ${role}` }));
     svg.append(h("svg:text", { x: x1 - 16, y: ly, "text-anchor": "end", class: "legend" }, text));
   });
   return svg;
