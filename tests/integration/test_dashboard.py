@@ -121,7 +121,7 @@ def test_no_token_no_data_and_the_token_is_asked_once_per_tab(page, browser, ser
 def test_a_quick_render_submitted_from_the_form_finishes_live_with_its_preview(page):
     sign_in(page, "submit")
     screenshot(page, "jobs")
-    job_id = submit_from_form(page, "render", "cornell_box", {"spp": 8}, "submit")
+    job_id = submit_from_form(page, "render", "cornell_box", {"spp": 8, "samplers": 0}, "submit")
     wait_for_state(page, "SUCCEEDED")  # no reload: the state arrives over the job's event stream
     expect(page.locator(".job-header .progress")).to_have_attribute("data-fraction", "1.000")
     expect(page.locator("#events .event-progress").first).to_be_visible()
@@ -171,6 +171,12 @@ def test_a_trained_job_shows_its_speed_error_report_and_comparison(page):
     assert sizes[0] == sizes[1] > 0
     page.locator("#compare-slider").fill("25")
     assert frame.evaluate("img => img.style.clipPath") == "inset(0px 0px 0px 25%)"
+    box = page.locator("#compare").bounding_box()
+    page.mouse.move(box["x"] + 0.5 * box["width"], box["y"] + 10)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 0.75 * box["width"], box["y"] + 10)
+    page.mouse.up()
+    assert abs(float(page.locator("#compare-slider").input_value()) - 75) < 1
     screenshot(page, "compare")
 
 

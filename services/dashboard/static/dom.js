@@ -42,6 +42,7 @@ export function formatBytes(n) {
 
 export function formatSeconds(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "";
+  if (s === 0) return "0 s";
   if (s < 1e-3) return `${(s * 1e6).toFixed(0)} µs`;
   if (s < 1) return `${(s * 1e3).toFixed(1)} ms`;
   if (s < 120) return `${s.toFixed(1)} s`;

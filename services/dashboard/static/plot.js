@@ -8,16 +8,21 @@ const MARGIN = { left: 58, right: 14, top: 26, bottom: 44 };
 
 const finitePositive = (v) => typeof v === "number" && Number.isFinite(v) && v > 0;
 
-/** Log-scale ticks at 1, 2 and 5 times each power of ten inside [low, high]. */
+/** Log-scale ticks at 1, 2 and 5 times each power of ten inside [low, high], or at every integer
+ *  multiple when that leaves fewer than three (a range inside one decade). */
 function ticks(low, high) {
-  const out = [];
-  for (let e = Math.floor(Math.log10(low)); e <= Math.ceil(Math.log10(high)); e += 1) {
-    for (const m of [1, 2, 5]) {
-      const v = m * 10 ** e;
-      if (v >= low && v <= high) out.push(v);
+  const at = (multiples) => {
+    const out = [];
+    for (let e = Math.floor(Math.log10(low)); e <= Math.ceil(Math.log10(high)); e += 1) {
+      for (const m of multiples) {
+        const v = m * 10 ** e;
+        if (v >= low && v <= high) out.push(v);
+      }
     }
-  }
-  return out;
+    return out;
+  };
+  const coarse = at([1, 2, 5]);
+  return coarse.length >= 3 ? coarse : at([1, 2, 3, 4, 5, 6, 7, 8, 9]);
 }
 
 function logScale(values, from, to) {

@@ -26,10 +26,11 @@ export function jobView(jobId, tab) {
   }, label)));
 
   function renderHeader() {
-    const cancellable = !TERMINAL.has(job.state) && !job.cancel_requested;
+    const finished = TERMINAL.has(job.state);
     const cancelStatus = h("span", { class: "cancel-status" });
-    const cancel = h("button", { type: "button", id: "cancel", class: "danger", disabled: !cancellable }, job.cancel_requested && !TERMINAL.has(job.state) ? "Cancelling…" : "Cancel");
-    cancel.addEventListener("click", async () => {
+    const cancel = finished ? null : h("button", { type: "button", id: "cancel", class: "danger", disabled: job.cancel_requested },
+      job.cancel_requested ? "Cancelling…" : "Cancel");
+    cancel?.addEventListener("click", async () => {
       cancel.disabled = true;
       try {
         job = await postJson(paths.cancel(job.id));
@@ -151,11 +152,18 @@ export function jobView(jobId, tab) {
     ];
   }
 
+  function formatValue(key, value) {
+    if (typeof value === "object" && value !== null) return JSON.stringify(value);
+    if (typeof value === "number" && /bytes$/.test(key)) return formatBytes(value);
+    if (typeof value === "number" && /seconds/.test(key)) return formatSeconds(value);
+    return formatNumber(value);
+  }
+
   function keyValues(object) {
     const entries = Object.entries(object ?? {});
     if (!entries.length) return h("p", { class: "muted" }, "None.");
     return h("table", { class: "table kv" }, h("tbody", {}, entries.map(([k, v]) => h("tr", {}, h("th", {}, k),
-      h("td", { class: "num" }, typeof v === "object" && v !== null ? JSON.stringify(v) : formatNumber(v))))));
+      h("td", { class: "num" }, formatValue(k, v))))));
   }
 
   async function report() {
@@ -206,9 +214,18 @@ export function jobView(jobId, tab) {
     };
     slider.addEventListener("input", split);
     split();
+    const stage = h("div", { class: "compare", id: "compare" }, reference, frame, divider);
+    const drag = (event) => {
+      if (event.buttons !== 1) return;
+      const box = stage.getBoundingClientRect();
+      slider.value = String(Math.min(100, Math.max(0, (100 * (event.clientX - box.left)) / box.width)));
+      split();
+    };
+    stage.addEventListener("pointerdown", drag);
+    stage.addEventListener("pointermove", drag);
     return h("section", { class: "card" }, h("h3", {}, "Model frame against the reference"),
       h("div", { class: "compare-labels" }, h("span", {}, "◀ reference (converged path tracing)"), h("span", {}, `${job.kind} model frame ▶`)),
-      h("div", { class: "compare", id: "compare" }, reference, frame, divider), slider);
+      stage, slider);
   }
 
   async function renderTab() {
