@@ -189,6 +189,13 @@ def test_a_job_named_script_is_shown_as_text_and_cancelled_with_a_submit_token(p
     sign_in(page, "read")
     row = page.locator(f'tr[data-job="{job["id"]}"]')
     expect(row.locator(".scene")).to_have_text(f"{HOSTILE_NAME} (inline)")
+    # The list follows the running job's progress without a reload.
+    progress = row.locator(".progress")
+    expect(progress).not_to_have_attribute("data-fraction", "0.000", timeout=JOB_TIMEOUT_MS)
+    seen = progress.get_attribute("data-fraction")
+    expect(progress).not_to_have_attribute("data-fraction", seen, timeout=JOB_TIMEOUT_MS)
+    assert float(progress.get_attribute("data-fraction")) > float(seen)
+    screenshot(page, "jobs-running")
     page.goto(f"/ui/#/jobs/{job['id']}")
     expect(page.locator(".job-header .scene")).to_have_text(f"{HOSTILE_NAME} (inline)")
     assert page.evaluate("window.__injected") is None
