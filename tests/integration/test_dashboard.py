@@ -70,6 +70,20 @@ def page(browser, served) -> Iterator[Page]:
     assert errors == [], errors
 
 
+@pytest.fixture(scope="module", autouse=True)
+def trained_job(served) -> str:
+    """A small lsnif job, submitted as the module starts so that it trains while the first tests run."""
+    body = {"kind": "lsnif", "scene": "thin_walls", "preset": "quick", "config": SMALL_LSNIF}
+    return post_job(served, body)["id"]
+
+
+def post_job(served, body: dict) -> dict:
+    headers = {"Authorization": f"Bearer {TOKENS['submit']}"}
+    response = httpx.post(f"{served.url}/v1/jobs", json=body, headers=headers, timeout=60)
+    assert response.status_code in (200, 201), response.text
+    return response.json()
+
+
 def screenshot(page: Page, name: str) -> None:
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=SCREENSHOTS / f"{name}.png", full_page=True)
@@ -146,12 +160,12 @@ def test_a_quick_render_submitted_from_the_form_finishes_live_with_its_preview(p
     expect(row.locator(".state")).to_have_text("SUCCEEDED")
 
 
-def test_a_trained_job_shows_its_speed_error_report_and_comparison(page):
+def test_a_trained_job_shows_its_speed_error_report_and_comparison(page, trained_job):
     sign_in(page, "admin")
-    job_id = submit_from_form(page, "lsnif", "thin_walls", SMALL_LSNIF)
+    page.goto(f"/ui/#/jobs/{trained_job}")
     wait_for_state(page, "SUCCEEDED")
 
-    page.goto(f"/ui/#/jobs/{job_id}/report")
+    page.goto(f"/ui/#/jobs/{trained_job}/report")
     plots = page.locator("#speed-error svg")
     expect(plots).to_have_count(2)
     table = page.locator("#report-table tbody tr")
@@ -184,9 +198,9 @@ def test_a_trained_job_shows_its_speed_error_report_and_comparison(page):
 
 def test_a_job_named_script_is_shown_as_text_and_cancelled_with_a_submit_token(page, served):
     scene = get_builtin("cornell_box").model_dump(mode="json") | {"name": HOSTILE_NAME}
-    body = {"kind": "render", "scene": scene, "preset": "quick", "config": LONG, "force": True}
-    headers = {"Authorization": f"Bearer {TOKENS['submit']}"}
-    job = httpx.post(f"{served.url}/v1/jobs", json=body, headers=headers, timeout=60).json()
+    config = LONG | {"samplers": 0}  # rendered in the driver: no sampler actors to start
+    body = {"kind": "render", "scene": scene, "preset": "quick", "config": config, "force": True}
+    job = post_job(served, body)
 
     sign_in(page, "read")
     row = page.locator(f'tr[data-job="{job["id"]}"]')
