@@ -202,10 +202,11 @@ def test_a_job_named_script_is_shown_as_text_and_cancelled_with_a_submit_token(p
     body = {"kind": "render", "scene": scene, "preset": "quick", "config": config, "force": True}
     job = post_job(served, body)
 
-    sign_in(page, "read")
+    with page.expect_request(lambda request: f"/v1/jobs/{job['id']}/events" in request.url):
+        sign_in(page, "read")  # the list follows the unfinished job's event stream
     row = page.locator(f'tr[data-job="{job["id"]}"]')
     expect(row.locator(".scene")).to_have_text(f"{HOSTILE_NAME} (inline)")
-    # The list follows the running job's progress without a reload.
+    # Its progress moves without a reload.
     progress = row.locator(".progress")
     expect(progress).not_to_have_attribute("data-fraction", "0.000", timeout=JOB_TIMEOUT_MS)
     seen = progress.get_attribute("data-fraction")

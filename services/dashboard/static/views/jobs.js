@@ -7,6 +7,7 @@ import { follow } from "../events.js";
 import { TERMINAL, problemBox, progressBar, sceneLabel, shortId, stateBadge } from "../components.js";
 
 const POLL_MS = 3000;
+const PAGE = 50, MAX_LIMIT = 200; // the API's largest page
 const MAX_STREAMS = 3;
 const STATES = ["", "QUEUED", "RUNNING", "SUCCEEDED", "FAILED", "CANCELLED"];
 
@@ -17,6 +18,8 @@ export function jobsView() {
   const status = h("div", { class: "status" });
   const filter = h("select", { id: "state-filter", "aria-label": "state" },
     STATES.map((s) => h("option", { value: s }, s || "all states")));
+  const older = h("button", { type: "button", id: "older", class: "link", hidden: true }, "Show older jobs");
+  let limit = PAGE;
   let timer = null;
   let disposed = false;
 
@@ -56,11 +59,12 @@ export function jobsView() {
 
   async function refresh() {
     try {
-      const query = filter.value ? `?limit=50&state=${encodeURIComponent(filter.value)}` : "?limit=50";
-      const page = await getJson(paths.jobs(query));
+      const state = filter.value ? `&state=${encodeURIComponent(filter.value)}` : "";
+      const page = await getJson(paths.jobs(`?limit=${limit}${state}`));
       if (disposed) return;
       rows.clear();
       fill(body, page.items.map(show));
+      older.hidden = !page.next_cursor || limit >= MAX_LIMIT;
       fill(status, page.items.length ? null : h("p", { class: "empty" }, "No jobs yet: submit one."));
       followUnfinished(page.items);
     } catch (error) {
@@ -69,14 +73,16 @@ export function jobsView() {
     if (!disposed) timer = setTimeout(refresh, POLL_MS);
   }
 
-  filter.addEventListener("change", () => { clearTimeout(timer); refresh(); });
+  const reload = () => { clearTimeout(timer); refresh(); };
+  filter.addEventListener("change", reload);
+  older.addEventListener("click", () => { limit = Math.min(limit + PAGE, MAX_LIMIT); reload(); });
   refresh();
   const element = h("section", { class: "jobs" },
     h("div", { class: "toolbar" }, h("h2", {}, "Jobs"), filter, h("a", { href: "#/submit", class: "button" }, "Submit a job")),
     h("table", { class: "table", id: "jobs-table" },
       h("thead", {}, h("tr", {}, ["Job", "Kind", "Scene", "Preset", "State", "Progress", "Created"].map((t) => h("th", {}, t)))),
       body),
-    status);
+    older, status);
   return {
     element,
     dispose() {
