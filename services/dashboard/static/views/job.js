@@ -25,29 +25,35 @@ export function jobView(jobId, tab) {
     class: name === tab ? "tab active" : "tab", "data-tab": name,
   }, label)));
 
+  // The header is built once and its parts updated, so the cancel button stays the same element while
+  // progress streams in (a button replaced between mousedown and mouseup would swallow the click).
+  const stateSlot = h("span"), progressSlot = h("div"), errorSlot = h("div");
+  const titleSlot = h("h2"), idSlot = h("div", { class: "job-id" });
+  const cancelStatus = h("span", { class: "cancel-status" });
+  const cancel = h("button", { type: "button", id: "cancel", class: "danger", hidden: true }, "Cancel");
+  cancel.addEventListener("click", async () => {
+    cancel.disabled = true;
+    try {
+      job = await postJson(paths.cancel(job.id));
+      renderHeader();
+    } catch (error) {
+      cancel.disabled = false;
+      cancelStatus.replaceChildren(problemBox(error));
+    }
+  });
+  fill(header, h("div", { class: "title-row" }, titleSlot, stateSlot, cancel), idSlot, progressSlot, errorSlot, cancelStatus);
+
   function renderHeader() {
-    const finished = TERMINAL.has(job.state);
-    const cancelStatus = h("span", { class: "cancel-status" });
-    const cancel = finished ? null : h("button", { type: "button", id: "cancel", class: "danger", disabled: job.cancel_requested },
-      job.cancel_requested ? "Cancelling…" : "Cancel");
-    cancel?.addEventListener("click", async () => {
+    fill(titleSlot, h("span", { class: "kind" }, job.kind), " of ", h("span", { class: "scene" }, sceneLabel(job.scene)));
+    fill(idSlot, job.id, " · preset ", job.preset);
+    fill(stateSlot, stateBadge(job.state));
+    fill(progressSlot, progressBar(job.progress, job.state));
+    fill(errorSlot, job.error ? h("div", { class: "problem" }, job.error) : null);
+    cancel.hidden = TERMINAL.has(job.state);
+    if (job.cancel_requested) {
       cancel.disabled = true;
-      try {
-        job = await postJson(paths.cancel(job.id));
-        renderHeader();
-      } catch (error) {
-        cancel.disabled = false;
-        cancelStatus.replaceChildren(problemBox(error));
-      }
-    });
-    fill(header,
-      h("div", { class: "title-row" },
-        h("h2", {}, h("span", { class: "kind" }, job.kind), " of ", h("span", { class: "scene" }, sceneLabel(job.scene))),
-        stateBadge(job.state), cancel),
-      h("div", { class: "job-id" }, job.id, " · preset ", job.preset),
-      progressBar(job.progress, job.state),
-      job.error ? h("div", { class: "problem" }, job.error) : null,
-      cancelStatus);
+      cancel.textContent = "Cancelling…";
+    }
   }
 
   async function reload() {
@@ -62,6 +68,15 @@ export function jobView(jobId, tab) {
     renderTab();
   }
 
+  // Events arrive in bursts (a finished job replays all of them at once): draw once per frame.
+  let drawPending = false;
+  function draw() {
+    drawPending = false;
+    if (disposed || !job) return;
+    renderHeader();
+    if (tab === "overview") renderEvents();
+  }
+
   function onEvent(event) {
     if (disposed) return;
     if (event === null) { reload(); return; } // final state: the job now has its artifact (or error)
@@ -69,8 +84,10 @@ export function jobView(jobId, tab) {
     if (!job) return;
     if (event.type === "progress") job = { ...job, progress: event.data };
     if (event.type === "state") job = { ...job, state: event.data.state };
-    if (event.type !== "log") renderHeader();
-    if (tab === "overview") renderEvents();
+    if (!drawPending) {
+      drawPending = true;
+      requestAnimationFrame(draw);
+    }
   }
 
   // ----------------------------------------------------------------- overview
