@@ -137,6 +137,13 @@ def test_no_token_no_data_and_the_token_is_asked_once_per_tab(page, browser, ser
 def test_a_quick_render_submitted_from_the_form_finishes_live_with_its_preview(page):
     sign_in(page, "submit")
     screenshot(page, "jobs")
+    page.goto("/ui/#/submit")
+    page.select_option("#kind", "render")
+    for bad, where in (("{spp: 8", "config: not valid JSON"), ('{"spp": 0}', "config.spp")):
+        page.fill("#config", bad)
+        page.click("#submit")  # refused: the field at fault is named and marked
+        expect(page.locator("#submit-form .problem")).to_contain_text(where)
+        expect(page.locator("#config")).to_have_attribute("aria-invalid", "true")
     job_id = submit_from_form(page, "render", "cornell_box", {"spp": 8, "samplers": 0}, "submit")
     wait_for_state(page, "SUCCEEDED")  # no reload: the state arrives over the job's event stream
     expect(page.locator(".job-header .progress")).to_have_attribute("data-fraction", "1.000")
