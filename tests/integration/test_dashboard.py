@@ -200,6 +200,7 @@ def test_a_trained_job_shows_its_speed_error_report_and_comparison(page, trained
     page.mouse.move(box["x"] + 0.75 * box["width"], box["y"] + 10)
     page.mouse.up()
     assert abs(float(page.locator("#compare-slider").input_value()) - 75) < 1
+    expect(page.locator("#side-by-side img")).to_have_count(2)
     screenshot(page, "compare")
 
 

@@ -240,9 +240,14 @@ export function jobView(jobId, tab) {
     };
     stage.addEventListener("pointerdown", drag);
     stage.addEventListener("pointermove", drag);
-    return h("section", { class: "card" }, h("h3", {}, "Model frame against the reference"),
-      h("div", { class: "compare-labels" }, h("span", {}, "◀ reference (converged path tracing)"), h("span", {}, `${job.kind} model frame ▶`)),
-      stage, slider);
+    const sideBySide = [[reference, "reference (converged path tracing)"], [frame, `${job.kind} model frame`]].map(
+      ([img, caption]) => h("figure", { class: "figure" }, h("img", { src: img.src, alt: caption, class: "preview side" }), h("figcaption", {}, caption)));
+    return [
+      h("section", { class: "card" }, h("h3", {}, "Model frame over the reference"),
+        h("div", { class: "compare-labels" }, h("span", {}, "◀ reference (converged path tracing)"), h("span", {}, `${job.kind} model frame ▶`)),
+        stage, slider),
+      h("section", { class: "card" }, h("h3", {}, "Side by side"), h("div", { class: "gallery", id: "side-by-side" }, sideBySide)),
+    ];
   }
 
   async function renderTab() {
