@@ -145,9 +145,9 @@ def test_a_quick_render_submitted_from_the_form_finishes_live_with_its_preview(p
         expect(page.locator("#submit-form .problem")).to_contain_text(where)
         expect(page.locator("#config")).to_have_attribute("aria-invalid", "true")
     job_id = submit_from_form(page, "render", "cornell_box", {"spp": 8, "samplers": 0}, "submit")
-    wait_for_state(page, "SUCCEEDED")  # no reload: the state arrives over the job's event stream
+    wait_for_state(page, "SUCCEEDED")  # no reload
     expect(page.locator(".job-header .progress")).to_have_attribute("data-fraction", "1.000")
-    expect(page.locator("#events .event-progress").first).to_be_visible()
+    expect(page.locator("#events .event-progress").first).to_be_visible()  # read from the SSE stream
     expect(page.locator("#events")).to_contain_text("RUNNING → SUCCEEDED")
     expect(page.locator("#plan")).to_contain_text("estimated")
     expect(page.locator("#log")).not_to_be_empty()
