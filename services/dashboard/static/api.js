@@ -50,15 +50,19 @@ export async function request(path, { method = "GET", body, signal, accept = "ap
 export const getJson = async (path, options) => (await request(path, options)).json();
 export const postJson = async (path, body) => (await request(path, { method: "POST", body })).json();
 
+// The API is the dashboard's parent folder (`/ui/` -> `/v1/...`), so a proxy that mounts the server
+// under a prefix serves both.
+const API = `${new URL("..", location.href).pathname}v1`;
+
 export const paths = {
-  jobs: (query = "") => `/v1/jobs${query}`,
-  job: (id) => `/v1/jobs/${encodeURIComponent(id)}`,
-  cancel: (id) => `/v1/jobs/${encodeURIComponent(id)}:cancel`,
-  events: (id, after) => `/v1/jobs/${encodeURIComponent(id)}/events?after=${after}`,
-  artifact: (id) => `/v1/artifacts/${encodeURIComponent(id)}`,
-  file: (id, name) => `/v1/artifacts/${encodeURIComponent(id)}/files/${name.split("/").map(encodeURIComponent).join("/")}`,
-  kinds: "/v1/kinds",
-  scenes: "/v1/scenes",
+  jobs: (query = "") => `${API}/jobs${query}`,
+  job: (id) => `${API}/jobs/${encodeURIComponent(id)}`,
+  cancel: (id) => `${API}/jobs/${encodeURIComponent(id)}:cancel`,
+  events: (id, after) => `${API}/jobs/${encodeURIComponent(id)}/events?after=${after}`,
+  artifact: (id) => `${API}/artifacts/${encodeURIComponent(id)}`,
+  file: (id, name) => `${API}/artifacts/${encodeURIComponent(id)}/files/${name.split("/").map(encodeURIComponent).join("/")}`,
+  kinds: `${API}/kinds`,
+  scenes: `${API}/scenes`,
 };
 
 // Artifacts are content-addressed, so a file fetched once is the same file for the page's lifetime.
