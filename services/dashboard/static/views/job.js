@@ -166,6 +166,8 @@ export function jobView(jobId, tab) {
             h("td", { class: "digest", title: f.digest }, f.digest.slice(0, 19)),
             h("td", {}, h("button", { type: "button", class: "link", onclick: () => download(f) }, "Download"))))))),
       h("section", { class: "card" }, h("h3", {}, "Metrics"), keyValues(found.metrics)),
+      Object.keys(found.annotations ?? {}).length
+        ? h("section", { class: "card", id: "annotations" }, h("h3", {}, "Annotations"), keyValues(found.annotations)) : null,
     ];
   }
 
