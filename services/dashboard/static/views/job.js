@@ -12,11 +12,13 @@ const TABS = [["overview", "Overview"], ["files", "Files"], ["report", "Report"]
 const MAX_EVENT_ROWS = 300;
 const REFERENCE = "reference.png", FRAME = "frame.png", REPORT = "report.json";
 
-export function jobView(jobId, tab) {
+export function jobView(jobId, requestedTab) {
+  const tab = TABS.some(([name]) => name === requestedTab) ? requestedTab : "overview";
   const header = h("div", { class: "job-header" });
   const content = h("div", { class: "tab-content", id: `tab-${tab}` }, h("p", {}, "Loading…"));
   const events = [];
   let job = null;
+  let finishedWhenLoaded = false;
   let disposed = false;
   let stop = () => {};
 
@@ -79,7 +81,10 @@ export function jobView(jobId, tab) {
 
   function onEvent(event) {
     if (disposed) return;
-    if (event === null) { reload(); return; } // final state: the job now has its artifact (or error)
+    if (event === null) { // the final state: a job that finished while shown now has its artifact (or error)
+      if (!finishedWhenLoaded) reload();
+      return;
+    }
     events.push(event);
     if (!job) return;
     if (event.type === "progress") job = { ...job, progress: event.data };
@@ -253,10 +258,9 @@ export function jobView(jobId, tab) {
   }
 
   async function renderTab() {
-    const shown = tab;
     try {
       const parts = tab === "overview" ? overview() : await { files, report, compare }[tab]();
-      if (!disposed && shown === tab) fill(content, parts);
+      if (!disposed) fill(content, parts);
     } catch (error) {
       if (!disposed) fill(content, error instanceof ApiError ? problemBox(error) : h("p", { class: "muted" }, error.message));
     }
@@ -266,6 +270,7 @@ export function jobView(jobId, tab) {
   getJson(paths.job(jobId)).then((found) => {
     if (disposed) return;
     job = found;
+    finishedWhenLoaded = TERMINAL.has(found.state);
     renderHeader();
     renderTab().then(() => { if (!disposed) stop = follow(jobId, onEvent); });
   }, (error) => fill(content, problemBox(error)));
