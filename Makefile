@@ -6,7 +6,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 
-.PHONY: venv run test test-all bench lint clean proto
+.PHONY: venv run test test-all bench lint clean proto browser
 
 venv: $(STAMP)
 
@@ -23,12 +23,16 @@ $(STAMP): pyproject.toml clients/python/pyproject.toml constraints.txt
 run: venv
 	$(PY) -m services.cli.run_job --scene cornell_box --preset default --config '{"spp": 64}' --out out/run
 
+## Debian's Chromium for the dashboard's browser test (Playwright drives it; it never downloads a browser).
+browser:
+	test -x /usr/bin/chromium || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium)
+
 ## The default test suite (what CI runs).
-test: venv
+test: venv browser
 	$(VENV)/bin/pytest -q
 
 ## Including slow accuracy checks.
-test-all: venv
+test-all: venv browser
 	$(VENV)/bin/pytest -q -m ''
 
 bench: venv

@@ -10,9 +10,10 @@ from fastapi import FastAPI
 
 from services.api import problems
 from services.api.limits import MULTIPART_OVERHEAD, BodyLimit
-from services.api.routes import artifacts, assets, health, jobs
+from services.api.routes import artifacts, assets, catalog, health, jobs
 from services.api.services import Services
 from services.api.settings import ServiceSettings
+from services.dashboard import mount_dashboard
 
 
 def create_app(settings: ServiceSettings) -> FastAPI:
@@ -31,7 +32,7 @@ def create_app(settings: ServiceSettings) -> FastAPI:
         version="1",
         summary="Train neural rendering representations of 3D scenes on Ray.",
         description="Upload a scene, submit a job (`render`, later neural kinds), follow its events, "
-        "download its artifact. Errors are `application/problem+json`.",
+        "download its artifact. Errors are `application/problem+json`. The web dashboard is at `/ui`.",
         lifespan=lifespan,
     )
     app.state.services = services
@@ -42,6 +43,7 @@ def create_app(settings: ServiceSettings) -> FastAPI:
         upload_bytes=settings.upload_limits.max_total_bytes + MULTIPART_OVERHEAD,
         upload_paths=("/v1/assets",),
     )
-    for module in (jobs, assets, artifacts, health):
+    for module in (jobs, assets, artifacts, catalog, health):
         app.include_router(module.router)
+    mount_dashboard(app)
     return app

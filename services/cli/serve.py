@@ -74,6 +74,7 @@ def serve_command(
     if not tokens:
         _, path = generated_admin_token(data_dir)
         typer.echo(f"admin token: {path}", err=True)
+    typer.echo(f"dashboard: http://{f'[{host}]' if ':' in host else host}:{port}/ui", err=True)
     ray_temp = _start_ray(data_dir)
     inference = None
     if inference_port is not None:

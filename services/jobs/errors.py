@@ -25,3 +25,7 @@ class JobNotFound(JobServiceError):
 
 class Conflict(JobServiceError):
     status, title = 409, "Conflict"
+
+
+class KindNotFound(JobServiceError):
+    status, title = 404, "Kind not found"

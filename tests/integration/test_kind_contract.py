@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 from tests.support.jobs import run_kind_job
 from tests.support.quality import report_failures
@@ -63,7 +65,16 @@ def test_a_trained_model_is_reported_against_path_tracing_of_its_view(example_jo
     ]
     assert report.path_tracing_equal_time in report.path_tracing
     assert report.parameter_bytes > 0 and report.training_samples > 0
-    assert {"report.json", "speed_error.png", "preview.png"} <= set(outcome.files)
+    assert {"report.json", "speed_error.png", "preview.png", "reference.png", "frame.png"} <= set(
+        outcome.files
+    )
+    # The preview starts with the reference and ends with the model's frame, both also stored alone.
+    preview, reference, frame = (
+        np.asarray(Image.open(out / f"{n}.png")) for n in ("preview", "reference", "frame")
+    )
+    assert reference.shape == frame.shape and preview.shape[0] == reference.shape[0]
+    width = reference.shape[1]
+    assert np.array_equal(preview[:, :width], reference) and np.array_equal(preview[:, -width:], frame)
     # The quality gate: a model that renders black, NaN or noise worse than one path per pixel fails here.
     assert report_failures(report) == {}
     assert outcome.warnings == [] and outcome.metrics["worse_than_one_spp"] == 0.0

@@ -7,8 +7,8 @@ sampler actors and opens their pool (dead samplers become a retryable `Infrastru
 `workers.runtime.samplers`), trains each model with exact resume from its own checkpoint sub-store,
 reports progress across all of them and stops on cancel, rounds weights to their stored precision,
 measures the model's frame against path tracing of the same view (`workers.runtime.report`), writes the
-report and `preview.png`, and returns the `RunOutput`, with a warning when the model is worse than 1-spp
-path tracing.
+report, `preview.png` and the reference and the model's frame alone (for a comparison slider), and returns
+the `RunOutput`, with a warning when the model is worse than 1-spp path tracing.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from workers.runtime.view import PathTracedView
 from workers.scene.image_io import write_png
 
 PREVIEW = "preview.png"  # the reference, any images the kind adds, and the model's frame, side by side
+REFERENCE_PNG, FRAME_PNG = "reference.png", "frame.png"  # the two alone, for a comparison slider
 
 
 @dataclass
@@ -106,11 +107,14 @@ def run_method(method: Method, ctx: JobContext) -> RunOutput:
     )
     files = dict(finished.files)
     files.update(report.write(str(ctx.output_dir)))
-    preview = ctx.output_dir / PREVIEW
-    write_png(
-        preview, np.concatenate([finished.view.reference(), *finished.preview, finished.frame.image], 1)
-    )
-    files[PREVIEW] = (str(preview), "image/png")
+    reference = finished.view.reference()
+    for name, image in (
+        (PREVIEW, np.concatenate([reference, *finished.preview, finished.frame.image], 1)),
+        (REFERENCE_PNG, reference),
+        (FRAME_PNG, finished.frame.image),
+    ):
+        write_png(ctx.output_dir / name, image)
+        files[name] = (str(ctx.output_dir / name), "image/png")
     for warning in report.warnings():
         ctx.log(f"warning: {warning}")
     metrics = {

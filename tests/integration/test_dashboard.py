@@ -1,0 +1,239 @@
+"""The web dashboard in a real browser (Debian's Chromium, headless, driven by Playwright) against a real
+`nbake serve`: the token gate, submitting a quick render from the form and watching it finish, its preview,
+a trained model's report and comparison, cancelling a running job (refused with a read token, done with a
+submit token), and job data shown as text (a scene named `<script>...` runs nothing). Each page is saved
+as a screenshot under `out/screenshots/` (or `$NBAKE_SCREENSHOTS`) for review."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+from playwright.sync_api import Browser, Page, expect, sync_playwright
+
+from tests.integration import test_grpc_server as grpc_server
+from tests.integration.test_api_server import TOKENS
+from tests.integration.test_grpc_server import LONG
+from workers.scene.builtin import get_builtin
+
+served = grpc_server.served  # fixture: one real `nbake serve` on free ports, stopped after the last user
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SCREENSHOTS = Path(os.environ.get("NBAKE_SCREENSHOTS", "out/screenshots"))
+JOB_TIMEOUT_MS = 180_000
+# A trained job of a few seconds: the quick lsnif preset cut to 10 steps and 1024 held-out rays, the
+# report's reference at 16 spp (what is checked is the report's display, not the model's quality).
+SMALL_LSNIF = {
+    "samplers": 0,
+    "train": {"steps": 10, "checkpoint_every": 10, "progress_every": 5},
+    "evaluation_rays": 1024,
+    "reference_spp": 16,
+}
+HOSTILE_NAME = '<script>window.__injected = 1</script><img src=x onerror="window.__injected = 2">'
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    if not CHROMIUM.exists():
+        pytest.fail(f"{CHROMIUM} is missing: `make browser` installs Debian's chromium")
+    with sync_playwright() as playwright:
+        launched = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_FLAGS)
+        yield launched
+        launched.close()
+
+
+@pytest.fixture
+def page(browser, served) -> Iterator[Page]:
+    """A fresh tab (its own session storage) at the dashboard; any script error fails the test."""
+    context = browser.new_context(viewport={"width": 1280, "height": 900}, base_url=served.url)
+    opened = context.new_page()
+    errors: list[str] = []
+    opened.on("pageerror", lambda error: errors.append(str(error)))
+    opened.goto("/ui")
+    yield opened
+    context.close()
+    assert errors == [], errors
+
+
+@pytest.fixture(scope="module", autouse=True)
+def trained_job(served) -> str:
+    """A small lsnif job, submitted as the module starts so that it trains while the first tests run."""
+    body = {"kind": "lsnif", "scene": "thin_walls", "preset": "quick", "config": SMALL_LSNIF}
+    return post_job(served, body)["id"]
+
+
+def post_job(served, body: dict) -> dict:
+    headers = {"Authorization": f"Bearer {TOKENS['submit']}"}
+    response = httpx.post(f"{served.url}/v1/jobs", json=body, headers=headers, timeout=60)
+    assert response.status_code in (200, 201), response.text
+    return response.json()
+
+
+def screenshot(page: Page, name: str) -> None:
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=SCREENSHOTS / f"{name}.png", full_page=True)
+
+
+def sign_in(page: Page, scope: str) -> None:
+    page.fill("#token", TOKENS[scope])
+    page.click("#login-form button[type=submit]")
+    expect(page.locator("#sign-out")).to_be_visible()
+
+
+def submit_from_form(page: Page, kind: str, scene: str, config: dict, shot: str | None = None) -> str:
+    page.goto("/ui/#/submit")
+    page.select_option("#kind", kind)
+    page.select_option("#scene", scene)
+    page.select_option("#preset", "quick")
+    expect(page.locator("#preset-config")).to_contain_text('"samplers":')  # the preset's resolved config
+    page.fill("#config", json.dumps(config))
+    if shot:
+        page.click("#submit-form details summary")
+        screenshot(page, shot)
+    page.click("#submit")
+    page.wait_for_url(re.compile(r"#/jobs/job-"))
+    return page.url.rsplit("/", 1)[-1]
+
+
+def wait_for_state(page: Page, state: str) -> None:
+    expect(page.locator(".job-header .state")).to_have_text(state, timeout=JOB_TIMEOUT_MS)
+
+
+def test_no_token_no_data_and_the_token_is_asked_once_per_tab(page, browser, served):
+    expect(page.locator("#login-form")).to_be_visible()
+    assert page.locator("#jobs-table").count() == 0
+    screenshot(page, "sign-in")
+    page.fill("#token", "not-a-token")
+    page.click("#login-form button[type=submit]")
+    expect(page.locator(".problem")).to_contain_text("unknown token")
+    sign_in(page, "read")
+    expect(page.locator("#jobs-table")).to_be_visible()
+    page.reload()  # the same tab keeps its token
+    expect(page.locator("#jobs-table")).to_be_visible()
+    page.click("#sign-out")
+    expect(page.locator("#login-form")).to_be_visible()
+    assert page.evaluate("sessionStorage.length") == 0
+
+    response = httpx.get(f"{served.url}/ui/app.js")
+    assert "script-src 'self'" in response.headers["content-security-policy"]
+    assert httpx.get(f"{served.url}/ui").status_code in (307, 308)
+
+
+def test_a_quick_render_submitted_from_the_form_finishes_live_with_its_preview(page):
+    sign_in(page, "submit")
+    screenshot(page, "jobs")
+    page.goto("/ui/#/submit")
+    page.select_option("#kind", "render")
+    for bad, where in (("{spp: 8", "config: not valid JSON"), ('{"spp": 0}', "config.spp")):
+        page.fill("#config", bad)
+        page.click("#submit")  # refused: the field at fault is named and marked
+        expect(page.locator("#submit-form .problem")).to_contain_text(where)
+        expect(page.locator("#config")).to_have_attribute("aria-invalid", "true")
+    job_id = submit_from_form(page, "render", "cornell_box", {"spp": 8, "samplers": 0}, "submit")
+    wait_for_state(page, "SUCCEEDED")  # no reload
+    expect(page.locator(".job-header .progress")).to_have_attribute("data-fraction", "1.000")
+    expect(page.locator("#events .event-progress").first).to_be_visible()  # read from the SSE stream
+    expect(page.locator("#events")).to_contain_text("RUNNING → SUCCEEDED")
+    expect(page.locator("#plan")).to_contain_text("estimated")
+    expect(page.locator("#log")).not_to_be_empty()
+    screenshot(page, "job")
+
+    page.click("[data-tab=files]")
+    preview = page.locator('img[data-file="preview.png"]')
+    expect(preview).to_be_visible()
+    assert preview.evaluate("img => img.complete && img.naturalWidth") == 64
+    expect(page.locator("#files")).to_contain_text("image.exr")
+    screenshot(page, "files")
+    page.click("[data-tab=report]")
+    expect(page.locator("#tab-report")).to_contain_text("trains no model")
+
+    page.goto("/ui/#/jobs")
+    row = page.locator(f'tr[data-job="{job_id}"]')
+    expect(row.locator(".state")).to_have_text("SUCCEEDED")
+
+
+def test_a_trained_job_shows_its_speed_error_report_and_comparison(page, trained_job):
+    sign_in(page, "admin")
+    page.goto(f"/ui/#/jobs/{trained_job}")
+    wait_for_state(page, "SUCCEEDED")
+
+    page.goto(f"/ui/#/jobs/{trained_job}/report")
+    plots = page.locator("#speed-error svg")
+    expect(plots).to_have_count(2)
+    table = page.locator("#report-table tbody tr")
+    path_traced = table.filter(has_text="path tracing").count()
+    assert path_traced >= 2  # 1 and 4 spp below the 16-spp reference
+    for plot in plots.all():
+        expect(plot.locator(".traced[data-point]")).to_have_count(path_traced)
+        expect(plot.locator(".equal[data-point]")).to_have_count(1)
+        expect(plot.locator(".model[data-point]")).to_have_count(1)
+    expect(page.locator("#report-table .model-row")).to_contain_text("lsnif")
+    screenshot(page, "report")
+
+    page.click("[data-tab=compare]")
+    frame = page.locator("#compare-frame")
+    expect(frame).to_be_visible()
+    sizes = page.evaluate(
+        "['compare-reference', 'compare-frame'].map(id => document.getElementById(id).naturalWidth)"
+    )
+    assert sizes[0] == sizes[1] > 0
+    page.locator("#compare-slider").fill("25")
+    assert frame.evaluate("img => img.style.clipPath") == "inset(0px 0px 0px 25%)"
+    box = page.locator("#compare").bounding_box()
+    page.mouse.move(box["x"] + 0.5 * box["width"], box["y"] + 10)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 0.75 * box["width"], box["y"] + 10)
+    page.mouse.up()
+    assert abs(float(page.locator("#compare-slider").input_value()) - 75) < 1
+    expect(page.locator("#side-by-side img")).to_have_count(2)
+    screenshot(page, "compare")
+
+
+def test_a_job_named_script_is_shown_as_text_and_cancelled_with_a_submit_token(page, served):
+    scene = get_builtin("cornell_box").model_dump(mode="json") | {"name": HOSTILE_NAME}
+    config = LONG | {"samplers": 0}  # rendered in the driver: no sampler actors to start
+    body = {"kind": "render", "scene": scene, "preset": "quick", "config": config, "force": True}
+    job = post_job(served, body)
+
+    with page.expect_request(lambda request: f"/v1/jobs/{job['id']}/events" in request.url):
+        sign_in(page, "read")  # the list follows the unfinished job's event stream
+    row = page.locator(f'tr[data-job="{job["id"]}"]')
+    expect(row.locator(".scene")).to_have_text(f"{HOSTILE_NAME} (inline)")
+    # Its progress moves without a reload.
+    progress = row.locator(".progress")
+    expect(progress).not_to_have_attribute("data-fraction", "0.000", timeout=JOB_TIMEOUT_MS)
+    seen = progress.get_attribute("data-fraction")
+    expect(progress).not_to_have_attribute("data-fraction", seen, timeout=JOB_TIMEOUT_MS)
+    assert float(progress.get_attribute("data-fraction")) > float(seen)
+    screenshot(page, "jobs-running")
+    page.goto(f"/ui/#/jobs/{job['id']}")
+    expect(page.locator(".job-header .scene")).to_have_text(f"{HOSTILE_NAME} (inline)")
+    assert page.evaluate("window.__injected") is None
+    assert page.locator("#view script, #view img[src=x]").count() == 0
+
+    wait_for_state(page, "RUNNING")
+    page.click("#cancel")  # a read token may not cancel
+    expect(page.locator(".cancel-status .problem")).to_contain_text("403")
+    page.click("#sign-out")
+    sign_in(page, "submit")
+    page.goto(f"/ui/#/jobs/{job['id']}")
+    wait_for_state(page, "RUNNING")
+    page.click("#cancel")
+    wait_for_state(page, "CANCELLED")
+    screenshot(page, "cancelled")
+    assert page.evaluate("window.__injected") is None
