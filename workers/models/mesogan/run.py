@@ -1,0 +1,81 @@
+"""The `mesogan` method on the shared pipeline: one GAN (discriminator and generator phases) trained on
+path-traced slab views, exported, then measured on the scene: the scene's covered surfaces rendered with
+the neural shell against the same surfaces covered by real strands and path-traced (the report's view).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import torch
+
+from workers.models.mesogan import artifact
+from workers.models.mesogan.aggregate import ShellAggregate
+from workers.models.mesogan.config import MesoganConfig
+from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
+from workers.models.mesogan.train import phases
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.runtime.contract import JobContext
+from workers.runtime.pipeline import Finished, Trainable, Trained
+from workers.runtime.report import TimedImage
+from workers.runtime.sources import SourceSpec
+from workers.runtime.view import PathTracedView
+
+TRIANGLE_BYTES = 3 * 3 * 4 + 3 * 3 * 4 + 3 * 2 * 4 + 64  # positions, normals, UVs and BVH share, float32
+
+
+class MesoganMethod:
+    kind = "mesogan"
+
+    def trainables(self, ctx: JobContext) -> list[Trainable]:
+        config: MesoganConfig = ctx.config
+        covering(ctx.scene.compiled(), config.surfaces, config.shell_height, config.texel)  # fail early
+        spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), ctx.seed)
+        torch.manual_seed(ctx.seed)
+        model = MesoGAN(config)
+        return [Trainable(model, phases(model), spec, config.train, stored_dtype=artifact.STORAGE_DTYPE)]
+
+    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
+        config: MesoganConfig = ctx.config
+        model: MesoGAN = trained[0].model
+        files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec)
+        scene = ctx.scene.compiled()
+        cover = covering(scene, config.surfaces, config.shell_height, config.texel)
+        shell = build_shell(scene, cover, config.shell_height)
+        ctx.raise_if_cancelled()
+        strands = with_strands(scene, cover, config, config.structure, config.appearance, ctx.seed)
+        settings = RenderSettings(
+            spp=config.evaluation_spp, width=config.preview_size, height=config.preview_size,
+            max_depth=config.max_depth, seed=ctx.seed, threads=1,
+        )  # fmt: skip
+        view = PathTracedView(strands, settings, config.reference_spp)
+        started = time.perf_counter()
+        material = neural_material(model, config, cover, config.structure, config.appearance, ctx.seed)
+        generate_seconds = time.perf_counter() - started
+        camera = scene.spec.camera
+        cone = 2 * math.tan(math.radians(camera.fov) / 2) / config.preview_size / math.sqrt(3)
+        aggregate = ShellAggregate(shell, material, config.samples_per_ray, cone)
+        ctx.log(f"rendering {config.preview_size}^2 with the neural shell at {config.evaluation_spp} spp")
+        result = render(PathTracer(scene, aggregate=aggregate), settings)
+        frame = TimedImage(f"{config.evaluation_spp} spp", result.image, result.seconds)
+        strand_triangles = strands.num_triangles - scene.num_triangles
+        model_bytes = artifact.shipped_bytes(model)
+        plane_bytes = sum(level.numel() * 2 for level in material.stack)
+        method_metrics = {
+            "covered_triangles": float(len(cover.triangles)),
+            "plane_resolution": float(cover.resolution),
+            "plane_seconds": generate_seconds,
+            "model_bytes": float(model_bytes),
+            "plane_bytes": float(plane_bytes),
+            "strand_triangles": float(strand_triangles),
+            "strand_bytes": float(strand_triangles * TRIANGLE_BYTES),
+            "strand_to_model_bytes": strand_triangles * TRIANGLE_BYTES / (model_bytes + plane_bytes),
+            "density_queries_per_pixel_sample": aggregate.density_queries
+            / (config.preview_size**2 * config.evaluation_spp),
+        }
+        metrics = {"model_bytes": float(model_bytes), "strand_triangles": float(strand_triangles)}
+        return Finished(files, view, frame, method_metrics, metrics)
