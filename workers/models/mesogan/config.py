@@ -16,7 +16,7 @@ from workers.scene.mesoscale import Appearance, MaterialKind, Structure
 
 
 # The structure parameters training instances are drawn from: each uniform in its range.
-STRUCTURE_RANGES = {"length": (0.4, 1.0), "density": (20.0, 80.0), "curliness": (0.0, 1.0)}
+STRUCTURE_RANGES = {"length": (0.4, 1.0), "density": (10.0, 80.0), "curliness": (0.0, 1.0)}
 
 
 class MesoganConfig(TrainedKindConfig):
@@ -66,6 +66,8 @@ class MesoganConfig(TrainedKindConfig):
     # Discriminator and loss.
     discriminator_width: int = Field(32, ge=4)
     r1_gamma: float = Field(1.0, ge=0)
+    ambient_consistency_weight: float = Field(1.0, ge=0, description="ambient head = hemispherical rho")
+    mean_color_weight: float = Field(10.0, ge=0, description="generator: |mean(fake) - mean(real)| weight")
     batch_size: int = Field(8, ge=1)
     train: TrainConfig = TrainConfig(
         steps=2000,
@@ -95,11 +97,13 @@ PRESETS: dict[str, dict] = {
         "image_size": 16,
         "training_spp": 8,
         "pool": 8,
+        "tile": 1.0,
         "tiles": 3,
-        "structure": {"density": 30.0},
+        "shell_height": 0.12,
+        "structure": {"density": 12.0},
         "batch_size": 4,
         "samples_per_ray": 6,
-        "train": {"steps": 6, "checkpoint_every": 3, "progress_every": 2},
+        "train": {"steps": 20, "checkpoint_every": 10, "progress_every": 5},
         "preview_size": 16,
         "evaluation_spp": 2,
         "reference_spp": 32,

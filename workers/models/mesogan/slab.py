@@ -118,8 +118,11 @@ def query(model: MesoGAN, config: MesoganConfig, stack: list[Tensor], window: Wi
 
 def render_slab(
     model: MesoGAN, config: MesoganConfig, planes: Tensor, window: Window, batch: dict[str, Tensor], jitter: bool
-) -> Tensor:
-    """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels."""
+) -> tuple[Tensor, Tensor]:
+    """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels, and
+    the ambient consistency residual: rho_ambient - 2 pi rho(w') for one uniform upper-hemisphere w' per
+    sample, weighted as the samples are, whose mean square is least when the ambient head is the
+    hemispherical integral of rho (what the path tracer integrates, `aggregate`)."""
     stack = mip_stack(planes, config.mip_levels)
     inside, base = march(batch["origins"], batch["directions"], batch["pixel_radius"], config.samples_per_ray, jitter)
     density, hidden = query(model, config, stack, window, inside)
@@ -134,4 +137,11 @@ def render_slab(
     radiance = config.light_irradiance * rho[..., :3] + config.ambient * rho[..., 3:]
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
     size = int(math.isqrt(pixels.shape[1]))
-    return pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+    image = pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+    u = torch.rand(*view.shape[:-1], 2, device=view.device)
+    z, phi = u[..., 0], 2 * math.pi * u[..., 1]
+    r = torch.sqrt((1 - z * z).clamp(min=0))
+    uniform = torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], -1)
+    sampled = model.decoder.rho(hidden, appearance, uniform, view)[..., :3]
+    residual = weights[..., None].detach() * (rho[..., 3:] - 2 * math.pi * sampled)
+    return image, residual

@@ -1,5 +1,5 @@
 """The GAN's two phases on the shared training loop: the discriminator's non-saturating loss with R1 on
-real images, and the generator's, each on its own named optimizer (`workers.runtime.training.Phase`).
+real images, and the generator's (with a mean-colour matching term), each on its own named optimizer (`workers.runtime.training.Phase`).
 
 Fakes are rendered under the real batch's labels (structure, colour, light, camera), so the conditional
 discriminator judges each pair under the same conditions. Latents and the planes' Fourier banks are drawn
@@ -26,19 +26,21 @@ def labels(batch: Batch) -> Tensor:
     return torch.cat([batch["structure"], batch["appearance"], batch["light"], batch["camera"] / 8.0], -1)
 
 
-def fake_images(model: MesoGAN, batch: Batch) -> Tensor:
-    """Tonemapped renders of freshly generated slabs under the batch's labels."""
+def fake_images(model: MesoGAN, batch: Batch) -> tuple[Tensor, Tensor]:
+    """Tonemapped renders of freshly generated slabs under the batch's labels, and their ambient
+    consistency residual (`slab.render_slab`)."""
     config = model.config
     b = batch["image"].shape[0]
     window = Window.centred(config.plane_resolution, config.texel)
     latent = torch.randn(b, config.latent_dims, device=batch["image"].device)
     planes = generate_planes(model, config, batch["structure"], latent, draw_noise(model, config, b), window)
-    return tonemap(render_slab(model, config, planes, window, batch, jitter=True))
+    image, residual = render_slab(model, config, planes, window, batch, jitter=True)
+    return tonemap(image), residual
 
 
 def discriminator_loss(model: MesoGAN, batch: Batch) -> Tensor:
     with torch.no_grad():
-        fake = fake_images(model, batch)
+        fake, _ = fake_images(model, batch)
     real = batch["image"].detach().requires_grad_(model.config.r1_gamma > 0)
     conditions = labels(batch)
     real_logits = model.discriminator(real, conditions)
@@ -50,7 +52,17 @@ def discriminator_loss(model: MesoGAN, batch: Batch) -> Tensor:
 
 
 def generator_loss(model: MesoGAN, batch: Batch) -> Tensor:
-    return F.softplus(-model.discriminator(fake_images(model, batch), labels(batch))).mean()
+    """Non-saturating loss, plus matching each fake's mean colour to its real twin's (feature matching on
+    the image mean, Salimans et al. 2016): the labels fix the expected colour, so this steadies the
+    appearance early without constraining the structure the discriminator judges."""
+    fake, residual = fake_images(model, batch)
+    loss = F.softplus(-model.discriminator(fake, labels(batch))).mean()
+    if model.config.mean_color_weight > 0:
+        difference = fake.mean((2, 3)) - batch["image"].mean((2, 3))
+        loss = loss + model.config.mean_color_weight * difference.abs().mean()
+    if model.config.ambient_consistency_weight > 0:
+        loss = loss + model.config.ambient_consistency_weight * residual.pow(2).sum(-2).mean()
+    return loss
 
 
 def phases(model: MesoGAN) -> list[Phase]:
