@@ -43,7 +43,7 @@ class NeuralMaterial:
     config: MesoganConfig
     stack: list[torch.Tensor]
     window: Window
-    appearance: torch.Tensor  # (2,)
+    appearance: torch.Tensor  # (3,) the strands' colour (`Appearance.color`)
 
     def hidden(self, uv: np.ndarray, height: np.ndarray, variance: np.ndarray, radius: np.ndarray):
         """Density (per slab height) and hidden state at mesh UVs, heights in [0, 1] and footprints."""
@@ -64,7 +64,7 @@ class NeuralMaterial:
     def rho(self, hidden: torch.Tensor, light: np.ndarray, view: np.ndarray) -> np.ndarray:
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).to(hidden.device)  # noqa: E731
         with torch.no_grad():
-            out = self.model.decoder.rho(hidden, self.appearance.expand(len(hidden), 2), f32(light), f32(view))
+            out = self.model.decoder.rho(hidden, self.appearance.expand(len(hidden), -1), f32(light), f32(view))
         return out[:, :3].double().cpu().numpy()
 
 

@@ -16,7 +16,7 @@ import torch
 from workers.models.mesogan.aggregate import NeuralMaterial
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
-from workers.models.mesogan.sampling import normalized_structure
+from workers.models.mesogan.sampling import SKIN, normalized_structure
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import mip_stack
@@ -72,14 +72,15 @@ def neural_material(
     with torch.no_grad():
         planes = generate_planes(model, config, s, latent, draw_noise(model, config, 1, seed), window)
     levels = max(config.mip_levels, int(math.log2(cover.resolution)) + 1)
-    a = torch.tensor([appearance.hue, appearance.saturation], dtype=torch.float32, device=device)
+    a = torch.tensor(appearance.color(), dtype=torch.float32, device=device)
     return NeuralMaterial(model, config, mip_stack(planes, levels), window, a)
 
 
 def with_strands(
     scene: CompiledScene, cover: Covering, config: MesoganConfig, structure: Structure, appearance: Appearance, seed: int
 ) -> CompiledScene:
-    """`scene` with real strands grown on the covered triangles (what the shell stands in for)."""
+    """`scene` with real strands grown on the covered triangles, which take the training slabs' skin: the
+    geometry the shell stands in for, base included."""
     t = cover.triangles
     strands = grow_on_triangles(
         scene.positions[t].astype(np.float64),
@@ -89,7 +90,16 @@ def with_strands(
         config.shell_height,
         seed,
     )
-    return with_mesh(scene, strands, "mesogan.strands", Diffuse(reflectance=appearance.color()))
+    skinned = with_material(scene, t, "mesogan.skin", Diffuse(reflectance=SKIN))
+    return with_mesh(skinned, strands, "mesogan.strands", Diffuse(reflectance=appearance.color()))
+
+
+def with_material(scene: CompiledScene, triangles: np.ndarray, material: str, definition) -> CompiledScene:
+    """`scene` with `triangles` shaded by the new material `definition`."""
+    spec = scene.spec.model_copy(update={"materials": {**scene.spec.materials, material: definition}})
+    material_ids = scene.material_ids.copy()
+    material_ids[triangles] = len(scene.material_names)
+    return replace(scene, spec=spec, material_ids=material_ids, material_names=[*scene.material_names, material])
 
 
 def with_mesh(scene: CompiledScene, mesh: MeshData, material: str, definition) -> CompiledScene:

@@ -106,7 +106,7 @@ class MesoganModel:
         up = torch.tensor([0.0, 0.0, 1.0]).expand(n, 3)
         light = torch.from_numpy(arrays["light"].astype(np.float32)) if "light" in arrays else up
         view = torch.from_numpy(arrays["view"].astype(np.float32)) if "view" in arrays else up
-        a = torch.tensor([params.appearance.hue, params.appearance.saturation]).expand(n, 2)
+        a = torch.tensor(params.appearance.color()).expand(n, 3)
         rho = self.model.decoder.rho(hidden, a, light, view)
         return Answer({"density": density.numpy(), "rho": rho.numpy()})
 

@@ -24,7 +24,8 @@ from torch import Tensor, nn
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.volume import integrated_encoding
 
-STRUCTURE_DIMS, APPEARANCE_DIMS = 3, 2  # (length, density, curliness), (hue, saturation), all in [0, 1]
+STRUCTURE_DIMS = 3  # (length, density, curliness), each in [0, 1] over its training range
+APPEARANCE_DIMS = 3  # the strands' RGB reflectance from (hue, saturation): hue is circular, colour is not
 RADIANCE_CHANNELS = 6  # rho towards the directional light's direction (3) and under unit ambient (3)
 
 

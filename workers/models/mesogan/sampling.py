@@ -74,7 +74,7 @@ class Instance:
     def labels(self) -> dict[str, np.ndarray]:
         return {
             "structure": normalized_structure(self.structure),
-            "appearance": np.array([self.appearance.hue, self.appearance.saturation]),
+            "appearance": np.array(self.appearance.color()),
             "light": self.light,
         }
 

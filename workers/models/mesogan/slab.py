@@ -132,7 +132,7 @@ def render_slab(
     weights = torch.cat([weights, remaining[..., None]], -1)
     view = -batch["directions"][..., None, :].expand(*hidden.shape[:-1], 3)
     light = batch["light"][:, None, None, :].expand_as(view)
-    appearance = batch["appearance"][:, None, None, :].expand(*hidden.shape[:-1], 2)
+    appearance = batch["appearance"][:, None, None, :].expand(*hidden.shape[:-1], -1)
     rho = model.decoder.rho(hidden, appearance, light, view)
     radiance = config.light_irradiance * rho[..., :3] + config.ambient * rho[..., 3:]
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
