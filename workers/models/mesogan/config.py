@@ -62,12 +62,13 @@ class MesoganConfig(TrainedKindConfig):
     decoder: MLPConfig = MLPConfig(width=32, depth=2, activation="leaky_relu")
     radiance_head: MLPConfig = MLPConfig(width=32, depth=1, activation="leaky_relu")
     samples_per_ray: int = Field(8, ge=2, le=256)
+    ambient_directions: int = Field(2, ge=1, le=64, description="hemisphere directions per sample for A")
 
     # Discriminator and loss.
     discriminator_width: int = Field(32, ge=4)
     r1_gamma: float = Field(1.0, ge=0)
-    ambient_consistency_weight: float = Field(1.0, ge=0, description="ambient head = hemispherical rho")
-    mean_color_weight: float = Field(10.0, ge=0, description="generator: |mean(fake) - mean(real)| weight")
+    mean_color_weight: float = Field(10.0, ge=0, description="generator: L1 of fake and real block means")
+    moment_block: int = Field(4, ge=1, description="pixels per side of the blocks whose means are matched")
     batch_size: int = Field(8, ge=1)
     train: TrainConfig = TrainConfig(
         steps=2000,
@@ -99,13 +100,18 @@ PRESETS: dict[str, dict] = {
         "pool": 8,
         "tile": 1.0,
         "tiles": 3,
-        "shell_height": 0.12,
+        "shell_height": 0.2,
         "structure": {"density": 12.0},
         "batch_size": 4,
         "samples_per_ray": 6,
-        "train": {"steps": 20, "checkpoint_every": 10, "progress_every": 5},
-        "preview_size": 16,
-        "evaluation_spp": 2,
+        "train": {
+            "steps": 60,
+            "checkpoint_every": 30,
+            "progress_every": 10,
+            "optimizers": {"generator": {"schedule": {"lr": 0.01}, "betas": (0.0, 0.99), "eps": 1e-8}},
+        },
+        "preview_size": 32,
+        "evaluation_spp": 8,
         "reference_spp": 32,
         "evaluation_instances": 4,
     },

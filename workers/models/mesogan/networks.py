@@ -8,7 +8,9 @@
   windows agree on their overlap and a large window equals stitched small ones.
 - `Mapping`: the latent code and the structure parameters to the style w (Sec. 6.2.8).
 - `Decoder`: plane features and the integrated encoding of height to density; appearance, light and view
-  directions enter only the radiance head, so they cannot change geometry.
+  directions enter only the radiance head, so they cannot change geometry. rho is the albedo-weighted
+  transport (Eq. 6.4), so the head predicts it as colour * g + h with g, h >= 0: the strands' colour
+  scales what they scatter from the first step, and h carries what does not follow it (the skin).
 - `Discriminator`: a convolutional critic with a projection of every label and the camera.
 """
 
@@ -26,7 +28,8 @@ from workers.models.mesogan.volume import integrated_encoding
 
 STRUCTURE_DIMS = 3  # (length, density, curliness), each in [0, 1] over its training range
 APPEARANCE_DIMS = 3  # the strands' RGB reflectance from (hue, saturation): hue is circular, colour is not
-RADIANCE_CHANNELS = 6  # rho towards the directional light's direction (3) and under unit ambient (3)
+RADIANCE_CHANNELS = 3  # rho: radiance towards the view per unit irradiance from the light direction
+HEAD_CHANNELS = 2 * RADIANCE_CHANNELS  # each as colour * g + h (module docstring)
 
 
 @dataclass
@@ -158,20 +161,21 @@ class Decoder(nn.Module):
         self.height_frequencies = config.height_frequencies
         hidden = config.decoder.width
         self.trunk = config.decoder.build(config.plane_channels + 2 * config.height_frequencies, hidden + 1)
-        self.radiance = config.radiance_head.build(hidden + APPEARANCE_DIMS + 6, RADIANCE_CHANNELS)
+        self.radiance = config.radiance_head.build(hidden + APPEARANCE_DIMS + 6, HEAD_CHANNELS)
 
     def density(self, features: Tensor, height_mean: Tensor, height_variance: Tensor) -> tuple[Tensor, Tensor]:
         """Extinction (per slab height) and the hidden state the radiance head reads."""
         encoded = integrated_encoding(height_mean, height_variance, self.height_frequencies)
         out = self.trunk(torch.cat([features, encoded], -1))
-        return F.softplus(out[..., 0] - 1.0) * 16.0, out[..., 1:]
+        # Starts nearly clear (0.4 per slab height): sparse strands over a visible skin, as in most slabs.
+        return F.softplus(out[..., 0] - 3.0) * 8.0, out[..., 1:]
 
     def rho(self, hidden: Tensor, appearance: Tensor, light: Tensor, view: Tensor) -> Tensor:
-        """Radiance per unit irradiance from `light` (3) and under unit ambient radiance (3), towards `view`;
-        light and view are unit directions in the tangent frame (z up). Zero for light from below."""
-        out = F.softplus(self.radiance(torch.cat([hidden, appearance, light, view], -1)) - 2.0)
-        lit = (light[..., 2:] > 0).to(out.dtype)
-        return torch.cat([out[..., :3] * lit, out[..., 3:]], -1)
+        """Radiance towards `view` per unit irradiance from `light` (unit directions in the tangent frame,
+        z up): the albedo-weighted transport of Eq. 6.4. Zero for light from below the slab."""
+        heads = F.softplus(self.radiance(torch.cat([hidden, appearance, light, view], -1)) - 2.0)
+        out = appearance * heads[..., :RADIANCE_CHANNELS] + heads[..., RADIANCE_CHANNELS:]
+        return out * (light[..., 2:] > 0).to(out.dtype)
 
 
 class Discriminator(nn.Module):

@@ -4,8 +4,8 @@ rays through them (Sec. 6.2.6-6.2.7), what the discriminator compares with path-
 A camera ray above the slab (height 1) is marched with `samples_per_ray` stratified samples down to the
 base (height 0), where an opaque last sample stands for the skin. Each sample is a cone segment: its
 Gaussian gives the variance of its height (the integrated encoding) and the radius of its footprint on
-the plane (the mip level). Radiance is E rho_light + A rho_ambient: rho per unit irradiance of the
-directional light and per unit ambient radiance, the quantities the path tracer uses (`aggregate`).
+the plane (the mip level). Radiance is E rho(light) + A times a Monte Carlo estimate of rho's integral over
+the hemisphere: rho per unit irradiance, the quantity the path tracer uses (`aggregate`).
 """
 
 from __future__ import annotations
@@ -118,11 +118,12 @@ def query(model: MesoGAN, config: MesoganConfig, stack: list[Tensor], window: Wi
 
 def render_slab(
     model: MesoGAN, config: MesoganConfig, planes: Tensor, window: Window, batch: dict[str, Tensor], jitter: bool
-) -> tuple[Tensor, Tensor]:
-    """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels, and
-    the ambient consistency residual: rho_ambient - 2 pi rho(w') for one uniform upper-hemisphere w' per
-    sample, weighted as the samples are, whose mean square is least when the ambient head is the
-    hemispherical integral of rho (what the path tracer integrates, `aggregate`)."""
+) -> Tensor:
+    """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels.
+
+    Radiance at a sample is E rho(light) + A 2 pi mean_k rho(w_k) over `ambient_directions` uniform
+    upper-hemisphere directions w_k: the same estimate of the incident integral the path tracer makes with
+    its one traced direction (`aggregate`), so one rho serves both, unbiased."""
     stack = mip_stack(planes, config.mip_levels)
     inside, base = march(batch["origins"], batch["directions"], batch["pixel_radius"], config.samples_per_ray, jitter)
     density, hidden = query(model, config, stack, window, inside)
@@ -133,15 +134,24 @@ def render_slab(
     view = -batch["directions"][..., None, :].expand(*hidden.shape[:-1], 3)
     light = batch["light"][:, None, None, :].expand_as(view)
     appearance = batch["appearance"][:, None, None, :].expand(*hidden.shape[:-1], -1)
-    rho = model.decoder.rho(hidden, appearance, light, view)
-    radiance = config.light_irradiance * rho[..., :3] + config.ambient * rho[..., 3:]
+    radiance = config.light_irradiance * model.decoder.rho(hidden, appearance, light, view)
+    if config.ambient > 0:
+        for _ in range(config.ambient_directions):
+            direction = uniform_hemisphere(view.shape[:-1], view.device, jitter)
+            rho = model.decoder.rho(hidden, appearance, direction, view)
+            radiance = radiance + (config.ambient * 2 * math.pi / config.ambient_directions) * rho
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
     size = int(math.isqrt(pixels.shape[1]))
-    image = pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
-    u = torch.rand(*view.shape[:-1], 2, device=view.device)
+    return pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+
+
+def uniform_hemisphere(shape, device, random: bool) -> Tensor:
+    """Uniform directions over the upper hemisphere (z up); without `random`, a fixed set (evaluation)."""
+    if random:
+        u = torch.rand(*shape, 2, device=device)
+    else:
+        generator = torch.Generator().manual_seed(FIXED_NOISE_SEED)
+        u = torch.rand(*shape, 2, generator=generator).to(device)
     z, phi = u[..., 0], 2 * math.pi * u[..., 1]
     r = torch.sqrt((1 - z * z).clamp(min=0))
-    uniform = torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], -1)
-    sampled = model.decoder.rho(hidden, appearance, uniform, view)[..., :3]
-    residual = weights[..., None].detach() * (rho[..., 3:] - 2 * math.pi * sampled)
-    return image, residual
+    return torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], -1)

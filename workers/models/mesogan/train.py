@@ -26,21 +26,19 @@ def labels(batch: Batch) -> Tensor:
     return torch.cat([batch["structure"], batch["appearance"], batch["light"], batch["camera"] / 8.0], -1)
 
 
-def fake_images(model: MesoGAN, batch: Batch) -> tuple[Tensor, Tensor]:
-    """Tonemapped renders of freshly generated slabs under the batch's labels, and their ambient
-    consistency residual (`slab.render_slab`)."""
+def fake_images(model: MesoGAN, batch: Batch) -> Tensor:
+    """Tonemapped renders of freshly generated slabs under the batch's labels."""
     config = model.config
     b = batch["image"].shape[0]
     window = Window.centred(config.plane_resolution, config.texel)
     latent = torch.randn(b, config.latent_dims, device=batch["image"].device)
     planes = generate_planes(model, config, batch["structure"], latent, draw_noise(model, config, b), window)
-    image, residual = render_slab(model, config, planes, window, batch, jitter=True)
-    return tonemap(image), residual
+    return tonemap(render_slab(model, config, planes, window, batch, jitter=True))
 
 
 def discriminator_loss(model: MesoGAN, batch: Batch) -> Tensor:
     with torch.no_grad():
-        fake, _ = fake_images(model, batch)
+        fake = fake_images(model, batch)
     real = batch["image"].detach().requires_grad_(model.config.r1_gamma > 0)
     conditions = labels(batch)
     real_logits = model.discriminator(real, conditions)
@@ -52,16 +50,16 @@ def discriminator_loss(model: MesoGAN, batch: Batch) -> Tensor:
 
 
 def generator_loss(model: MesoGAN, batch: Batch) -> Tensor:
-    """Non-saturating loss, plus matching each fake's mean colour to its real twin's (feature matching on
-    the image mean, Salimans et al. 2016): the labels fix the expected colour, so this steadies the
-    appearance early without constraining the structure the discriminator judges."""
-    fake, residual = fake_images(model, batch)
+    """Non-saturating loss, plus matching each fake's block means to its real twin's (feature matching on
+    low-passed images, Salimans et al. 2016): the labels fix the expected colour and shading of a
+    block of `moment_block`^2 pixels, so this steadies appearance and lighting early without constraining
+    the structure below the block size, which the discriminator judges."""
+    fake = fake_images(model, batch)
     loss = F.softplus(-model.discriminator(fake, labels(batch))).mean()
     if model.config.mean_color_weight > 0:
-        difference = fake.mean((2, 3)) - batch["image"].mean((2, 3))
+        block = model.config.moment_block
+        difference = F.avg_pool2d(fake, block) - F.avg_pool2d(batch["image"], block)
         loss = loss + model.config.mean_color_weight * difference.abs().mean()
-    if model.config.ambient_consistency_weight > 0:
-        loss = loss + model.config.ambient_consistency_weight * residual.pow(2).sum(-2).mean()
     return loss
 
 
