@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import torch
 
 from workers.models.mesogan import artifact
@@ -17,6 +18,9 @@ from workers.models.mesogan.covering import build_shell, covering, neural_materi
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
 from workers.models.mesogan.train import phases
+from workers.models.mesogan.shell import Shell
+from workers.nn.metrics import flip
+from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.contract import JobContext
@@ -24,8 +28,20 @@ from workers.runtime.pipeline import Finished, Trainable, Trained
 from workers.runtime.report import TimedImage
 from workers.runtime.sources import SourceSpec
 from workers.runtime.view import PathTracedView
+from workers.scene.spec import Camera
 
 TRIANGLE_BYTES = 3 * 3 * 4 + 3 * 3 * 4 + 3 * 2 * 4 + 64  # positions, normals, UVs and BVH share, float32
+
+
+def covered_pixels(shell: Shell, camera: Camera, size: int) -> np.ndarray:
+    """(size, size) mask of the pixels whose centre ray meets the shell."""
+    pinhole = PinholeCamera(camera, size, size)
+    py, px = np.mgrid[0:size, 0:size] + 0.5
+    origins, directions = pinhole.rays(px.ravel(), py.ravel())
+    n = len(origins)
+    hit = np.zeros(n, bool)
+    hit[shell.intervals(origins, directions, np.zeros(n), np.full(n, np.inf)).ray] = True
+    return hit.reshape(size, size)
 
 
 class MesoganMethod:
@@ -65,10 +81,16 @@ class MesoganMethod:
         ctx.log(f"rendering {config.preview_size}^2 with the neural shell at {config.evaluation_spp} spp")
         result = render(PathTracer(scene, aggregate=aggregate), settings)
         frame = TimedImage(f"{config.evaluation_spp} spp", result.image, result.seconds)
+        covered = covered_pixels(shell, camera, config.preview_size)
+        reference = view.reference()
         strand_triangles = strands.num_triangles - scene.num_triangles
         model_bytes = artifact.shipped_bytes(model)
         plane_bytes = sum(level.numel() * 2 for level in material.stack)
         method_metrics = {
+            # the frame's error where the shell is seen, against path tracing there at 1 spp
+            "flip_covered_pixels": flip(reference, result.image, mask=covered),
+            "flip_covered_pixels_path_tracing_1spp": flip(reference, view.frame(1).image, mask=covered),
+            "covered_pixel_fraction": float(covered.mean()),
             "covered_triangles": float(len(cover.triangles)),
             "plane_resolution": float(cover.resolution),
             "plane_seconds": generate_seconds,

@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+MAX_OPTICAL_DEPTH = 1e4  # per sample: exp(-1e4) is 0 in float64, and sums of these stay finite
 TONEMAP_MAX = 1.0 - 1e-4  # y = x / (x + 1) is clamped below 1 so the inverse stays finite
 
 
@@ -72,9 +73,10 @@ def footprint_radius(axis_variance: Tensor, radial_variance: Tensor, direction_z
 def composite(density: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
     """Quadrature weights w_i = T_i (1 - exp(-sigma_i delta_i)) and the transmittance left after the last
     sample (..., ) along the last axis; sum(w) + T_final = 1 exactly, and huge densities give no NaN."""
-    optical = (density * deltas).clamp(min=0.0)
+    optical = (density * deltas).clamp(0.0, MAX_OPTICAL_DEPTH)
     alpha = -torch.expm1(-optical)
-    before = torch.cumsum(optical, dim=-1) - optical
+    # Exclusive sum (no cumsum - optical: a huge sample would swallow its predecessors in float32).
+    before = torch.cat([torch.zeros_like(optical[..., :1]), torch.cumsum(optical[..., :-1], dim=-1)], -1)
     transmittance = torch.exp(-before)
     weights = transmittance * alpha
     final = torch.exp(-optical.sum(-1))
