@@ -25,7 +25,9 @@ def test_windows_of_the_infinite_plane_agree_on_their_overlap_and_stitch_into_a_
         a = gan.synthesis(w, noise, (0, 0), (24, 24))
         b = gan.synthesis(w, noise, (12, -8), (24, 24))
         large = gan.synthesis(w, noise, (-40, -40), (48, 48))
-        quarters = [gan.synthesis(w, noise, (-40 + 24 * i, -40 + 24 * j), (24, 24)) for i in (0, 1) for j in (0, 1)]
+        quarters = [
+            gan.synthesis(w, noise, (-40 + 24 * i, -40 + 24 * j), (24, 24)) for i in (0, 1) for j in (0, 1)
+        ]
     assert (a[..., 12:, :16] - b[..., :12, 8:]).abs().max() < 1e-5
     stitched = torch.cat([torch.cat(quarters[:2], -1), torch.cat(quarters[2:], -1)], -2)
     assert (large - stitched).abs().max() < 1e-5
@@ -48,7 +50,12 @@ def test_frequencies_are_redrawn_and_each_layer_injects_its_own_band_below_nyqui
 def test_appearance_and_light_change_radiance_only_and_density_ignores_the_camera():
     config, gan = model()
     window = Window.centred(config.plane_resolution, config.texel)
-    plane = gan.synthesis(gan.mapping(torch.randn(1, config.latent_dims), torch.rand(1, 3)), [gan.synthesis.draw_noise()], window.origin, window.size)
+    plane = gan.synthesis(
+        gan.mapping(torch.randn(1, config.latent_dims), torch.rand(1, 3)),
+        [gan.synthesis.draw_noise()],
+        window.origin,
+        window.size,
+    )
     stack = mip_stack(plane, config.mip_levels)
     n = 64
     samples = SlabSamples(

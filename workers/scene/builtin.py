@@ -250,10 +250,15 @@ def fur_ball() -> SceneSpec:
     its shadow on, under a sun and a grey sky: small enough to path-trace with its real strands."""
     return SceneSpec(
         name="fur_ball",
-        materials={"fur": Diffuse(reflectance=(0.5, 0.2, 0.1)), "floor": Diffuse(reflectance=(0.45, 0.45, 0.4))},
+        materials={
+            "fur": Diffuse(reflectance=(0.5, 0.2, 0.1)),
+            "floor": Diffuse(reflectance=(0.45, 0.45, 0.4)),
+        },
         objects=[
             SceneObject(
-                name="ball", shape=SphereShape(center=(0.0, 0.5, 0.0), radius=0.5, subdivisions=3), material="fur"
+                name="ball",
+                shape=SphereShape(center=(0.0, 0.5, 0.0), radius=0.5, subdivisions=3),
+                material="fur",
             ),
             ground(6.0, "floor"),
         ],

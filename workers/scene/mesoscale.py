@@ -98,7 +98,7 @@ def mesoscale_slab(p: MesoscaleSlabParams) -> MeshData:
     (y = 0, facing +y, scene axes) and cropped at y = `height`; the strands only (the base is
     `mesoscale_base`, a separate object so that it can carry its own material)."""
     rng = np.random.default_rng(p.seed)
-    n = max(1, int(round(p.structure.density * p.tile * p.tile)))
+    n = max(1, round(p.structure.density * p.tile * p.tile))
     roots = rng.uniform(0.0, p.tile, size=(n, 2))
     centers, radius = local_strands(rng, n, p.material, p.structure)
     offsets = (np.arange(p.tiles) - (p.tiles - 1) / 2) * p.tile - p.tile / 2
@@ -136,7 +136,7 @@ def grow_on_triangles(
     rng = np.random.default_rng(seed)
     e1, e2 = positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0]
     areas = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-    n = max(1, int(round(structure.density * areas.sum() / height**2)))
+    n = max(1, round(structure.density * areas.sum() / height**2))
     tri = rng.choice(len(positions), size=n, p=areas / areas.sum())
     r1, r2 = rng.uniform(size=n), rng.uniform(size=n)
     flip = r1 + r2 > 1

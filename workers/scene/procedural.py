@@ -606,4 +606,5 @@ def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
     occupied &= ~openings(door_z, wall_z, interval_labels(mx, *x_door), y_door, 2)
     return grid_surface(occupied, edges)
 
+
 from workers.scene import mesoscale  # noqa: E402, F401  (registers the mesoscale generators)

@@ -64,13 +64,17 @@ class NeuralMaterial:
     def rho(self, hidden: torch.Tensor, light: np.ndarray, view: np.ndarray) -> np.ndarray:
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).to(hidden.device)  # noqa: E731
         with torch.no_grad():
-            out = self.model.decoder.rho(hidden, self.appearance.expand(len(hidden), -1), f32(light), f32(view))
+            out = self.model.decoder.rho(
+                hidden, self.appearance.expand(len(hidden), -1), f32(light), f32(view)
+            )
         return out[:, :3].double().cpu().numpy()
 
 
 def pack_events(prism: np.ndarray, b: np.ndarray, height: np.ndarray) -> np.ndarray:
     q = np.clip(np.round(height * (1 << HEIGHT_BITS)), 0, (1 << HEIGHT_BITS) - 1).astype(np.int64)
-    return np.stack([(prism.astype(np.int64) << HEIGHT_BITS) | q, b[:, 1].view(np.int64), b[:, 2].view(np.int64)], 1)
+    return np.stack(
+        [(prism.astype(np.int64) << HEIGHT_BITS) | q, b[:, 1].view(np.int64), b[:, 2].view(np.int64)], 1
+    )
 
 
 def unpack_events(voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -167,7 +171,9 @@ class ShellAggregate:
 
     def first_events(self, origins, directions, t_min, t_max, rng) -> AggregateEvents:
         n = len(origins)
-        events = AggregateEvents(np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3), np.int64), np.ones(n))
+        events = AggregateEvents(
+            np.zeros(n, bool), np.full(n, np.inf), np.zeros((n, 3), np.int64), np.ones(n)
+        )
         iv = self.shell.intervals(origins, directions, t_min, t_max)
         if len(iv.ray) == 0:
             return events

@@ -14,7 +14,6 @@ from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import OptimizerConfig, Schedule, TrainConfig
 from workers.scene.mesoscale import Appearance, MaterialKind, Structure
 
-
 # The structure parameters training instances are drawn from: each uniform in its range.
 STRUCTURE_RANGES = {"length": (0.4, 1.0), "density": (10.0, 80.0), "curliness": (0.0, 1.0)}
 

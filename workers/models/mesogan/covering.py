@@ -57,11 +57,18 @@ def covering(scene: CompiledScene, surfaces: list[str], shell_height: float, tex
 
 def build_shell(scene: CompiledScene, cover: Covering, height: float) -> Shell:
     t = cover.triangles
-    return Shell(scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field="config.shell_height")
+    return Shell(
+        scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field="config.shell_height"
+    )
 
 
 def neural_material(
-    model: MesoGAN, config: MesoganConfig, cover: Covering, structure: Structure, appearance: Appearance, seed: int
+    model: MesoGAN,
+    config: MesoganConfig,
+    cover: Covering,
+    structure: Structure,
+    appearance: Appearance,
+    seed: int,
 ) -> NeuralMaterial:
     """The plane of the instance `seed` with these parameters over the covering's UV square."""
     window = Window((0, 0), (cover.resolution, cover.resolution), cover.plane_units / cover.resolution)
@@ -77,7 +84,12 @@ def neural_material(
 
 
 def with_strands(
-    scene: CompiledScene, cover: Covering, config: MesoganConfig, structure: Structure, appearance: Appearance, seed: int
+    scene: CompiledScene,
+    cover: Covering,
+    config: MesoganConfig,
+    structure: Structure,
+    appearance: Appearance,
+    seed: int,
 ) -> CompiledScene:
     """`scene` with real strands grown on the covered triangles, which take the training slabs' skin: the
     geometry the shell stands in for, base included."""
@@ -99,7 +111,9 @@ def with_material(scene: CompiledScene, triangles: np.ndarray, material: str, de
     spec = scene.spec.model_copy(update={"materials": {**scene.spec.materials, material: definition}})
     material_ids = scene.material_ids.copy()
     material_ids[triangles] = len(scene.material_names)
-    return replace(scene, spec=spec, material_ids=material_ids, material_names=[*scene.material_names, material])
+    return replace(
+        scene, spec=spec, material_ids=material_ids, material_names=[*scene.material_names, material]
+    )
 
 
 def with_mesh(scene: CompiledScene, mesh: MeshData, material: str, definition) -> CompiledScene:
@@ -119,7 +133,9 @@ def with_mesh(scene: CompiledScene, mesh: MeshData, material: str, definition) -
         positions=np.concatenate([scene.positions, positions.astype(np.float32)]),
         shading_normals=np.concatenate([scene.shading_normals, normals.astype(np.float32)]),
         uvs=np.concatenate([scene.uvs, mesh.uvs[mesh.faces].astype(np.float32)]),
-        geometric_normals=np.concatenate([scene.geometric_normals, (cross / length[:, None]).astype(np.float32)]),
+        geometric_normals=np.concatenate(
+            [scene.geometric_normals, (cross / length[:, None]).astype(np.float32)]
+        ),
         areas=np.concatenate([scene.areas, 0.5 * length]),
         material_ids=np.concatenate([scene.material_ids, np.full(n, material_id, np.int32)]),
         object_ids=np.concatenate([scene.object_ids, np.full(n, object_id, np.int32)]),

@@ -82,7 +82,9 @@ class MesoganModel:
             raise ValueError(f"params.size: a window is 1 to {MAX_WINDOW} texels per side, got {window.size}")
         generator = torch.Generator().manual_seed(params.seed)
         latent = torch.randn(1, self.config.latent_dims, generator=generator).to(self.device)
-        s = torch.tensor(normalized_structure(params.structure), dtype=torch.float32, device=self.device)[None]
+        s = torch.tensor(normalized_structure(params.structure), dtype=torch.float32, device=self.device)[
+            None
+        ]
         noise = draw_noise(self.model, self.config, 1, params.seed)
         return generate_planes(self.model, self.config, s, latent, noise, window)
 
@@ -116,14 +118,20 @@ class MesoganModel:
             refuse_missing_scene(self.stored)
             spec, surfaces = self.stored.spec, config.surfaces
         else:
-            ball = SceneObject(name="ball", shape=SphereShape(radius=0.5, subdivisions=4), material=NEUTRAL_SURFACE)
+            ball = SceneObject(
+                name="ball", shape=SphereShape(radius=0.5, subdivisions=4), material=NEUTRAL_SURFACE
+            )
             spec = neutral_scene([ball], {NEUTRAL_SURFACE: Diffuse()})
-            spec = spec.model_copy(update={"camera": Camera(position=(0.0, 0.4, 2.0), target=(0.0, 0.0, 0.0))})
+            spec = spec.model_copy(
+                update={"camera": Camera(position=(0.0, 0.4, 2.0), target=(0.0, 0.0, 0.0))}
+            )
             surfaces = [NEUTRAL_SURFACE]
         scene = compile_scene(spec)
         cover = covering(scene, surfaces, config.shell_height, config.texel)
         shell = build_shell(scene, cover, config.shell_height)
-        material = neural_material(self.model, config, cover, params.structure, params.appearance, params.seed)
+        material = neural_material(
+            self.model, config, cover, params.structure, params.appearance, params.seed
+        )
         camera = params.camera.over(spec.camera)
         cone = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
         tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))

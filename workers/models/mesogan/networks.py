@@ -133,12 +133,18 @@ class PlaneGenerator(nn.Module):
     def positions(self, origin: tuple[int, int], size: tuple[int, int], margin: int, device) -> Tensor:
         """Plane positions (H, W, 2) of texel centres: texel (i, j) of the lattice is at ((i, j) + 1/2) texel,
         `origin` the lattice index of the window's first texel (so windows share exact positions)."""
-        rows = torch.arange(origin[0] - margin, origin[0] + size[0] + margin, device=device, dtype=torch.float64)
-        cols = torch.arange(origin[1] - margin, origin[1] + size[1] + margin, device=device, dtype=torch.float64)
+        rows = torch.arange(
+            origin[0] - margin, origin[0] + size[0] + margin, device=device, dtype=torch.float64
+        )
+        cols = torch.arange(
+            origin[1] - margin, origin[1] + size[1] + margin, device=device, dtype=torch.float64
+        )
         grid = torch.stack(torch.meshgrid(rows, cols, indexing="ij"), -1)
         return ((grid + 0.5) * self.texel).to(torch.float32)
 
-    def forward(self, w: Tensor, noise: list[PlaneNoise], origin: tuple[int, int], size: tuple[int, int]) -> Tensor:
+    def forward(
+        self, w: Tensor, noise: list[PlaneNoise], origin: tuple[int, int], size: tuple[int, int]
+    ) -> Tensor:
         """Planes (B, C, H, W) of the window of `size` texels at lattice `origin`, one per style and noise."""
         device = w.device
         m = self.margin
@@ -163,7 +169,9 @@ class Decoder(nn.Module):
         self.trunk = config.decoder.build(config.plane_channels + 2 * config.height_frequencies, hidden + 1)
         self.radiance = config.radiance_head.build(hidden + APPEARANCE_DIMS + 6, HEAD_CHANNELS)
 
-    def density(self, features: Tensor, height_mean: Tensor, height_variance: Tensor) -> tuple[Tensor, Tensor]:
+    def density(
+        self, features: Tensor, height_mean: Tensor, height_variance: Tensor
+    ) -> tuple[Tensor, Tensor]:
         """Extinction (per slab height) and the hidden state the radiance head reads."""
         encoded = integrated_encoding(height_mean, height_variance, self.height_frequencies)
         out = self.trunk(torch.cat([features, encoded], -1))
@@ -189,7 +197,9 @@ class Discriminator(nn.Module):
         while size > 4:
             layers += [nn.Conv2d(width, width, 4, stride=2, padding=1), nn.LeakyReLU(0.2)]
             size //= 2
-        self.features = nn.Sequential(*layers, nn.Flatten(), nn.Linear(width * size * size, width), nn.LeakyReLU(0.2))
+        self.features = nn.Sequential(
+            *layers, nn.Flatten(), nn.Linear(width * size * size, width), nn.LeakyReLU(0.2)
+        )
         self.out = nn.Linear(width, 1)
         self.embed = nn.Linear(LABEL_DIMS, width)
 
@@ -214,4 +224,3 @@ class MesoGAN(nn.Module):
 
     def generator_parameters(self) -> list[nn.Parameter]:
         return [*self.mapping.parameters(), *self.synthesis.parameters(), *self.decoder.parameters()]
-

@@ -42,7 +42,8 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
             name="plane",
             choice=f"{cover.resolution}^2 x {config.plane_channels}, {levels} mip levels",
             reason=(
-                f"the UV square spans {cover.plane_units:.1f} slab heights at {config.texel:g} per texel; the "
+                f"the UV square spans {cover.plane_units:.1f} slab heights at {config.texel:g} per texel; "
+                "the "
                 f"closest view ({closest:.2f} away) reads level {finest:.1f} and coarser"
             ),
         ),

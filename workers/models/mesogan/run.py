@@ -17,8 +17,8 @@ from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
-from workers.models.mesogan.train import phases
 from workers.models.mesogan.shell import Shell
+from workers.models.mesogan.train import phases
 from workers.nn.metrics import flip
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer

@@ -52,7 +52,11 @@ def to_local(scene: np.ndarray) -> np.ndarray:
 def hemisphere(elevation: float, azimuth: float) -> np.ndarray:
     """A unit vector in the slab frame (z up) at `elevation` and `azimuth` (radians)."""
     return np.array(
-        [math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth), math.sin(elevation)]
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
     )
 
 
@@ -108,7 +112,10 @@ def slab_scene(config: MesoganConfig, instance: Instance) -> SceneSpec:
     }
     return SceneSpec(
         name="mesoscale_slab",
-        materials={"strands": Diffuse(reflectance=instance.appearance.color()), "skin": Diffuse(reflectance=SKIN)},
+        materials={
+            "strands": Diffuse(reflectance=instance.appearance.color()),
+            "skin": Diffuse(reflectance=SKIN),
+        },
         objects=[
             SceneObject(
                 name="strands",

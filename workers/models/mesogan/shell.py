@@ -64,7 +64,9 @@ class Shell:
         scale = np.maximum(np.abs(v).max((1, 2)), self.height) ** 2
         area = np.linalg.norm(face, axis=1)
         if (bad := np.flatnonzero(area <= DEGENERATE * scale)).size:
-            raise SceneError(field, f"triangle {int(bad[0])} of the covered surfaces is degenerate ({bad.size} in all)")
+            raise SceneError(
+                field, f"triangle {int(bad[0])} of the covered surfaces is degenerate ({bad.size} in all)"
+            )
         unit = face / area[:, None]
         # The offset triangle's normal is quadratic in t: n(t) = c0 + c1 t + c2 t^2; it must keep facing
         # along the base normal over t in [0, 1] (checked at the ends, the middle and the extremum).
@@ -79,7 +81,8 @@ class Shell:
         if (bad := np.flatnonzero((worst <= 0.05 * c0) | (facing <= 0.05))).size:
             raise SceneError(
                 field,
-                f"a shell of height {self.height:g} folds over at triangle {int(bad[0])} ({bad.size} in all): "
+                f"a shell of height {self.height:g} folds over at triangle {int(bad[0])} "
+                f"({bad.size} in all): "
                 "it is thicker than the surface's local radius of curvature, or a vertex normal leans past "
                 "the face; lower the shell height or refine the mesh",
             )
@@ -91,7 +94,9 @@ class Shell:
         corners = self.base[prism] + t[:, None, None] * self.offsets[prism]
         return (b[:, :, None] * corners).sum(1)
 
-    def inverse(self, prism: np.ndarray, p: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    def inverse(
+        self, prism: np.ndarray, p: np.ndarray, iterations: int = 30
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Barycentrics (N, 3) and height t (N,) of points p (N, 3) in their prisms (module docstring); points
         outside a prism get coordinates outside [0, 1]."""
         v, o = self.base[prism], self.offsets[prism]
@@ -148,7 +153,9 @@ class Shell:
 
     # ------------------------------------------------------------------ rays
 
-    def candidates(self, origins, directions, t_min, t_max, chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+    def candidates(
+        self, origins, directions, t_min, t_max, chunk: int = 1 << 22
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(ray, prism) pairs whose prism's box the ray segment [t_min, t_max] meets (slab test)."""
         inv = 1.0 / np.where(np.abs(directions) > 1e-300, directions, 1e-300)
         rays, prisms = [], []

@@ -50,7 +50,9 @@ class Window:
         return uv.flip(-1)
 
 
-def draw_noise(model: MesoGAN, config: MesoganConfig, count: int, seed: int | None = None) -> list[PlaneNoise]:
+def draw_noise(
+    model: MesoGAN, config: MesoganConfig, count: int, seed: int | None = None
+) -> list[PlaneNoise]:
     """The planes' random Fourier banks: from torch's stream in training (re-drawn every step), from `seed`
     at inference, and fixed for the ablation without re-drawing."""
     if not config.redraw_frequencies:
@@ -60,7 +62,12 @@ def draw_noise(model: MesoGAN, config: MesoganConfig, count: int, seed: int | No
 
 
 def generate_planes(
-    model: MesoGAN, config: MesoganConfig, structure: Tensor, latent: Tensor, noise: list[PlaneNoise], window: Window
+    model: MesoGAN,
+    config: MesoganConfig,
+    structure: Tensor,
+    latent: Tensor,
+    noise: list[PlaneNoise],
+    window: Window,
 ) -> Tensor:
     w = model.mapping(latent, structure)
     return model.synthesis(w, noise, window.origin, window.size)
@@ -77,7 +84,9 @@ class SlabSamples:
     deltas: Tensor
 
 
-def march(origins: Tensor, directions: Tensor, pixel_radius: Tensor, samples: int, jitter: bool) -> tuple[SlabSamples, SlabSamples]:
+def march(
+    origins: Tensor, directions: Tensor, pixel_radius: Tensor, samples: int, jitter: bool
+) -> tuple[SlabSamples, SlabSamples]:
     """Stratified samples between the slab's top and its base and the base point itself (its own
     'samples' of size 1). Rays must point downwards (camera above the slab)."""
     dz = directions[..., 2].clamp(max=-1e-6)
@@ -102,7 +111,9 @@ def march(origins: Tensor, directions: Tensor, pixel_radius: Tensor, samples: in
     return inside, base
 
 
-def query(model: MesoGAN, config: MesoganConfig, stack: list[Tensor], window: Window, s: SlabSamples) -> tuple[Tensor, Tensor]:
+def query(
+    model: MesoGAN, config: MesoganConfig, stack: list[Tensor], window: Window, s: SlabSamples
+) -> tuple[Tensor, Tensor]:
     """Density (B, N, S) and the radiance head's hidden state at the samples."""
     b = s.xy.shape[0]
     uv = window.uv(s.xy).reshape(b, -1, 2)
@@ -117,7 +128,12 @@ def query(model: MesoGAN, config: MesoganConfig, stack: list[Tensor], window: Wi
 
 
 def render_slab(
-    model: MesoGAN, config: MesoganConfig, planes: Tensor, window: Window, batch: dict[str, Tensor], jitter: bool
+    model: MesoGAN,
+    config: MesoganConfig,
+    planes: Tensor,
+    window: Window,
+    batch: dict[str, Tensor],
+    jitter: bool,
 ) -> Tensor:
     """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels.
 
@@ -125,7 +141,9 @@ def render_slab(
     upper-hemisphere directions w_k: the same estimate of the incident integral the path tracer makes with
     its one traced direction (`aggregate`), so one rho serves both, unbiased."""
     stack = mip_stack(planes, config.mip_levels)
-    inside, base = march(batch["origins"], batch["directions"], batch["pixel_radius"], config.samples_per_ray, jitter)
+    inside, base = march(
+        batch["origins"], batch["directions"], batch["pixel_radius"], config.samples_per_ray, jitter
+    )
     density, hidden = query(model, config, stack, window, inside)
     _, base_hidden = query(model, config, stack, window, base)
     weights, remaining = composite(density, inside.deltas)
@@ -141,7 +159,7 @@ def render_slab(
             rho = model.decoder.rho(hidden, appearance, direction, view)
             radiance = radiance + (config.ambient * 2 * math.pi / config.ambient_directions) * rho
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
-    size = int(math.isqrt(pixels.shape[1]))
+    size = math.isqrt(pixels.shape[1])
     return pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
 
 

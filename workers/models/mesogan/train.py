@@ -1,5 +1,6 @@
 """The GAN's two phases on the shared training loop: the discriminator's non-saturating loss with R1 on
-real images, and the generator's (with a mean-colour matching term), each on its own named optimizer (`workers.runtime.training.Phase`).
+real images, and the generator's (with block-mean matching), each on its own named optimizer
+(`workers.runtime.training.Phase`).
 
 Fakes are rendered under the real batch's labels (structure, colour, light, camera), so the conditional
 discriminator judges each pair under the same conditions. Latents and the planes' Fourier banks are drawn

@@ -47,7 +47,10 @@ def sample_mipmapped(stack: list[Tensor], uv: Tensor, level: Tensor) -> Tensor:
     integer level the other level's weight is exactly zero."""
     grid = (uv * 2.0 - 1.0)[:, :, None, :]
     samples = torch.stack(
-        [F.grid_sample(m, grid, mode="bilinear", padding_mode="border", align_corners=False)[..., 0] for m in stack],
+        [
+            F.grid_sample(m, grid, mode="bilinear", padding_mode="border", align_corners=False)[..., 0]
+            for m in stack
+        ],
         dim=-1,
     )  # (B, C, N, L)
     lower = level.floor().long().clamp(0, len(stack) - 1)
