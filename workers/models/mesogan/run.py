@@ -15,6 +15,7 @@ from workers.models.mesogan import artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
+from workers.models.mesogan.evaluate import generation_scores, held_out_views
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
 from workers.models.mesogan.shell import Shell
@@ -83,10 +84,13 @@ class MesoganMethod:
         frame = TimedImage(f"{config.evaluation_spp} spp", result.image, result.seconds)
         covered = covered_pixels(shell, camera, config.preview_size)
         reference = view.reference()
+        source: SlabSource = trained[0].trainable.source.build()
+        scores = generation_scores(model, held_out_views(source, config.evaluation_instances))
         strand_triangles = strands.num_triangles - scene.num_triangles
         model_bytes = artifact.shipped_bytes(model)
         plane_bytes = sum(level.numel() * 2 for level in material.stack)
         method_metrics = {
+            **{f"held_out_{k}": v for k, v in scores.items()},
             # the frame's error where the shell is seen, against path tracing there at 1 spp
             "flip_covered_pixels": flip(reference, result.image, mask=covered),
             "flip_covered_pixels_path_tracing_1spp": flip(reference, view.frame(1).image, mask=covered),
@@ -102,5 +106,9 @@ class MesoganMethod:
             "density_queries_per_pixel_sample": aggregate.density_queries
             / (config.preview_size**2 * config.evaluation_spp),
         }
-        metrics = {"model_bytes": float(model_bytes), "strand_triangles": float(strand_triangles)}
+        metrics = {
+            "model_bytes": float(model_bytes),
+            "strand_triangles": float(strand_triangles),
+            "held_out_swd": scores["swd"],
+        }
         return Finished(files, view, frame, method_metrics, metrics)
