@@ -47,7 +47,8 @@ def covering(scene: CompiledScene, surfaces: list[str], shell_height: float, tex
     ids = [scene.material_names.index(n) for n in names]
     triangles = np.flatnonzero(np.isin(scene.material_ids, ids))
     uv = scene.uvs[triangles].astype(np.float64)
-    uv_area = 0.5 * np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0])).sum()
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     if uv_area <= 0:
         raise SceneError("config.surfaces", f"surfaces {names} have no UVs: the plane needs a UV layout")
     plane_units = math.sqrt(scene.areas[triangles].sum() / uv_area) / shell_height

@@ -1,6 +1,7 @@
 """Generation quality without a pretrained network: the sliced Wasserstein distance between Laplacian-
 pyramid patches of generated and path-traced slab views (Karras et al. 2018's SWD, after Rabin et al.
-2011), measured on held-out instances (their own seed stream) rendered under the same labels.
+2011), measured on held-out instances (their own seed stream) rendered under the same labels; and the
+conditioning: how the generated density's mean height follows the strand length parameter.
 """
 
 from __future__ import annotations
@@ -12,7 +13,9 @@ from torch import Tensor
 
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, stack_views
+from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.train import fake_images
+from workers.models.mesogan.volume import HEIGHT_TO_RADIANS
 
 HELD_OUT_SEED_OFFSET = 1 << 20  # held-out instances come from a seed no training batch uses
 PATCH = 3
@@ -71,4 +74,33 @@ def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
         "swd_black": pyramid_swd(real, black + 1e-3 * torch.rand_like(real)),
         "block_error": float((F.avg_pool2d(fake, block) - F.avg_pool2d(real, block)).abs().mean()),
         "block_error_black": float(F.avg_pool2d(real, block).abs().mean()),
+    }
+
+
+def mean_height(model: MesoGAN, structure: Tensor, seed: int, heights: int = 16) -> float:
+    """The density-weighted mean height of the slab generated for `structure` (normalised (3,)): the
+    measure of strand length the conditioning test reads (a longer pile puts density higher)."""
+    config = model.config
+    window = Window.centred(config.plane_resolution, config.texel)
+    generator = torch.Generator().manual_seed(seed)
+    latent = torch.randn(1, config.latent_dims, generator=generator)
+    with torch.no_grad():
+        planes = generate_planes(
+            model, config, structure[None], latent, draw_noise(model, config, 1, seed), window
+        )
+        features = planes[0].flatten(1).T  # (R^2, C) at level 0
+        h = (torch.arange(heights) + 0.5) / heights
+        f = features[:, None].expand(-1, heights, -1)
+        hh = h[None].expand(len(features), -1)
+        density, _ = model.decoder.density(f, hh * HEIGHT_TO_RADIANS, torch.zeros_like(hh))
+    return float((density * hh).sum() / density.sum().clamp(min=1e-12))
+
+
+def structure_response(model: MesoGAN, seeds: int = 4) -> dict[str, float]:
+    """Mean generated height at the shortest and the longest trained strand length (other parameters at
+    the middle of their ranges), averaged over `seeds` instances."""
+    short, long = torch.tensor([0.0, 0.5, 0.5]), torch.tensor([1.0, 0.5, 0.5])
+    return {
+        "mean_height_short": float(np.mean([mean_height(model, short, s) for s in range(seeds)])),
+        "mean_height_long": float(np.mean([mean_height(model, long, s) for s in range(seeds)])),
     }

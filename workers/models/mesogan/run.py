@@ -15,7 +15,7 @@ from workers.models.mesogan import artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
-from workers.models.mesogan.evaluate import generation_scores, held_out_views
+from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
 from workers.models.mesogan.shell import Shell
@@ -91,6 +91,7 @@ class MesoganMethod:
         plane_bytes = sum(level.numel() * 2 for level in material.stack)
         method_metrics = {
             **{f"held_out_{k}": v for k, v in scores.items()},
+            **structure_response(model),
             # the frame's error where the shell is seen, against path tracing there at 1 spp
             "flip_covered_pixels": flip(reference, result.image, mask=covered),
             "flip_covered_pixels_path_tracing_1spp": flip(reference, view.frame(1).image, mask=covered),
