@@ -84,6 +84,13 @@ def unpack_events(voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return prism, np.stack([1 - b1 - b2, b1, b2], 1), height
 
 
+def _running_max_by_ray(ray: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Running maximum of finite `values` restarting at every new ray (rows grouped by ray): each ray's
+    rows are lifted above all earlier rays' by a ray-wise offset."""
+    offset = np.cumsum(np.r_[0, ray[1:] != ray[:-1]]) * (2 * np.abs(values).max() + 1.0)
+    return np.maximum.accumulate(values + offset) - offset
+
+
 def ray_uniforms(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """A uniform in [0, 1) per ray from a hash of its bits: shadow tests are random yet reproducible
     whatever thread or batch asks (the protocol gives `occluded` no random stream)."""
@@ -217,11 +224,14 @@ class ShellAggregate:
         out = np.zeros(n)
         if len(iv.ray) == 0:
             return out
-        # Walk each ray's intervals from its origin while they touch (prism to prism).
+        # Each ray's run of touching intervals (prism to prism) that starts at its origin, and its end.
         gap = 1e-6 * max(self.shell.height, 1e-12)
-        reach = np.zeros(n)
-        for ray, enter, leave in zip(iv.ray, iv.enter, iv.leave, strict=True):
-            if enter <= reach[ray] + gap:
-                reach[ray] = max(reach[ray], leave)
-        out[:] = reach
+        first = np.r_[True, iv.ray[1:] != iv.ray[:-1]]
+        previous_end = np.r_[-np.inf, _running_max_by_ray(iv.ray, iv.leave)[:-1]]
+        breaks = first | (iv.enter > previous_end + gap)
+        run = np.cumsum(breaks) - 1
+        ends = np.full(run[-1] + 1, -np.inf)
+        np.maximum.at(ends, run, iv.leave)
+        rows = np.flatnonzero(first & (iv.enter <= gap))
+        out[iv.ray[rows]] = ends[run[rows]]
         return out

@@ -26,6 +26,7 @@ from workers.scene.procedural import orthonormal_frames
 EDGES = ((0, 1), (1, 2), (2, 0))
 DEGENERATE = 1e-12  # relative area below which a base triangle has no well-defined prism
 INSIDE_TOLERANCE = 1e-7
+GROUP = 16  # prisms per box of the hierarchy's upper level
 
 
 @dataclass
@@ -54,6 +55,7 @@ class Shell:
         corners = np.concatenate([self.base, self.top], 1)
         self.lo, self.hi = corners.min(1), corners.max(1)
         self._check(field)
+        self._group_prisms()
 
     def __len__(self) -> int:
         return len(self.base)
@@ -153,24 +155,34 @@ class Shell:
 
     # ------------------------------------------------------------------ rays
 
-    def candidates(
-        self, origins, directions, t_min, t_max, chunk: int = 1 << 22
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(ray, prism) pairs whose prism's box the ray segment [t_min, t_max] meets (slab test)."""
+    def _group_prisms(self) -> None:
+        """Prisms in groups of GROUP consecutive along a Morton curve of their centres, with the groups'
+        boxes: a two-level hierarchy that `candidates` tests rays against before single prisms."""
+        centre = 0.5 * (self.lo + self.hi)
+        span = np.maximum(centre.max(0) - centre.min(0), 1e-300)
+        cells = np.clip(((centre - centre.min(0)) / span * 1023).astype(np.int64), 0, 1023)
+        code = np.zeros(len(self), np.int64)
+        for bit in range(10):
+            for axis in range(3):
+                code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+        self.order = np.argsort(code, kind="stable")
+        starts = np.arange(0, len(self), GROUP)
+        self.group_lo = np.minimum.reduceat(self.lo[self.order], starts)
+        self.group_hi = np.maximum.reduceat(self.hi[self.order], starts)
+
+    def candidates(self, origins, directions, t_min, t_max) -> tuple[np.ndarray, np.ndarray]:
+        """(ray, prism) pairs whose prism's box the ray segment [t_min, t_max] meets (slab tests against
+        the groups' boxes, then against the prisms of the groups met)."""
         inv = 1.0 / np.where(np.abs(directions) > 1e-300, directions, 1e-300)
-        rays, prisms = [], []
-        per = max(1, chunk // max(len(self), 1))
-        for start in range(0, len(origins), per):
-            o, i = origins[start : start + per, None], inv[start : start + per, None]
-            a, b = (self.lo[None] - o) * i, (self.hi[None] - o) * i
-            near = np.minimum(a, b).max(-1)
-            far = np.maximum(a, b).min(-1)
-            lo = t_min[start : start + per, None]
-            hi = t_max[start : start + per, None]
-            r, p = np.nonzero((near <= far) & (far >= lo) & (near <= hi))
-            rays.append(r + start)
-            prisms.append(p)
-        return np.concatenate(rays), np.concatenate(prisms)
+        ray, group = _boxes_met(origins, inv, t_min, t_max, self.group_lo, self.group_hi)
+        ray = np.repeat(ray, GROUP)
+        slot = (group[:, None] * GROUP + np.arange(GROUP)[None]).ravel()
+        inside = slot < len(self)
+        ray, prism = ray[inside], self.order[slot[inside]]
+        a, b = (self.lo[prism] - origins[ray]) * inv[ray], (self.hi[prism] - origins[ray]) * inv[ray]
+        near, far = np.minimum(a, b).max(-1), np.maximum(a, b).min(-1)
+        met = (near <= far) & (far >= t_min[ray]) & (near <= t_max[ray])
+        return ray[met], prism[met]
 
     def crossings(self, o: np.ndarray, d: np.ndarray, prism: np.ndarray) -> np.ndarray:
         """Distances (N, 8) where rays cross the boundary of their prisms (inf where they do not): the
@@ -207,6 +219,21 @@ class Shell:
         order = np.lexsort((a, ray[rows]))
         rows, a, b = rows[order], a[order], b[order]
         return Intervals(ray[rows], prism[rows], a, b)
+
+
+def _boxes_met(origins, inv, t_min, t_max, lo, hi, chunk: int = 1 << 21) -> tuple[np.ndarray, np.ndarray]:
+    """(ray, box) pairs of rays (inverse directions `inv`) meeting boxes [lo, hi] within [t_min, t_max]."""
+    rays, boxes = [], []
+    per = max(1, chunk // max(len(lo), 1))
+    for start in range(0, len(origins), per):
+        o, i = origins[start : start + per, None], inv[start : start + per, None]
+        a, b = (lo[None] - o) * i, (hi[None] - o) * i
+        near, far = np.minimum(a, b).max(-1), np.maximum(a, b).min(-1)
+        lo_t, hi_t = t_min[start : start + per, None], t_max[start : start + per, None]
+        r, g = np.nonzero((near <= far) & (far >= lo_t) & (near <= hi_t))
+        rays.append(r + start)
+        boxes.append(g)
+    return np.concatenate(rays), np.concatenate(boxes)
 
 
 def _triangle(o: np.ndarray, d: np.ndarray, tri: np.ndarray) -> np.ndarray:
