@@ -31,8 +31,8 @@ from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 
-SIZE = 48
-SPPS = (1, 2, 4, 8, 16)
+SIZE = 32
+SPPS = (1, 4, 16)
 REFERENCE_SPP = 256
 SEED = 5
 
