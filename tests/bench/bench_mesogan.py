@@ -5,7 +5,9 @@ shell covers), median frame times, time to equal error, and memory (model and pl
 triangles); plus held-out generation quality (pyramid SWD and block error against a black image).
 
 The model is trained here at the `quick` preset with `MESOGAN_BENCH_STEPS` steps (default 200, minutes on
-this CPU), or read from the artifact folder `MESOGAN_ARTIFACT`.
+this CPU), or read from the artifact folder `MESOGAN_ARTIFACT`. With `MESOGAN_BENCH_ABLATION_STEPS` > 0,
+the thesis's ablations (no mipmapping, fixed frequencies, no injection) and the full model are each
+trained that many quick steps and scored on the same held-out views.
 """
 
 from __future__ import annotations
@@ -19,15 +21,20 @@ import torch
 
 from tests.bench.common import BenchSection, median_seconds
 from tests.support.jobs import run_kind_job
-from workers.models.mesogan import artifact
+from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
 from workers.models.mesogan.evaluate import generation_scores, held_out_views
+from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.run import TRIANGLE_BYTES, covered_pixels
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
+from workers.models.mesogan.train import phases
 from workers.nn.metrics import flip
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
+from workers.runtime.samplers import open_batches
+from workers.runtime.sources import SourceSpec
+from workers.runtime.training import train_phases
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 
@@ -106,5 +113,30 @@ def run() -> list[BenchSection]:
 
     quality = BenchSection("mesogan generation on 16 held-out path-traced slab views")
     source = SlabSource(SlabSourceConfig(mesogan=config), SEED)
-    quality.add(**generation_scores(model, held_out_views(source, 16)))
+    held_out = held_out_views(source, 16)
+    quality.add(model="trained", **generation_scores(model, held_out))
+    if steps := int(os.environ.get("MESOGAN_BENCH_ABLATION_STEPS", "0")):
+        for name, overrides in ABLATIONS.items():
+            quality.add(
+                model=f"{name}, {steps} steps",
+                **generation_scores(ablation(name, overrides, steps), held_out),
+            )
     return [curve, memory, quality]
+
+
+ABLATIONS = {
+    "full": {},
+    "no mipmapping": {"mipmapping": False},
+    "fixed frequencies": {"redraw_frequencies": False},
+    "no injection": {"inject": False},
+}
+
+
+def ablation(name: str, overrides: dict, steps: int) -> MesoGAN:
+    config = KIND.resolve_config("quick", {**overrides, "train": {"steps": steps}})
+    spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), SEED)
+    torch.manual_seed(SEED)
+    model = MesoGAN(config)
+    with open_batches(spec, 0) as batches:
+        train_phases(model, phases(model), batches, config.train)
+    return model.eval()
