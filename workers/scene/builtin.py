@@ -245,6 +245,30 @@ def fur_patch() -> SceneSpec:
 
 
 @builtin
+def fur_ball() -> SceneSpec:
+    """A UV-mapped ball whose material `fur` a mesoscale material (`mesogan`) covers, on a floor it casts
+    its shadow on, under a sun and a grey sky: small enough to path-trace with its real strands."""
+    return SceneSpec(
+        name="fur_ball",
+        materials={
+            "fur": Diffuse(reflectance=(0.5, 0.2, 0.1)),
+            "floor": Diffuse(reflectance=(0.45, 0.45, 0.4)),
+        },
+        objects=[
+            SceneObject(
+                name="ball",
+                shape=SphereShape(center=(0.0, 0.5, 0.0), radius=0.5, subdivisions=3),
+                material="fur",
+            ),
+            ground(6.0, "floor"),
+        ],
+        lights=[DirectionalLight(direction=(-0.4, -1.0, -0.5), irradiance=(3.0, 3.0, 3.0))],
+        environment=ConstantBackground(radiance=(0.3, 0.3, 0.3)),
+        camera=Camera(position=(0.0, 1.4, 3.0), target=(0.0, 0.45, 0.0), fov=40.0, width=128, height=128),
+    )
+
+
+@builtin
 def env_lit_objects() -> SceneSpec:
     """Glossy, plastic and diffuse spheres and boxes on a ground plane under the `courtyard` HDRI."""
 

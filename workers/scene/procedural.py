@@ -605,3 +605,6 @@ def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
     occupied &= ~openings(window_z, wall_z, interval_labels(mx, *x_window), y_window, 2)
     occupied &= ~openings(door_z, wall_z, interval_labels(mx, *x_door), y_door, 2)
     return grid_surface(occupied, edges)
+
+
+from workers.scene import mesoscale  # noqa: E402, F401  (registers the mesoscale generators)

@@ -1,0 +1,142 @@
+"""mesogan on a mesh against the real strands it stands in for (issue 17, "On a mesh"): a furred ball
+(`fur_ball`) rendered with the neural shell and path-traced with strand geometry grown on it, at several
+spp, each frame's FLIP against a converged render of the strands (the whole frame and the pixels the
+shell covers), median frame times, time to equal error, and memory (model and plane against strand
+triangles); plus held-out generation quality (pyramid SWD and block error against a black image).
+
+The model is trained here at the `quick` preset with `MESOGAN_BENCH_STEPS` steps (default 200, minutes on
+this CPU), or read from the artifact folder `MESOGAN_ARTIFACT`. With `MESOGAN_BENCH_ABLATION_STEPS` > 0,
+the thesis's ablations (no mipmapping, fixed frequencies, no injection) and the full model are each
+trained that many quick steps and scored on the same held-out views.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import torch
+
+from tests.bench.common import BenchSection, median_seconds
+from tests.support.jobs import run_kind_job
+from workers.models.mesogan import KIND, artifact
+from workers.models.mesogan.aggregate import ShellAggregate
+from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
+from workers.models.mesogan.evaluate import generation_scores, held_out_views
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.mesogan.run import TRIANGLE_BYTES, covered_pixels
+from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
+from workers.models.mesogan.train import phases
+from workers.nn.metrics import flip
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.runtime.samplers import open_batches
+from workers.runtime.sources import SourceSpec
+from workers.runtime.training import train_phases
+from workers.scene.builtin import get_builtin
+from workers.scene.compile import compile_scene
+
+SIZE = 32
+SPPS = (1, 4, 16)
+REFERENCE_SPP = 256
+SEED = 5
+
+
+def trained_artifact() -> Path:
+    if folder := os.environ.get("MESOGAN_ARTIFACT"):
+        return Path(folder)
+    steps = int(os.environ.get("MESOGAN_BENCH_STEPS", "200"))
+    folder = Path(tempfile.mkdtemp(prefix="bench-mesogan-"))
+    overrides = {"train": {"steps": steps}}
+    _, outcome = run_kind_job("mesogan", get_builtin("fur_ball"), folder, overrides, seed=SEED)
+    assert outcome.state == "succeeded", outcome.error
+    return folder / "out"
+
+
+def run() -> list[BenchSection]:
+    torch.set_num_threads(1)
+    config, model = artifact.load(trained_artifact())
+    spec = get_builtin("fur_ball")
+    scene = compile_scene(spec)
+    cover = covering(scene, config.surfaces, config.shell_height, config.texel)
+    shell = build_shell(scene, cover, config.shell_height)
+    strands = with_strands(scene, cover, config, config.structure, config.appearance, SEED)
+    settings = RenderSettings(
+        spp=1, width=SIZE, height=SIZE, max_depth=config.max_depth, seed=SEED, threads=1
+    )
+    strand_tracer = PathTracer(strands)
+    converged = settings.model_copy(update={"spp": REFERENCE_SPP, "seed": SEED + 2})
+    reference = render(strand_tracer, converged).image
+    material = neural_material(model, config, cover, config.structure, config.appearance, SEED)
+    cone = 2 * math.tan(math.radians(spec.camera.fov) / 2) / SIZE / math.sqrt(3)
+    shell_tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
+    mask = covered_pixels(shell, spec.camera, SIZE)
+
+    curve = BenchSection(
+        f"mesogan shell vs path-traced strands, fur_ball {SIZE}^2 (reference {REFERENCE_SPP} spp)"
+    )
+    best: dict[str, tuple[float, float]] = {}
+    for spp in SPPS:
+        at = settings.model_copy(update={"spp": spp})
+        for name, tracer in (("shell", shell_tracer), ("strands", strand_tracer)):
+            image = render(tracer, at).image
+            seconds = median_seconds(lambda tracer=tracer, at=at: render(tracer, at), repeats=3, warmup=0)
+            error, covered = flip(reference, image), flip(reference, image, mask=mask)
+            curve.add(method=name, spp=spp, seconds=seconds, flip=error, flip_covered=covered)
+            if name not in best or covered < best[name][1]:
+                best[name] = (seconds, covered)
+    shell_seconds, shell_error = best["shell"]
+    equal = [r for r in curve.rows if r["method"] == "strands" and r["flip_covered"] <= shell_error]
+    if equal:
+        curve.notes.append(
+            f"strands reach the shell's best covered-pixel FLIP ({shell_error:.3f}) at "
+            f"{equal[0]['spp']} spp: {equal[0]['seconds'] / shell_seconds:.2f}x the shell's time"
+        )
+    else:
+        curve.notes.append(
+            f"strands beat the shell's best covered-pixel FLIP ({shell_error:.3f}) at every spp"
+        )
+
+    memory = BenchSection("mesogan memory: model + generated plane against strand geometry")
+    model_bytes = artifact.shipped_bytes(model)
+    plane_bytes = sum(level.numel() * 2 for level in material.stack)
+    triangles = strands.num_triangles - scene.num_triangles
+    memory.add(
+        model_bytes=model_bytes,
+        plane_bytes=plane_bytes,
+        strand_triangles=triangles,
+        strand_bytes=triangles * TRIANGLE_BYTES,
+        ratio=triangles * TRIANGLE_BYTES / (model_bytes + plane_bytes),
+    )
+
+    quality = BenchSection("mesogan generation on 16 held-out path-traced slab views")
+    source = SlabSource(SlabSourceConfig(mesogan=config), SEED)
+    held_out = held_out_views(source, 16)
+    quality.add(model="trained", **generation_scores(model, held_out))
+    if steps := int(os.environ.get("MESOGAN_BENCH_ABLATION_STEPS", "0")):
+        for name, overrides in ABLATIONS.items():
+            quality.add(
+                model=f"{name}, {steps} steps",
+                **generation_scores(ablation(name, overrides, steps), held_out),
+            )
+    return [curve, memory, quality]
+
+
+ABLATIONS = {
+    "full": {},
+    "no mipmapping": {"mipmapping": False},
+    "fixed frequencies": {"redraw_frequencies": False},
+    "no injection": {"inject": False},
+}
+
+
+def ablation(name: str, overrides: dict, steps: int) -> MesoGAN:
+    config = KIND.resolve_config("quick", {**overrides, "train": {"steps": steps}})
+    spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), SEED)
+    torch.manual_seed(SEED)
+    model = MesoGAN(config)
+    with open_batches(spec, 0) as batches:
+        train_phases(model, phases(model), batches, config.train)
+    return model.eval()

@@ -1,0 +1,85 @@
+"""The shell as the path tracer's aggregate: the scatter/uncollided mixture is unbiased for a known
+constant extinction, shadow rays pass with the transmittance, the base is opaque, and events keep their
+shell coordinates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from workers.models.mesogan.aggregate import NeuralMaterial, ShellAggregate, pack_events, unpack_events
+from workers.models.mesogan.shell import Shell
+
+SIGMA = 0.8  # extinction per shell height
+
+
+class ConstantMaterial(NeuralMaterial):
+    """A test double of the decoder: constant extinction, constant rho (the estimator's known inputs)."""
+
+    def __init__(self) -> None:
+        pass
+
+    def hidden(self, uv, height, variance, radius):
+        return torch.full((len(uv),), SIGMA, dtype=torch.float64), torch.zeros(len(uv), 1)
+
+    def rho(self, hidden, light, view):
+        return np.full((len(hidden), 3), 0.25)
+
+
+def square_shell(height: float = 1.0) -> Shell:
+    v = np.array([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]], np.float64)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    normals = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
+    return Shell(v[faces], normals, (v[faces][..., :2] + 5) / 10, height)
+
+
+def test_scattering_is_chosen_with_probability_one_minus_transmittance():
+    aggregate = ShellAggregate(square_shell(), ConstantMaterial(), samples=8)
+    n = 4000
+    rng = np.random.default_rng(0)
+    origins = np.tile([-6.0, 0.0, 0.5], (n, 1))  # through both side faces, 10 units inside, above the base
+    directions = np.tile([1.0, 0.0, 0.0], (n, 1))
+    events = aggregate.first_events(origins, directions, np.zeros(n), np.full(n, np.inf), rng)
+    p = 1 - math.exp(-SIGMA * 10.0)
+    short = aggregate.first_events(origins, directions, np.zeros(n), np.full(n, 1.5), rng)  # 0.5 inside
+    q = 1 - math.exp(-SIGMA * 0.5)
+    for found, expected in ((events.found, p), (short.found, q)):
+        z = (found.mean() - expected) / math.sqrt(expected * (1 - expected) / n)
+        assert abs(z) < 4, (found.mean(), expected)
+    assert np.all(events.weight == 1)
+    t = short.t[short.found]
+    assert (t >= 1.0).all() and (t <= 1.5).all()
+
+
+def test_the_base_is_opaque_and_shadow_rays_pass_with_the_transmittance():
+    aggregate = ShellAggregate(square_shell(), ConstantMaterial(), samples=8)
+    n = 2000
+    rng = np.random.default_rng(1)
+    down = aggregate.first_events(
+        np.column_stack([rng.uniform(-4, 4, (n, 2)), np.full(n, 3.0)]),
+        np.tile([0.0, 0.0, -1.0], (n, 1)),
+        np.zeros(n),
+        np.full(n, np.inf),
+        rng,
+    )
+    assert down.found.all()
+    origins = np.column_stack([np.full(n, -6.0), rng.uniform(-4, 4, n), rng.uniform(0.1, 0.9, n)])
+    blocked = aggregate.occluded(origins, np.tile([1.0, 0.0, 0.0], (n, 1)), np.zeros(n), np.full(n, 8.0))
+    expected = 1 - math.exp(-SIGMA * 7.0)
+    assert abs(blocked.mean() - expected) < 4 * math.sqrt(expected * (1 - expected) / n)
+
+
+def test_events_keep_their_shell_coordinates_and_continuing_rays_leave_the_shell():
+    rng = np.random.default_rng(2)
+    prism = rng.integers(0, 1 << 30, 100)
+    b = rng.dirichlet([1, 1, 1], 100)
+    height = rng.uniform(0, 1, 100)
+    p2, b2, h2 = unpack_events(pack_events(prism, b, height))
+    assert np.array_equal(p2, prism) and np.abs(b2 - b).max() < 1e-15 and np.abs(h2 - height).max() < 2**-20
+    aggregate = ShellAggregate(square_shell(0.5), ConstantMaterial(), samples=4)
+    origins = np.array([[0.0, 0.0, 0.1], [4.0, 4.0, 0.3]])
+    directions = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    exits = aggregate.exit_distance(np.zeros((2, 3), np.int64), origins, directions)
+    assert np.allclose(exits, [0.4, min(0.2 / 0.8, 1.0 / 0.6)])

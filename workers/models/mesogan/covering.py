@@ -1,0 +1,148 @@
+"""A scene's surfaces covered by the material: the shell over them, the generated plane laid over their
+UVs, and, for comparison, the same surfaces covered by real strand geometry.
+
+The plane spans the UV square; its size in slab heights is the surfaces' world size per UV unit
+(sqrt(world area / UV area)) over the shell height, so a texel has the size it had in training.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from workers.models.mesogan.aggregate import NeuralMaterial
+from workers.models.mesogan.config import MesoganConfig
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.mesogan.sampling import SKIN, normalized_structure
+from workers.models.mesogan.shell import Shell
+from workers.models.mesogan.slab import Window, draw_noise, generate_planes
+from workers.models.mesogan.volume import mip_stack
+from workers.scene.compile import CompiledScene, ObjectGeometry
+from workers.scene.errors import SceneError
+from workers.scene.mesoscale import Appearance, Structure, grow_on_triangles
+from workers.scene.shapes import MeshData
+from workers.scene.spec import Diffuse
+
+MAX_PLANE = 4096  # texels per side of a generated plane
+
+
+@dataclass(frozen=True)
+class Covering:
+    triangles: np.ndarray  # indices into the compiled scene
+    plane_units: float  # slab heights per UV unit
+    resolution: int  # texels per side of the plane over the UV square
+
+
+def covering(scene: CompiledScene, surfaces: list[str], shell_height: float, texel: float) -> Covering:
+    """The covered triangles and the plane they imply; `SceneError` naming `surfaces` if none match."""
+    names = [n for n in surfaces if n in scene.material_names]
+    if not names:
+        raise SceneError(
+            "config.surfaces",
+            f"no scene material is named {surfaces}; the scene's materials are {scene.material_names}",
+        )
+    ids = [scene.material_names.index(n) for n in names]
+    triangles = np.flatnonzero(np.isin(scene.material_ids, ids))
+    uv = scene.uvs[triangles].astype(np.float64)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    if uv_area <= 0:
+        raise SceneError("config.surfaces", f"surfaces {names} have no UVs: the plane needs a UV layout")
+    plane_units = math.sqrt(scene.areas[triangles].sum() / uv_area) / shell_height
+    resolution = int(min(MAX_PLANE, max(8, math.ceil(plane_units / texel))))
+    return Covering(triangles, plane_units, resolution)
+
+
+def build_shell(scene: CompiledScene, cover: Covering, height: float) -> Shell:
+    t = cover.triangles
+    return Shell(
+        scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field="config.shell_height"
+    )
+
+
+def neural_material(
+    model: MesoGAN,
+    config: MesoganConfig,
+    cover: Covering,
+    structure: Structure,
+    appearance: Appearance,
+    seed: int,
+) -> NeuralMaterial:
+    """The plane of the instance `seed` with these parameters over the covering's UV square."""
+    window = Window((0, 0), (cover.resolution, cover.resolution), cover.plane_units / cover.resolution)
+    device = next(model.parameters()).device
+    generator = torch.Generator().manual_seed(seed)
+    latent = torch.randn(1, config.latent_dims, generator=generator).to(device)
+    s = torch.tensor(normalized_structure(structure), dtype=torch.float32, device=device)[None]
+    with torch.no_grad():
+        planes = generate_planes(model, config, s, latent, draw_noise(model, config, 1, seed), window)
+    levels = max(config.mip_levels, int(math.log2(cover.resolution)) + 1)
+    a = torch.tensor(appearance.color(), dtype=torch.float32, device=device)
+    return NeuralMaterial(model, config, mip_stack(planes, levels), window, a)
+
+
+def with_strands(
+    scene: CompiledScene,
+    cover: Covering,
+    config: MesoganConfig,
+    structure: Structure,
+    appearance: Appearance,
+    seed: int,
+) -> CompiledScene:
+    """`scene` with real strands grown on the covered triangles, which take the training slabs' skin: the
+    geometry the shell stands in for, base included."""
+    t = cover.triangles
+    strands = grow_on_triangles(
+        scene.positions[t].astype(np.float64),
+        scene.shading_normals[t].astype(np.float64),
+        config.material,
+        structure,
+        config.shell_height,
+        seed,
+    )
+    skinned = with_material(scene, t, "mesogan.skin", Diffuse(reflectance=SKIN))
+    return with_mesh(skinned, strands, "mesogan.strands", Diffuse(reflectance=appearance.color()))
+
+
+def with_material(scene: CompiledScene, triangles: np.ndarray, material: str, definition) -> CompiledScene:
+    """`scene` with `triangles` shaded by the new material `definition`."""
+    spec = scene.spec.model_copy(update={"materials": {**scene.spec.materials, material: definition}})
+    material_ids = scene.material_ids.copy()
+    material_ids[triangles] = len(scene.material_names)
+    return replace(
+        scene, spec=spec, material_ids=material_ids, material_names=[*scene.material_names, material]
+    )
+
+
+def with_mesh(scene: CompiledScene, mesh: MeshData, material: str, definition) -> CompiledScene:
+    """`scene` with one more object: `mesh` in world space, shaded by the new material `definition`."""
+    positions = mesh.vertices[mesh.faces]
+    normals = mesh.normals[mesh.faces]
+    cross = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
+    length = np.maximum(np.linalg.norm(cross, axis=1), 1e-300)
+    n, start = len(positions), scene.num_triangles
+    material_id, object_id = len(scene.material_names), len(scene.objects)
+    instance = int(scene.instance_ids.max()) + 1
+    spec = scene.spec.model_copy(update={"materials": {**scene.spec.materials, material: definition}})
+    geometry = ObjectGeometry(material, object_id, mesh, [np.eye(4)], [(start, start + n)], material)
+    return replace(
+        scene,
+        spec=spec,
+        positions=np.concatenate([scene.positions, positions.astype(np.float32)]),
+        shading_normals=np.concatenate([scene.shading_normals, normals.astype(np.float32)]),
+        uvs=np.concatenate([scene.uvs, mesh.uvs[mesh.faces].astype(np.float32)]),
+        geometric_normals=np.concatenate(
+            [scene.geometric_normals, (cross / length[:, None]).astype(np.float32)]
+        ),
+        areas=np.concatenate([scene.areas, 0.5 * length]),
+        material_ids=np.concatenate([scene.material_ids, np.full(n, material_id, np.int32)]),
+        object_ids=np.concatenate([scene.object_ids, np.full(n, object_id, np.int32)]),
+        instance_ids=np.concatenate([scene.instance_ids, np.full(n, instance, np.int32)]),
+        emission=np.concatenate([scene.emission, np.zeros((n, 3), np.float32)]),
+        two_sided_emission=np.concatenate([scene.two_sided_emission, np.zeros(n, bool)]),
+        material_names=[*scene.material_names, material],
+        objects=[*scene.objects, geometry],
+    )

@@ -1,0 +1,160 @@
+"""Serving a `mesogan` artifact.
+
+`generate`: the feature plane of a window of the infinite texture (lattice origin and size in texels) for
+given structure parameters and seed, so a client can tile or cache it: windows of one seed agree on
+their overlap.
+`query`: density and rho at slab points (plane x, y and height in slab heights) of the seed's plane,
+with light and view directions in the tangent frame (z up).
+`render`: the scene the artifact keeps (or a sphere under a grey sky) with the material on its
+surfaces, for the given structure, appearance, seed and camera, path-traced with the neural shell.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+
+from workers.models.mesogan import artifact
+from workers.models.mesogan.aggregate import ShellAggregate
+from workers.models.mesogan.covering import build_shell, covering, neural_material
+from workers.models.mesogan.sampling import normalized_structure
+from workers.models.mesogan.slab import Window, draw_noise, generate_planes
+from workers.models.mesogan.volume import HEIGHT_TO_RADIANS, mip_stack, sample_mipmapped
+from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
+from workers.render.integrator import PathTracer
+from workers.runtime.view_render import SCENE, ViewRender, refuse_missing_scene, render_view
+from workers.scene.compile import compile_scene
+from workers.scene.mesoscale import Appearance, Structure
+from workers.scene.portable import load_scene, neutral_scene
+from workers.scene.spec import Camera, Diffuse, SceneObject, SphereShape
+
+GENERATE = "generate"
+MAX_WINDOW = 2048
+NEUTRAL_SURFACE = "mesogan"
+
+
+class Material(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    structure: Structure = Structure()
+    appearance: Appearance = Appearance()
+    seed: int = Field(0, ge=0, description="which instance of the distribution")
+
+
+class GenerateParams(Material):
+    origin: tuple[int, int] = (0, 0)
+    size: tuple[int, int] = Field((64, 64), description="texels per side, at most 2048")
+
+
+class QueryParams(Material):
+    window: tuple[int, int, int, int] = Field(
+        (-64, -64, 128, 128), description="the plane window the points lie in: origin and size in texels"
+    )
+
+
+class RenderParams(ViewRender, Material):
+    pass
+
+
+class MesoganModel:
+    def __init__(self, folder: Path, device: str) -> None:
+        self.config, self.model = artifact.load(folder, device)
+        self.device = device
+        self.stored = load_scene(folder)
+        self.nbytes = artifact.shipped_bytes(self.model)
+
+    def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
+        with torch.inference_mode():
+            if operation == GENERATE:
+                return self._generate(params)
+            if operation == RENDER:
+                return self._render(params)
+            return self._query(params, arrays)
+
+    def _plane(self, params: Material, window: Window) -> torch.Tensor:
+        if max(window.size) > MAX_WINDOW or min(window.size) < 1:
+            raise ValueError(f"params.size: a window is 1 to {MAX_WINDOW} texels per side, got {window.size}")
+        generator = torch.Generator().manual_seed(params.seed)
+        latent = torch.randn(1, self.config.latent_dims, generator=generator).to(self.device)
+        s = torch.tensor(normalized_structure(params.structure), dtype=torch.float32, device=self.device)[
+            None
+        ]
+        noise = draw_noise(self.model, self.config, 1, params.seed)
+        return generate_planes(self.model, self.config, s, latent, noise, window)
+
+    def _generate(self, params: GenerateParams) -> Answer:
+        window = Window(params.origin, params.size, self.config.texel)
+        plane = self._plane(params, window)[0].permute(1, 2, 0)
+        return Answer({"plane": plane.float().cpu().numpy()}, {"texel": self.config.texel})
+
+    def _query(self, params: QueryParams, arrays: dict[str, np.ndarray]) -> Answer:
+        ox, oy, sx, sy = params.window
+        window = Window((ox, oy), (sx, sy), self.config.texel)
+        stack = mip_stack(self._plane(params, window), 1)
+        points = torch.from_numpy(arrays["points"].astype(np.float32))
+        uv = window.uv(points[:, :2])
+        if ((uv < 0) | (uv > 1)).any():
+            raise ValueError("inputs.points: points lie outside params.window")
+        features = sample_mipmapped(stack, uv[None], torch.zeros(1, len(points)))[0]
+        height = points[:, 2].clamp(0, 1) * HEIGHT_TO_RADIANS
+        density, hidden = self.model.decoder.density(features, height, torch.zeros_like(height))
+        n = len(points)
+        up = torch.tensor([0.0, 0.0, 1.0]).expand(n, 3)
+        light = torch.from_numpy(arrays["light"].astype(np.float32)) if "light" in arrays else up
+        view = torch.from_numpy(arrays["view"].astype(np.float32)) if "view" in arrays else up
+        a = torch.tensor(params.appearance.color()).expand(n, 3)
+        rho = self.model.decoder.rho(hidden, a, light, view)
+        return Answer({"density": density.numpy(), "rho": rho.numpy()})
+
+    def _render(self, params: RenderParams) -> Answer:
+        config = self.config
+        if params.background == SCENE:
+            refuse_missing_scene(self.stored)
+            spec, surfaces = self.stored.spec, config.surfaces
+        else:
+            ball = SceneObject(
+                name="ball", shape=SphereShape(radius=0.5, subdivisions=4), material=NEUTRAL_SURFACE
+            )
+            spec = neutral_scene([ball], {NEUTRAL_SURFACE: Diffuse()})
+            spec = spec.model_copy(
+                update={"camera": Camera(position=(0.0, 0.4, 2.0), target=(0.0, 0.0, 0.0))}
+            )
+            surfaces = [NEUTRAL_SURFACE]
+        scene = compile_scene(spec)
+        cover = covering(scene, surfaces, config.shell_height, config.texel)
+        shell = build_shell(scene, cover, config.shell_height)
+        material = neural_material(
+            self.model, config, cover, params.structure, params.appearance, params.seed
+        )
+        camera = params.camera.over(spec.camera)
+        cone = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
+        tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
+        image = render_view(tracer, params, camera).image
+        return Answer({"image": image}, {"plane_resolution": cover.resolution})
+
+
+class MesoganInference:
+    operations: ClassVar[Mapping[str, Operation]] = {
+        QUERY: Operation(
+            params=QueryParams,
+            inputs={
+                "points": ArraySpec("float32", (None, 3)),
+                "light": ArraySpec("float32", (None, 3), required=False),
+                "view": ArraySpec("float32", (None, 3), required=False),
+            },
+        ),
+        GENERATE: Operation(params=GenerateParams),
+        RENDER: Operation(params=RenderParams),
+    }
+
+    def load(self, folder: Path, device: str) -> MesoganModel:
+        return MesoganModel(folder, device)
+
+
+INFERENCE = MesoganInference()

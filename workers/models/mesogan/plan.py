@@ -1,0 +1,63 @@
+"""What a scene needs from mesogan: the surfaces the shell covers (by material name), the shell height,
+the plane's resolution and mip levels implied by the surfaces' UV area and the closest view, the
+networks' sizes, and the estimated cost.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from workers.models.mesogan.config import MesoganConfig
+from workers.models.mesogan.covering import build_shell, covering
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.reference import SceneRef
+
+SECONDS_PER_IMAGE = 0.5  # path tracing one training view (quick sizes, one idle core)
+SECONDS_PER_STEP_PER_VIEW = 0.02  # generator + discriminator phases per batch element at 16^2, 6 samples
+
+
+def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
+    compiled = scene.compiled()
+    cover = covering(compiled, config.surfaces, config.shell_height, config.texel)
+    build_shell(compiled, cover, config.shell_height)  # a degenerate or folding shell is refused here
+    camera = compiled.spec.camera
+    covered = compiled.positions[cover.triangles].reshape(-1, 3)
+    closest = float(np.linalg.norm(covered - np.asarray(camera.position), axis=1).min())
+    cone = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
+    footprint = closest * cone / config.shell_height  # slab heights per pixel at the closest point
+    finest = max(0.0, math.log2(max(footprint, 1e-12) / config.texel))
+    levels = int(math.log2(cover.resolution)) + 1
+    pixels = config.image_size**2
+    seconds = config.pool * SECONDS_PER_IMAGE * pixels / 256 * config.training_spp / 8
+    seconds += config.train.steps * config.batch_size * SECONDS_PER_STEP_PER_VIEW * pixels / 256
+    items = [
+        PlanItem(
+            name="surfaces",
+            choice=", ".join(n for n in config.surfaces if n in compiled.material_names),
+            reason=f"{len(cover.triangles)} triangles covered by a shell of height {config.shell_height:g}",
+        ),
+        PlanItem(
+            name="plane",
+            choice=f"{cover.resolution}^2 x {config.plane_channels}, {levels} mip levels",
+            reason=(
+                f"the UV square spans {cover.plane_units:.1f} slab heights at {config.texel:g} per texel; "
+                "the "
+                f"closest view ({closest:.2f} away) reads level {finest:.1f} and coarser"
+            ),
+        ),
+        PlanItem(
+            name="networks",
+            choice=(
+                f"generator {config.generator_layers}x{config.generator_width}, decoder "
+                f"{config.decoder.describe()}, discriminator {config.discriminator_width} wide"
+            ),
+            reason=f"{config.train.steps} GAN steps of {config.batch_size} views of {config.image_size}^2",
+        ),
+    ]
+    summary = (
+        f"{config.material} shell over {len(cover.triangles)} triangles, plane {cover.resolution}^2; "
+        f"about {seconds:.0f} s"
+    )
+    return Plan(items=items, estimated_seconds=seconds, summary=summary)

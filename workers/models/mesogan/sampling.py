@@ -1,0 +1,195 @@
+"""Training images of random mesoscale instances, path-traced by our own tracer (Sec. 6.2.3).
+
+Instance j of a source is a pure function of (seed, j): structure parameters drawn from
+`STRUCTURE_RANGES`, a colour, a directional light from a random upper-hemisphere direction plus a constant
+ambient sky, and a camera on the hemisphere at one of the configured distances (multi-scale) looking at
+the slab's centre tile with its neighbours around it. The image is HDR, tonemapped x / (x + 1) for the
+discriminator. A batch draws `batch_size` instances of a pool of `pool` (each rendered once per process
+and cached), so batches are a pure function of (seed, index) and a job can bound its rendering cost.
+
+Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict
+
+from workers.models.mesogan.config import STRUCTURE_RANGES, MesoganConfig
+from workers.models.mesogan.volume import tonemap
+from workers.render.camera import PinholeCamera
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.runtime.sources import Batch, batch_rng
+from workers.scene.compile import compile_scene
+from workers.scene.mesoscale import Appearance, Structure
+from workers.scene.spec import (
+    Camera,
+    ConstantBackground,
+    Diffuse,
+    DirectionalLight,
+    ProceduralShape,
+    SceneObject,
+    SceneSpec,
+)
+
+SKIN = (0.08, 0.07, 0.06)  # the base under the strands
+INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
+
+
+def to_scene(local: np.ndarray) -> np.ndarray:
+    return local[..., [0, 2, 1]] * np.array([1.0, 1.0, -1.0])
+
+
+def to_local(scene: np.ndarray) -> np.ndarray:
+    return np.stack([scene[..., 0], -scene[..., 2], scene[..., 1]], -1)
+
+
+def hemisphere(elevation: float, azimuth: float) -> np.ndarray:
+    """A unit vector in the slab frame (z up) at `elevation` and `azimuth` (radians)."""
+    return np.array(
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
+    )
+
+
+def normalized_structure(s: Structure) -> np.ndarray:
+    """The structure parameters mapped to [0, 1] over their training ranges (what the networks see)."""
+    return np.array([(getattr(s, k) - lo) / (hi - lo) for k, (lo, hi) in STRUCTURE_RANGES.items()])
+
+
+@dataclass
+class Instance:
+    """One labelled training view."""
+
+    structure: Structure
+    appearance: Appearance
+    light: np.ndarray  # unit direction towards the light, slab frame
+    camera: Camera  # scene axes
+    strands_seed: int
+
+    def labels(self) -> dict[str, np.ndarray]:
+        return {
+            "structure": normalized_structure(self.structure),
+            "appearance": np.array(self.appearance.color()),
+            "light": self.light,
+        }
+
+
+class SlabSourceConfig(BaseModel):
+    model_config = ConfigDict(arbitrary_types_allowed=True, frozen=True)
+
+    mesogan: MesoganConfig
+
+
+def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
+    structure = Structure(**{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in STRUCTURE_RANGES.items()})
+    appearance = Appearance(hue=float(rng.uniform()), saturation=float(rng.uniform(0.2, 1.0)))
+    light = hemisphere(math.radians(rng.uniform(15, 80)), rng.uniform(0, 2 * math.pi))
+    distance = config.camera_distances[rng.integers(len(config.camera_distances))] * rng.uniform(0.9, 1.1)
+    eye = distance * hemisphere(math.radians(rng.uniform(35, 85)), rng.uniform(0, 2 * math.pi))
+    size = config.image_size
+    camera = Camera(
+        position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=size, height=size
+    )
+    return Instance(structure, appearance, light, camera, int(rng.integers(2**62)))
+
+
+def slab_scene(config: MesoganConfig, instance: Instance) -> SceneSpec:
+    """The instance's slab: strands and their base, lit by the directional light and the ambient sky."""
+    tiling = {"tile": config.tile, "tiles": config.tiles, "height": 1.0}
+    strands = {
+        "material": config.material,
+        "seed": instance.strands_seed,
+        "structure": instance.structure.model_dump(),
+    }
+    return SceneSpec(
+        name="mesoscale_slab",
+        materials={
+            "strands": Diffuse(reflectance=instance.appearance.color()),
+            "skin": Diffuse(reflectance=SKIN),
+        },
+        objects=[
+            SceneObject(
+                name="strands",
+                shape=ProceduralShape(generator="mesoscale_slab", params=strands | tiling),
+                material="strands",
+            ),
+            SceneObject(
+                name="skin", shape=ProceduralShape(generator="mesoscale_base", params=tiling), material="skin"
+            ),
+        ],
+        lights=[
+            DirectionalLight(
+                direction=tuple(-to_scene(instance.light)), irradiance=(config.light_irradiance,) * 3
+            )
+        ],
+        environment=ConstantBackground(radiance=(config.ambient,) * 3),
+        camera=instance.camera,
+    )
+
+
+def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
+    """Pixel-centre rays in the slab frame, rows in image order, and the cone radius per unit distance
+    (mip-NeRF: the pixel's width / sqrt(3))."""
+    pinhole = PinholeCamera(camera)
+    py, px = np.mgrid[0 : camera.height, 0 : camera.width] + 0.5
+    origins, directions = pinhole.rays(px.ravel(), py.ravel())
+    radius = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
+    return to_local(origins), to_local(directions), radius
+
+
+def render_instance(config: MesoganConfig, instance: Instance, spp: int, seed: int) -> np.ndarray:
+    """The instance's HDR image (H, W, 3), path-traced with the real strand geometry."""
+    tracer = PathTracer(compile_scene(slab_scene(config, instance)))
+    settings = RenderSettings(spp=spp, max_depth=config.max_depth, seed=seed, threads=1)
+    return render(tracer, settings).image
+
+
+class SlabSource:
+    """Batches of tonemapped instance images with their rays and labels (module docstring)."""
+
+    def __init__(self, config: SlabSourceConfig, seed: int) -> None:
+        self.config = config
+        self.seed = seed
+        self._images: dict[int, tuple[Instance, np.ndarray]] = {}
+
+    def instance(self, j: int) -> tuple[Instance, np.ndarray]:
+        """Instance j and its HDR image, rendered on first use."""
+        if j not in self._images:
+            c = self.config.mesogan
+            instance = draw_instance(c, np.random.default_rng([self.seed, INSTANCE_STREAM, j]))
+            self._images[j] = instance, render_instance(c, instance, c.training_spp, seed=j)
+        return self._images[j]
+
+    def batch(self, index: int) -> Batch:
+        c = self.config.mesogan
+        ids = batch_rng(self.seed, index).integers(c.pool, size=c.batch_size)
+        return stack_views([self.instance(int(j)) for j in ids])
+
+
+def stack_views(views: list[tuple[Instance, np.ndarray]]) -> Batch:
+    """Tensors of labelled views: tonemapped images (B, 3, H, W), rays (B, HW, 3), labels (B, ...)."""
+    rows: dict[str, list[np.ndarray]] = {}
+    for instance, image in views:
+        origins, directions, radius = camera_rays(instance.camera)
+        row = {
+            "image": np.transpose(image, (2, 0, 1)),
+            "origins": origins,
+            "directions": directions,
+            "pixel_radius": np.array(radius),
+            "camera": origins[0],
+            **instance.labels(),
+        }
+        for key, value in row.items():
+            rows.setdefault(key, []).append(np.asarray(value, np.float32))
+    batch = {key: torch.from_numpy(np.stack(values)) for key, values in rows.items()}
+    batch["image"] = tonemap(batch["image"])
+    return batch

@@ -1,0 +1,71 @@
+"""The GAN's two phases on the shared training loop: the discriminator's non-saturating loss with R1 on
+real images, and the generator's (with block-mean matching), each on its own named optimizer
+(`workers.runtime.training.Phase`).
+
+Fakes are rendered under the real batch's labels (structure, colour, light, camera), so the conditional
+discriminator judges each pair under the same conditions. Latents and the planes' Fourier banks are drawn
+from torch's stream, which checkpoints hold: a resumed run repeats the uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.mesogan.slab import Window, draw_noise, generate_planes, render_slab
+from workers.models.mesogan.volume import tonemap
+from workers.runtime.sources import Batch
+from workers.runtime.training import Phase
+
+DISCRIMINATOR, GENERATOR = "discriminator", "generator"
+
+
+def labels(batch: Batch) -> Tensor:
+    """Every label the discriminator is conditioned on, with the camera position (Sec. 6.2.8)."""
+    return torch.cat([batch["structure"], batch["appearance"], batch["light"], batch["camera"] / 8.0], -1)
+
+
+def fake_images(model: MesoGAN, batch: Batch) -> Tensor:
+    """Tonemapped renders of freshly generated slabs under the batch's labels."""
+    config = model.config
+    b = batch["image"].shape[0]
+    window = Window.centred(config.plane_resolution, config.texel)
+    latent = torch.randn(b, config.latent_dims, device=batch["image"].device)
+    planes = generate_planes(model, config, batch["structure"], latent, draw_noise(model, config, b), window)
+    return tonemap(render_slab(model, config, planes, window, batch, jitter=True))
+
+
+def discriminator_loss(model: MesoGAN, batch: Batch) -> Tensor:
+    with torch.no_grad():
+        fake = fake_images(model, batch)
+    real = batch["image"].detach().requires_grad_(model.config.r1_gamma > 0)
+    conditions = labels(batch)
+    real_logits = model.discriminator(real, conditions)
+    loss = F.softplus(model.discriminator(fake, conditions)).mean() + F.softplus(-real_logits).mean()
+    if model.config.r1_gamma > 0:
+        (gradient,) = torch.autograd.grad(real_logits.sum(), real, create_graph=True)
+        loss = loss + 0.5 * model.config.r1_gamma * gradient.pow(2).sum((1, 2, 3)).mean()
+    return loss
+
+
+def generator_loss(model: MesoGAN, batch: Batch) -> Tensor:
+    """Non-saturating loss, plus matching each fake's block means to its real twin's (feature matching on
+    low-passed images, Salimans et al. 2016): the labels fix the expected colour and shading of a
+    block of `moment_block`^2 pixels, so this steadies appearance and lighting early without constraining
+    the structure below the block size, which the discriminator judges."""
+    fake = fake_images(model, batch)
+    loss = F.softplus(-model.discriminator(fake, labels(batch))).mean()
+    if model.config.mean_color_weight > 0:
+        block = model.config.moment_block
+        difference = F.avg_pool2d(fake, block) - F.avg_pool2d(batch["image"], block)
+        loss = loss + model.config.mean_color_weight * difference.abs().mean()
+    return loss
+
+
+def phases(model: MesoGAN) -> list[Phase]:
+    return [
+        Phase(DISCRIMINATOR, discriminator_loss, model.discriminator.parameters()),
+        Phase(GENERATOR, generator_loss, model.generator_parameters()),
+    ]
