@@ -91,9 +91,35 @@ def mitsuba_bsdf(material: spec.Material, base_dir: Path | None = None) -> dict:
                 "int_ior": float(material.ior),
                 "ext_ior": 1.0,
             }
+        case spec.PbrMaterial():
+            return mitsuba_principled(material, base_dir)
         case _:
             raise TypeError(f"no Mitsuba export for {type(material).__name__}")
     return {"type": "twosided", "bsdf": inner}
+
+
+def mitsuba_principled(material: spec.PbrMaterial, base_dir: Path | None = None) -> dict:
+    """`principled` with the parameters our `pbr` family has (workers/render/bsdfs/pbr.py); opaque ones
+    (no transmission lobe) wrapped in `twosided`, as ours are. A base colour texture must have factor 1."""
+    unsupported = [
+        name
+        for name in ("metallic_roughness_texture", "transmission_texture", "normal_texture", "emission_texture")
+        if getattr(material, name) is not None
+    ]
+    if unsupported or (material.base_color_texture is not None and material.base_color != (1.0, 1.0, 1.0)):
+        raise TypeError(f"no Mitsuba export for a pbr material with {unsupported or 'a scaled texture'}")
+    base = material.base_color_texture if material.base_color_texture is not None else material.base_color
+    principled = {
+        "type": "principled",
+        "base_color": _reflectance(base, base_dir),
+        "metallic": float(material.metallic),
+        "roughness": float(material.roughness),
+        "eta": float(material.ior),
+        "spec_trans": float(material.transmission),
+    }
+    if material.transmission == 0 or material.metallic == 1:
+        return {"type": "twosided", "bsdf": principled}
+    return principled
 
 
 def mitsuba_scene_dict(

@@ -161,7 +161,7 @@ class PathTracer:
         deviation = np.abs(self._ns - self._ng[:, None, :]).max(axis=(1, 2))
         self._smooth = deviation > 1e-6
         self._any_smooth = bool(self._smooth.any())
-        self._needs_uv = bool(self.materials.textures)
+        self._needs_uv = self.materials.needs_uv
         self._has_emitters = bool((scene.emission > 0).any())
 
     # ------------------------------------------------------------------ geometry helpers

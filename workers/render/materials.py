@@ -18,11 +18,15 @@ from workers.scene.textures import evaluate_texture, load_image_texture
 class MaterialTable:
     def __init__(self, scene: CompiledScene):
         materials = scene.materials
+        self._materials = materials
         parameters = [bsdf_family(m.type).parameters(m) for m in materials]
         self.family = np.array([bsdf_code(m.type) for m in materials], dtype=np.int8)
         self.alpha = np.array([p.alpha for p in parameters], dtype=np.float64)
         self.ior = np.array([p.ior for p in parameters], dtype=np.float64)
         self._roughness = np.array([p.roughness for p in parameters], dtype=np.float64)
+        self.extra = np.zeros((len(materials), max([len(p.extra) for p in parameters], default=0)))
+        for i, p in enumerate(parameters):
+            self.extra[i, : len(p.extra)] = p.extra
         self.base = np.zeros((len(materials), 3))
         self.textures: dict[int, tuple[spec.Texture, np.ndarray | None]] = {}
         for i, (name, p) in enumerate(zip(scene.material_names, parameters, strict=True)):
@@ -32,6 +36,16 @@ class MaterialTable:
                 field = f"materials.{name}"
                 image = load_image_texture(p.base, field, scene.base_dir) if p.base.type == "image" else None
                 self.textures[i] = (p.base, image)
+        self.slots: dict[int, dict[str, tuple[spec.Texture, np.ndarray | None]]] = {}
+        for i, (name, m) in enumerate(zip(scene.material_names, materials, strict=True)):
+            slots = bsdf_family(m.type).textures(m)
+            if slots:
+                self.slots[i] = {
+                    slot: (t, load_image_texture(t, f"materials.{name}.{slot}_texture", scene.base_dir))
+                    if t.type == "image"
+                    else (t, None)
+                    for slot, t in slots.items()
+                }
 
     def surfaces(self, material_ids: np.ndarray, uv: np.ndarray) -> SurfaceBatch:
         base = self.base[material_ids]
@@ -39,7 +53,26 @@ class MaterialTable:
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
                 base[sel] = evaluate_texture(texture, image, uv[sel])
-        return SurfaceBatch(self.family[material_ids], base, self.alpha[material_ids], self.ior[material_ids])
+        batch = SurfaceBatch(
+            self.family[material_ids],
+            base,
+            self.alpha[material_ids],
+            self.ior[material_ids],
+            self.extra[material_ids] if self.extra.shape[1] else None,
+        )
+        for i, slots in self.slots.items():
+            sel = np.flatnonzero(material_ids == i)
+            if len(sel):
+                lookups = {slot: evaluate_texture(t, image, uv[sel]) for slot, (t, image) in slots.items()}
+                rows = batch.take(sel)
+                bsdf_family(self._materials[i].type).apply_textures(self._materials[i], rows, lookups)
+                batch.assign(sel, rows)
+        return batch
+
+    @property
+    def needs_uv(self) -> bool:
+        """Whether any material reads a texture (hits then need their UVs)."""
+        return bool(self.textures or self.slots)
 
     def roughness(self, material_ids: np.ndarray) -> np.ndarray:
         """Roughness for the AOV: the GGX alpha, and 1 for Lambertian surfaces."""

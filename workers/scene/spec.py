@@ -104,11 +104,21 @@ def euler_xyz(degrees: Vec3) -> np.ndarray:
 # --------------------------------------------------------------------------- textures
 
 
+Wrap = Literal["repeat", "clamp", "mirror"]
+
+
 class ImageTexture(Model):
-    """An 8-bit (sRGB-decoded) or EXR (linear) image addressed by UV; wraps (repeat)."""
+    """An image addressed by UV (`workers.scene.textures`): by default 8-bit images are sRGB-decoded and
+    EXR is linear; `color_space` says otherwise (data such as roughness or normals is linear)."""
 
     type: Literal["image"] = "image"
     path: str
+    image: Annotated[int, Field(ge=0)] | None = Field(
+        default=None, description="the index of an image inside the glTF file `path` (embedded images)"
+    )
+    color_space: Literal["srgb", "linear"] | None = None
+    wrap_u: Wrap = "repeat"
+    wrap_v: Wrap = "repeat"
 
 
 class CheckerTexture(Model):
@@ -157,7 +167,30 @@ class Dielectric(Model):
     roughness: Roughness = 0.0
 
 
-Material = Annotated[Diffuse | Conductor | Plastic | Dielectric, Field(discriminator="type")]
+class PbrMaterial(Model):
+    """glTF 2.0's metallic-roughness material (`workers.render.bsdfs.pbr`), with glTF's defaults.
+
+    Textures multiply their factors, as in glTF: `base_color_texture` (sRGB), `metallic_roughness_texture`
+    (linear; roughness in G, metallic in B), `transmission_texture` (R), `normal_texture` (tangent space,
+    linear, +Y up as glTF's), and `emission_texture` (sRGB) scaling the emission of the objects using it.
+    `roughness` is glTF's perceptual roughness (GGX alpha = roughness^2).
+    """
+
+    type: Literal["pbr"] = "pbr"
+    base_color: Albedo = (1.0, 1.0, 1.0)
+    base_color_texture: Texture | None = None
+    metallic: Annotated[FiniteFloat, Field(ge=0, le=1)] = 1.0
+    roughness: Annotated[FiniteFloat, Field(ge=0, le=1)] = 1.0
+    metallic_roughness_texture: Texture | None = None
+    ior: Annotated[FiniteFloat, Field(gt=1.0, le=4.0)] = 1.5
+    transmission: Annotated[FiniteFloat, Field(ge=0, le=1)] = 0.0
+    transmission_texture: Texture | None = None
+    normal_texture: Texture | None = None
+    normal_scale: FiniteFloat = 1.0
+    emission_texture: Texture | None = None
+
+
+Material = Annotated[Diffuse | Conductor | Plastic | Dielectric | PbrMaterial, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------- shapes
