@@ -5,7 +5,12 @@ import numpy as np
 import pytest
 
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
-from tests.unit.test_render_bsdf_sampling import chi_square_p_value, expected_counts, incident, observed_counts
+from tests.unit.test_render_bsdf_sampling import (
+    chi_square_p_value,
+    expected_counts,
+    incident,
+    observed_counts,
+)
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family, eval_bsdf, sample_bsdf
 from workers.scene import spec
 
@@ -66,7 +71,15 @@ CHI_CASES = [(p, theta, inside) for p in MATERIALS for theta in (10, 60, 85) for
 P_THRESHOLD = 0.01 / len(CHI_CASES)
 
 
-@pytest.mark.parametrize(("params", "theta", "inside"), CHI_CASES, ids=str)
+def _default_or_slow(case):
+    """Opaque rows seen from inside are mirrored (a second look at the same case), and grazing angles cost
+    the most pooling: those run with the slow checks."""
+    (_, _, _, transmission), theta, inside = case
+    slow = theta == 85 or (inside and transmission == 0)
+    return pytest.param(*case, marks=pytest.mark.slow) if slow else pytest.param(*case)
+
+
+@pytest.mark.parametrize(("params", "theta", "inside"), [_default_or_slow(c) for c in CHI_CASES], ids=str)
 def test_pbr_sampled_directions_follow_the_evaluated_pdf(params, theta, inside):
     s = rows(material(*params), 1)
     rng = np.random.default_rng(CHI_CASES.index((params, theta, inside)))
@@ -87,7 +100,7 @@ def test_pbr_sampled_directions_follow_the_evaluated_pdf(params, theta, inside):
     assert np.all(weight[~covered] == 0)
 
 
-def albedo(m: spec.PbrMaterial, theta: float, inside: bool = False, n: int = 400_000) -> np.ndarray:
+def albedo(m: spec.PbrMaterial, theta: float, inside: bool = False, n: int = 100_000) -> np.ndarray:
     """Directional albedo: the mean sample weight (f |cos| / pdf), and its standard error."""
     rng = np.random.default_rng(3)
     _, weight, _, _ = sample_bsdf(rows(m, n), incident(theta, n, inside), rng.random((n, 2)), rng.random(n))
@@ -104,7 +117,7 @@ def test_white_metal_loses_only_what_single_scattering_ggx_loses(theta):
             np.full(1, bsdf_code("conductor"), np.int8), np.ones((1, 3)), np.full(1, roughness**2), np.ones(1)
         )
         rng = np.random.default_rng(4)
-        n = 400_000
+        n = 100_000
         _, w, _, _ = sample_bsdf(
             conductor.take(np.zeros(n, np.int64)), incident(theta, n), rng.random((n, 2)), rng.random(n)
         )
@@ -120,7 +133,7 @@ def test_white_glass_scatters_at_most_what_arrives(theta, inside):
     """transmission = 1, base white: reflection + transmission carry F + (1 - F) of the light (less GGX's
     single-scattering loss) once the 1/eta^2 radiance scaling of entering the glass is undone."""
     m = material(0.0, 0.2, 1.5, 1.0, base=(1, 1, 1))
-    n = 400_000
+    n = 100_000
     rng = np.random.default_rng(5)
     wo = incident(theta, n, inside)
     wi, weight, _, _ = sample_bsdf(rows(m, n), wo, rng.random((n, 2)), rng.random(n))
@@ -143,7 +156,10 @@ def test_burley_diffuse_is_bounded_as_mitsubas_is():
 
 def test_textures_multiply_factors_with_gltf_channel_packing():
     m = material(0.8, 0.5, 1.5, 0.0).model_copy(
-        update={"metallic_roughness_texture": spec.CheckerTexture(), "base_color_texture": spec.CheckerTexture()}
+        update={
+            "metallic_roughness_texture": spec.CheckerTexture(),
+            "base_color_texture": spec.CheckerTexture(),
+        }
     )
     s = rows(m, 2)
     texel = np.array([[0.1, 0.6, 0.25], [0.3, 0.2, 1.0]])
@@ -152,3 +168,27 @@ def test_textures_multiply_factors_with_gltf_channel_packing():
     np.testing.assert_allclose(s.extra[:, 2], 0.5 * texel[:, 1])  # roughness from G
     np.testing.assert_allclose(s.alpha, np.maximum(0.001, (0.5 * texel[:, 1]) ** 2))
     np.testing.assert_allclose(s.base, np.asarray(COLOUR) * texel)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [(1.0, 0.0, 1.5, 0.0), (0.0, 0.0, 1.5, 1.0), (0.0, 0.05, 1.5, 1.0)],
+    ids=["mirror-metal", "smooth-glass", "rough-glass"],
+)
+def test_white_furnace_pbr_sphere_returns_the_environment(params):
+    """A white smooth metal or glass sphere in a uniform environment L is invisible: every path returns L
+    (alpha 0.001 and 0.0025: GGX's single-scattering loss is below 1%); through the path tracer, so the
+    back side of glass (the inside) and the radiance scaling through it are exercised."""
+    from tests.unit.test_render_analytic import ball, scene_with, sphere_pixels
+    from workers.render.integrator import PathTracer
+    from workers.render.render import RenderSettings, render
+    from workers.scene.compile import compile_scene
+
+    radiance = np.array([2.0, 2.0, 2.0])
+    scene = scene_with(
+        [ball()], {"m": material(*params, base=(1, 1, 1))}, spec.ConstantBackground(radiance=(2, 2, 2))
+    )
+    tracer = PathTracer(compile_scene(scene))
+    image = render(tracer, RenderSettings(spp=32, max_depth=64, rr_depth=64)).image.astype(np.float64)
+    px = sphere_pixels(image, tracer)
+    np.testing.assert_allclose(px.mean(0), radiance, rtol=0.01)

@@ -151,7 +151,9 @@ class MetallicRoughness(BSDF):
         fo, fi = schlick_weight(np.abs(cos_l)), schlick_weight(np.abs(cos_v))
         retro = 2.0 * roughness * l_h**2
         lobe = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + retro * (fo + fi + fo * fi * (retro - 1.0))
-        diffuse = np.where(active & (brdf > 0) & reflection & front, brdf * np.abs(cos_l) * INV_PI * lobe, 0.0)
+        diffuse = np.where(
+            active & (brdf > 0) & reflection & front, brdf * np.abs(cos_l) * INV_PI * lobe, 0.0
+        )
         value += s.base * diffuse[:, None]
 
         p_reflect = np.where(front, 1.0 - bsdf * (1.0 - f_d), f_d)
