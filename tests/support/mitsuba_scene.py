@@ -103,7 +103,12 @@ def mitsuba_principled(material: spec.PbrMaterial, base_dir: Path | None = None)
     (no transmission lobe) wrapped in `twosided`, as ours are. A base colour texture must have factor 1."""
     unsupported = [
         name
-        for name in ("metallic_roughness_texture", "transmission_texture", "normal_texture", "emission_texture")
+        for name in (
+            "metallic_roughness_texture",
+            "transmission_texture",
+            "normal_texture",
+            "emission_texture",
+        )
         if getattr(material, name) is not None
     ]
     if unsupported or (material.base_color_texture is not None and material.base_color != (1.0, 1.0, 1.0)):
@@ -177,6 +182,8 @@ def mitsuba_scene_dict(
                 "position": list(light.position),
                 "intensity": _rgb(light.intensity),
             }
+        elif isinstance(light, spec.SpotLight):
+            raise TypeError("no Mitsuba export for spot lights (Mitsuba's falloff is not glTF's)")
         else:
             out[f"light_{i}"] = {
                 "type": "directional",

@@ -149,8 +149,10 @@ class PathTracer:
         self.aggregate_next_event = aggregate_next_event
         self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)
         self.primary = primary if primary is not None else self.rays
-        self.lights = LightSampler(scene)
         self.materials = MaterialTable(scene)
+        self.lights = LightSampler(
+            scene, self.materials.emission_scale if self.materials.emission_textured else None
+        )
         self._positions = scene.positions.astype(np.float64)
         self._ng = scene.geometric_normals.astype(np.float64)
         self._ns = scene.shading_normals.astype(np.float64)
@@ -247,8 +249,14 @@ class PathTracer:
         rec.instance_id[sel] = self.scene.instance_ids[prim]
         rec.albedo[sel] = self._surfaces(sub, mat, it.uv).base
         rec.roughness[sel] = self.materials.roughness(mat)
-        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
+        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng, it.uv)
         return rec
+
+    def _tangents(self, hits: Hits) -> np.ndarray:
+        """(N, 4) tangents (xyz, bitangent sign) interpolated at the hits, for normal maps."""
+        b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
+        corners = self.scene.tangents[hits.prim].astype(np.float64)
+        return (1.0 - b1 - b2) * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
 
     def _material_ids(self, hits: Hits) -> np.ndarray:
         mat = self.scene.material_ids[hits.prim]
@@ -262,9 +270,12 @@ class PathTracer:
             surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf
 
-    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
+    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray, uv: np.ndarray) -> np.ndarray:
         front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
-        return self._emission[prim] * front[:, None]
+        emitted = self._emission[prim] * front[:, None]
+        if self.materials.emission_textured:
+            emitted = emitted * self.materials.emission_scale(self.scene.material_ids[prim], uv)
+        return emitted
 
     # ------------------------------------------------------------------ path tracing
 
@@ -366,7 +377,7 @@ class PathTracer:
         wo = -d
 
         if self._has_emitters:
-            emitted = self._emitted(prim, wo, it.ng)
+            emitted = self._emitted(prim, wo, it.ng, it.uv)
             lit = np.flatnonzero(max3(emitted) > 0)
             if len(lit):
                 pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
@@ -472,8 +483,11 @@ class PathTracer:
         return self._shade(it, hits, -directions)
 
     def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray) -> Shading:
-        surf = self._surfaces(hits, self._material_ids(hits), it.uv)
+        material_ids = self._material_ids(hits)
+        surf = self._surfaces(hits, material_ids, it.uv)
         ns = it.ns
+        if self.materials.normal_mapped:
+            ns = self.materials.perturb_normals(material_ids, it.uv, ns, self._tangents(hits))
         flip = (dot(wo, ns) < 0) & surf.two_sided
         ns = np.where(flip[:, None], -ns, ns)
         fs, ft = coordinate_frame(ns)

@@ -1,7 +1,11 @@
 """Material parameters by scene material id: the scene's materials as arrays, textures looked up by UV.
 
 Each scene material is shaded by the BSDF family registered under its `type` (`workers.render.bsdf`);
-the family says what the material contributes to a `SurfaceBatch`.
+the family says what the material contributes to a `SurfaceBatch`, and which of its parameters are
+textured (`BSDF.textures`). Two texture slots mean the same for every family and are handled here: `normal`
+(a tangent-space normal map, glTF's convention: linear, +Y towards the image's top, unpacked as
+2 texel - 1 with x and y scaled by the material's `normal_scale`) bends the shading normal, and `emission`
+scales the radiance of the emitting objects that use the material.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
 from workers.scene.textures import evaluate_texture, load_image_texture
+
+SHADING_SLOTS = frozenset({"normal", "emission"})  # read by the renderer, not by the BSDF family
 
 
 class MaterialTable:
@@ -63,11 +69,55 @@ class MaterialTable:
         for i, slots in self.slots.items():
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
-                lookups = {slot: evaluate_texture(t, image, uv[sel]) for slot, (t, image) in slots.items()}
+                lookups = {
+                    slot: evaluate_texture(t, image, uv[sel])
+                    for slot, (t, image) in slots.items()
+                    if slot not in SHADING_SLOTS
+                }
+                if not lookups:
+                    continue
                 rows = batch.take(sel)
                 bsdf_family(self._materials[i].type).apply_textures(self._materials[i], rows, lookups)
                 batch.assign(sel, rows)
         return batch
+
+    def _slot(self, name: str) -> dict[int, tuple[spec.Texture, np.ndarray | None]]:
+        return {i: slots[name] for i, slots in self.slots.items() if name in slots}
+
+    @property
+    def normal_mapped(self) -> bool:
+        return bool(self._slot("normal"))
+
+    def perturb_normals(self, material_ids, uv, ns: np.ndarray, tangents: np.ndarray) -> np.ndarray:
+        """Shading normals bent by the normal maps of `material_ids`; `tangents` (N, 4) at the points."""
+        ns = ns.copy()
+        for i, (texture, image) in self._slot("normal").items():
+            sel = np.flatnonzero(material_ids == i)
+            if not len(sel):
+                continue
+            local = 2.0 * evaluate_texture(texture, image, uv[sel]).astype(np.float64) - 1.0
+            local[:, :2] *= getattr(self._materials[i], "normal_scale", 1.0)
+            n = ns[sel]
+            t = tangents[sel, :3] - n * np.einsum("ij,ij->i", tangents[sel, :3], n)[:, None]
+            t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+            b = np.cross(n, t) * np.where(tangents[sel, 3:] < 0, -1.0, 1.0)
+            bent = local[:, :1] * t + local[:, 1:2] * b + local[:, 2:] * n
+            length = np.linalg.norm(bent, axis=1, keepdims=True)
+            ns[sel] = np.where(length > 1e-12, bent / np.maximum(length, 1e-300), n)
+        return ns
+
+    def emission_scale(self, material_ids: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(N, 3) factors the emission textures apply to emitted radiance (1 without one)."""
+        scale = np.ones((len(material_ids), 3))
+        for i, (texture, image) in self._slot("emission").items():
+            sel = np.flatnonzero(material_ids == i)
+            if len(sel):
+                scale[sel] = evaluate_texture(texture, image, uv[sel])
+        return scale
+
+    @property
+    def emission_textured(self) -> bool:
+        return bool(self._slot("emission"))
 
     @property
     def needs_uv(self) -> bool:

@@ -21,6 +21,7 @@ class MeshData:
     faces: np.ndarray  # (F, 3) int64
     normals: np.ndarray | None = None  # (V, 3)
     uvs: np.ndarray | None = None  # (V, 2)
+    tangents: np.ndarray | None = None  # (V, 4): xyz and the bitangent's sign (glTF's TANGENT)
 
     @property
     def num_triangles(self) -> int:
@@ -90,6 +91,13 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
             from workers.scene.procedural import generate
 
             mesh = generate(shape.generator, shape.params, field)
+        case spec.GltfShape():
+            from workers.scene.gltf import primitive_mesh
+
+            path = Path(shape.path)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            mesh = primitive_mesh(path, shape.mesh, shape.primitive, field)
         case _:
             raise SceneError(field, f"unsupported shape {type(shape).__name__}")
     return check_mesh(mesh, field, repair=getattr(shape, "repair", False))
@@ -139,4 +147,7 @@ def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
         uvs = np.asarray(uvs, dtype=np.float64)
         if uvs.shape != (len(v), 2) or not np.isfinite(uvs).all():
             raise SceneError(field, "texture coordinates are malformed or not finite")
-    return MeshData(v, f, normals, uvs)
+    tangents = mesh.tangents
+    if tangents is not None and (tangents.shape != (len(v), 4) or not np.isfinite(tangents).all()):
+        tangents = None  # unusable tangents: generated from the UVs instead
+    return MeshData(v, f, normals, uvs, tangents)

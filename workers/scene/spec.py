@@ -231,8 +231,19 @@ class ProceduralShape(Model):
     params: dict[str, Any] = Field(default_factory=dict)
 
 
+class GltfShape(Model):
+    """One primitive of a mesh in a glTF 2.0 file (`.gltf` or `.glb`), in the mesh's own space: what
+    `workers.scene.gltf` imports each (mesh, primitive) as, placed once per node that uses the mesh."""
+
+    type: Literal["gltf"] = "gltf"
+    path: str
+    mesh: Annotated[int, Field(ge=0)] = 0
+    primitive: Annotated[int, Field(ge=0)] = 0
+
+
 Shape = Annotated[
-    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape, Field(discriminator="type")
+    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape | GltfShape,
+    Field(discriminator="type"),
 ]
 
 
@@ -278,7 +289,27 @@ class DirectionalLight(Model):
         return d
 
 
-Light = Annotated[PointLight | DirectionalLight, Field(discriminator="type")]
+class SpotLight(Model):
+    """A point light limited to a cone, with glTF's (KHR_lights_punctual) smooth falloff: full intensity
+    within `inner_cone` of `direction`, squared-linear in the cosine down to zero at `outer_cone`."""
+
+    type: Literal["spot"] = "spot"
+    position: Vec3
+    direction: Vec3 = Field(description="the cone's axis, the direction light travels")
+    intensity: NonNegRGB = Field(description="radiant intensity on the axis, W/sr")
+    inner_cone: Annotated[FiniteFloat, Field(ge=0, lt=90)] = 0.0
+    outer_cone: Annotated[FiniteFloat, Field(gt=0, le=90)] = 45.0
+
+    @model_validator(mode="after")
+    def _cones(self):
+        if math.hypot(*self.direction) < 1e-12:
+            raise ValueError("direction must be non-zero")
+        if self.inner_cone >= self.outer_cone:
+            raise ValueError("inner_cone must be smaller than outer_cone")
+        return self
+
+
+Light = Annotated[PointLight | DirectionalLight | SpotLight, Field(discriminator="type")]
 
 
 class EnvironmentMap(Model):
@@ -351,6 +382,9 @@ class SceneSpec(Model):
     lights: list[Light] = Field(default_factory=list)
     environment: Environment | None = None
     camera: Camera = Camera()
+    notes: list[str] = Field(
+        default_factory=list, description="what an importer defaulted or ignored; job plans list them"
+    )
 
     @model_validator(mode="after")
     def _references(self):

@@ -1,11 +1,17 @@
 """Material textures: loading images as linear RGB and evaluating any colour-or-texture at UVs.
 
-UV convention (Mitsuba's): (0, 0) is the top-left corner of the image, u grows to the right,
-v grows downwards; texel centres sit at half-integers; lookups repeat outside [0, 1).
+UV convention (Mitsuba's, and glTF's): (0, 0) is the top-left corner of the image, u grows to the right,
+v grows downwards; texel centres sit at half-integers. Outside [0, 1) lookups wrap per axis as glTF's
+samplers do: `repeat`, `clamp` (to the edge texels) or `mirror` (mirrored repeat).
+
+Colour spaces: an image texture's `color_space` says how its texels are decoded; by default 8-bit images
+are sRGB (decoded to linear with the sRGB EOTF) and EXR is linear. Data textures (metallic-roughness,
+normals, transmission) are declared `linear` by the importers, as glTF and UsdPreviewSurface require.
 """
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -13,11 +19,13 @@ from PIL import Image, UnidentifiedImageError
 
 from workers.scene import spec
 from workers.scene.errors import SceneError
+from workers.scene.gltf import embedded_image
 from workers.scene.image_io import read_exr, srgb_to_linear
 
 
 def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> np.ndarray:
-    """(H, W, 3) float32 linear RGB: 8-bit images are sRGB-decoded, EXR is read as linear."""
+    """(H, W, 3) float32 RGB, decoded as `tex.color_space` says (module docstring); an `image` index reads
+    that image out of the glTF file at `path`."""
     path = Path(tex.path)
     if not path.is_absolute() and base_dir is not None:
         path = base_dir / path
@@ -25,12 +33,15 @@ def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None
     if not path.is_file():
         raise SceneError(where, f"texture file not found: {path}")
     try:
-        if path.suffix.lower() == ".exr":
+        if tex.image is None and path.suffix.lower() == ".exr":
             image = read_exr(path)
+            if tex.color_space == "srgb":
+                image = srgb_to_linear(image)
         else:
-            with Image.open(path) as opened:
+            source = path if tex.image is None else io.BytesIO(embedded_image(path, tex.image))
+            with Image.open(source) as opened:
                 encoded = np.asarray(opened.convert("RGB"), dtype=np.float64) / 255.0
-            image = srgb_to_linear(encoded)
+            image = encoded if tex.color_space == "linear" else srgb_to_linear(encoded)
     except (ValueError, OSError, UnidentifiedImageError) as error:
         raise SceneError(where, f"cannot read texture {path.name}: {error}") from error
     if not np.isfinite(image).all() or image.min() < 0:
@@ -52,21 +63,37 @@ def evaluate_texture(
         case spec.ImageTexture():
             if image is None:
                 raise ValueError("an image texture needs its loaded image")
-            return bilinear_repeat(image, uv)
+            return bilinear(image, uv, texture.wrap_u, texture.wrap_v)
         case _:
             return np.broadcast_to(np.asarray(texture, dtype=np.float32), (len(uv), 3)).copy()
 
 
-def bilinear_repeat(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear interpolation between texel centres with repeat wrapping on both axes."""
+def _texel_indices(coordinate: np.ndarray, size: int, wrap: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The two texels a bilinear lookup at `coordinate` (UV along one axis) blends, and the second's weight."""
+    if wrap == "repeat":
+        coordinate = coordinate % 1.0  # and keep huge coordinates away from int64 overflow
+    elif wrap == "mirror":
+        coordinate = coordinate % 2.0
+        coordinate = np.where(coordinate > 1.0, 2.0 - coordinate, coordinate)
+    else:
+        coordinate = np.clip(coordinate, 0.0, 1.0)
+    x = coordinate * size - 0.5
+    x0 = np.floor(x)
+    fraction = x - x0
+    first = x0.astype(np.int64)
+    second = first + 1
+    if wrap == "repeat":
+        return first % size, second % size, fraction
+    # clamp and mirror: the texels beyond an edge are the edge texel itself (mirroring repeats it too)
+    return np.clip(first, 0, size - 1), np.clip(second, 0, size - 1), fraction
+
+
+def bilinear(image: np.ndarray, uv: np.ndarray, wrap_u: str = "repeat", wrap_v: str = "repeat") -> np.ndarray:
+    """Bilinear interpolation between texel centres, wrapping each axis as glTF's sampler modes do."""
     height, width = image.shape[:2]
-    uv = uv % 1.0  # repeat, and keep huge coordinates away from int64 overflow
-    x = uv[:, 0] * width - 0.5
-    y = uv[:, 1] * height - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    x0, y0 = x0.astype(np.int64) % width, y0.astype(np.int64) % height
-    x1, y1 = (x0 + 1) % width, (y0 + 1) % height
+    x0, x1, fx = _texel_indices(uv[:, 0], width, wrap_u)
+    y0, y1, fy = _texel_indices(uv[:, 1], height, wrap_v)
+    fx, fy = fx[:, None], fy[:, None]
     top = image[y0, x0] * (1.0 - fx) + image[y0, x1] * fx
     bottom = image[y1, x0] * (1.0 - fx) + image[y1, x1] * fx
     return (top * (1.0 - fy) + bottom * fy).astype(np.float32)

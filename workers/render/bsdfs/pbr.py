@@ -96,6 +96,7 @@ class MetallicRoughness(BSDF):
             "metallic_roughness": material.metallic_roughness_texture,
             "transmission": material.transmission_texture,
             "normal": material.normal_texture,
+            "emission": material.emission_texture,
         }
         return {slot: texture for slot, texture in slots.items() if texture is not None}
 
