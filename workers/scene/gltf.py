@@ -301,7 +301,9 @@ class _Importer:
         image = self.doc.images[texture.source]
         own_path = posixpath.join(self.prefix, self.file.path.name)
         if image.uri is not None and not image.uri.startswith("data:"):
-            _inside_folder(self.file.path, image.uri, f"{where}: images[{texture.source}].uri")
+            target = _inside_folder(self.file.path, image.uri, f"{where}: images[{texture.source}].uri")
+            if not target.is_file():
+                raise SceneError(where, f"image {image.uri!r} is missing (looked for {target.name})")
             path, index = posixpath.join(self.prefix, unquote(image.uri)), None
         else:
             path, index = own_path, texture.source
