@@ -4,6 +4,7 @@ files written here with pygltflib (tests/support/gltf_files.py)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -333,3 +334,45 @@ def test_normal_maps_bend_along_u_and_up_the_image_with_generated_tangents(tmp_p
     np.testing.assert_allclose(bent, [-0.5, 0.0, math.sqrt(0.75)], atol=0.01)
     bent = shading_normal(normal_mapped_quad(tmp_path, tilt(0.0, 0.5), uvs=mirrored))
     np.testing.assert_allclose(bent, [0.0, 0.5, math.sqrt(0.75)], atol=0.01)  # still up the image
+
+
+ASSIMP_GLTF2 = Path("/usr/share/assimp/models/glTF2")  # Debian `assimp-testmodels` (BSD)
+needs_assimp_models = pytest.mark.skipif(not ASSIMP_GLTF2.is_dir(), reason="Debian assimp-testmodels missing")
+
+
+@needs_assimp_models
+def test_real_files_from_assimp_testmodels_import_or_fail_naming_the_problem():
+    """Khronos' BoxTextured as .gltf, .glb and with embedded buffers is one scene; real bad files fail."""
+    compiled = []
+    for name in ("BoxTextured-glTF/BoxTextured.gltf", "BoxTextured-glTF-Binary/BoxTextured.glb",
+                 "BoxTextured-glTF-Embedded/BoxTextured.gltf"):  # fmt: skip
+        scene, folder = load_scene(ASSIMP_GLTF2 / name)
+        tracer = PathTracer(compile_scene(scene, folder))
+        compiled.append(tracer)
+        material = next(iter(scene.materials.values()))
+        assert material.base_color_texture is not None and material.base_color_texture.color_space == "srgb"
+    for other in compiled[1:]:
+        np.testing.assert_array_equal(other.scene.positions, compiled[0].scene.positions)
+        np.testing.assert_array_equal(other.scene.uvs, compiled[0].scene.uvs)
+    surf = [
+        t.materials.surfaces(np.zeros(4, np.int64), np.random.default_rng(0).random((4, 2))) for t in compiled
+    ]
+    np.testing.assert_array_equal(surf[0].base, surf[1].base)
+    np.testing.assert_array_equal(surf[0].base, surf[2].base)
+
+    scene, _ = load_scene(ASSIMP_GLTF2 / "2CylinderEngine-glTF-Binary/2CylinderEngine.glb")
+    assert len(scene.objects) > 20 and any("degenerate" in n for n in scene.notes)
+    for name, field, problem in [
+        ("draco/2CylinderEngine.gltf", "extensionsRequired", "KHR_draco_mesh_compression"),
+        ("IncorrectVertexArrays/Cube.gltf", "nodes[2] (Lines).mesh", "LINES"),
+        (
+            "IndexOutOfRange/IndexOutOfRange.gltf",
+            "IndexOutOfRange.gltf (meshes[0].primitives[0])",
+            "past the 24 vertices",
+        ),
+        ("MissingBin/BoxTextured.gltf", "BoxTextured.gltf: buffers[0].uri", "missing"),
+        ("RecursiveNodes/RecursiveNodes.gltf", "nodes[0]", "not a tree"),
+    ]:
+        with pytest.raises(SceneError, match=problem) as caught:
+            load_scene(ASSIMP_GLTF2 / name)
+        assert caught.value.field == field, caught.value

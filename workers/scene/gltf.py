@@ -31,7 +31,7 @@ import pygltflib
 
 from workers.scene import spec
 from workers.scene.errors import SceneError
-from workers.scene.shapes import MeshData
+from workers.scene.shapes import MeshData, degenerate_triangles
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 SUPPORTED_EXTENSIONS = frozenset(
@@ -213,6 +213,13 @@ def primitive_mesh(path: Path, mesh: int, primitive: int, field: str) -> MeshDat
         indices = accessor(file, prim.indices, where)[:, 0].astype(np.int64)
     else:
         indices = np.arange(len(vertices))
+    if len(indices) and (indices.min() < 0 or indices.max() >= len(vertices)):
+        raise SceneError(where, f"indices reach {int(indices.max())}, past the {len(vertices)} vertices")
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise SceneError(
+            where, f"{int(bad.sum())} vertices are NaN or Inf (first at index {int(np.argmax(bad))})"
+        )
     faces = _triangles(indices, mode)
 
     def optional(index, width):
@@ -367,17 +374,15 @@ def _unique(name: str | None, fallback: str, taken: set[str]) -> str:
     return candidate
 
 
-def _bounds(file: GltfFile, placements: dict[tuple[int, int], list[np.ndarray]]) -> np.ndarray:
-    """World bounds from the POSITION accessors' min/max (glTF requires them) of every placement."""
-    corners = []
-    for (mesh, primitive), matrices in placements.items():
-        acc = file.document.accessors[file.document.meshes[mesh].primitives[primitive].attributes.POSITION]
-        lo, hi = np.asarray(acc.min, float), np.asarray(acc.max, float)
-        box = np.array(
-            [[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-        )
-        corners += [(box @ m.T)[:, :3] for m in matrices]
-    points = np.concatenate(corners)
+def _bounds(geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[int, int], list[np.ndarray]]):
+    """World bounds of every placed primitive."""
+    points = np.concatenate(
+        [
+            geometry[key].vertices @ m[:3, :3].T + m[:3, 3]
+            for key, matrices in placements.items()
+            for m in matrices
+        ]
+    )
     return np.stack([points.min(0), points.max(0)])
 
 
@@ -430,6 +435,7 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
     if not placements:
         raise SceneError(file.path.name, "the glTF scene has no mesh to render")
 
+    geometry = {key: primitive_mesh(file.path, *key, file.path.name) for key in placements}
     materials: dict[str, spec.Material] = {}
     material_names: dict[int | None, str] = {}
     emission: dict[int | None, tuple[tuple[float, float, float], bool]] = {None: ((0.0, 0.0, 0.0), False)}
@@ -452,11 +458,18 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
         if len(doc.meshes[mesh].primitives) > 1:
             object_names.discard(name)
             name = _unique(f"{doc.meshes[mesh].name or f'mesh_{mesh}'}/{j}", "", object_names)
+        degenerate = int(degenerate_triangles(geometry[mesh, j].vertices, geometry[mesh, j].faces).sum())
+        if degenerate:
+            importer.notes.append(
+                f"geometry: {name}: dropped {degenerate} degenerate (zero-area) triangle(s)"
+            )
         transforms = [spec.Transform(matrix=tuple(tuple(row) for row in w[:3].tolist())) for w in matrices]
         objects.append(
             spec.SceneObject(
                 name=name,
-                shape=spec.GltfShape(path=posixpath.join(prefix, file.path.name), mesh=mesh, primitive=j),
+                shape=spec.GltfShape(
+                    path=posixpath.join(prefix, file.path.name), mesh=mesh, primitive=j, repair=degenerate > 0
+                ),
                 material=material_names[m],
                 emission=emitted if max(emitted) > 0 else None,
                 two_sided_emission=two_sided and max(emitted) > 0,
@@ -478,7 +491,7 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
         if len(perspective) > 1:
             importer.notes.append(f"camera: {where}'s, the first of {len(perspective)} in node order")
     else:
-        camera = framing_camera(_bounds(file, placements))
+        camera = framing_camera(_bounds(geometry, placements))
         importer.notes.append("camera: none in the file; a default camera frames the scene's bounds")
     environment = None
     if not scene_lights and not any(o.emission for o in objects):

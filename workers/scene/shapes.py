@@ -108,6 +108,12 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
+def degenerate_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Which triangles have (relatively) zero area: they would break the renderer's normals and sampling."""
+    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
+    return triangle_areas(vertices, faces) <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
+
+
 def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
     """Reject (or with `repair` drop) what would break the renderer: non-finite data, bad indices, slivers."""
     v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
@@ -122,9 +128,7 @@ def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
         )
     if f.min() < 0 or f.max() >= len(v):
         raise SceneError(field, f"face indices out of range [0, {len(v)})")
-    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
-    areas = triangle_areas(v, f)
-    degenerate = areas <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
+    degenerate = degenerate_triangles(v, f)
     normals, uvs = mesh.normals, mesh.uvs
     if degenerate.all():
         raise SceneError(field, "every triangle is degenerate (zero area)")

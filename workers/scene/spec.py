@@ -239,6 +239,7 @@ class GltfShape(Model):
     path: str
     mesh: Annotated[int, Field(ge=0)] = 0
     primitive: Annotated[int, Field(ge=0)] = 0
+    repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
 
 
 Shape = Annotated[
