@@ -34,12 +34,15 @@ def _reflectance(value: spec.ColorOrTexture, base_dir: Path | None = None) -> di
                 "to_uv": _scalar_transform(np.diag([value.scale / 2, value.scale / 2, 1.0, 1.0])),
             }
         case spec.ImageTexture():
+            if value.image is not None or value.wrap_u != value.wrap_v:
+                raise TypeError("no Mitsuba export for images inside glTF files or with two wrap modes")
             path = Path(value.path)
             return {
                 "type": "bitmap",
                 "filename": str(path if path.is_absolute() or base_dir is None else base_dir / path),
                 "filter_type": "bilinear",
-                "wrap_mode": "repeat",
+                "wrap_mode": value.wrap_u,
+                "raw": value.color_space == "linear",
             }
         case _:
             return _rgb(value)
