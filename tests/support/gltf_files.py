@@ -41,8 +41,18 @@ class GltfBuilder:
         self.doc.accessors.append(acc)
         return len(self.doc.accessors) - 1
 
-    def mesh(self, positions, indices=None, *, normals=None, uvs=None, tangents=None, material=None, mode=None,
-             name=None) -> int:  # fmt: skip
+    def mesh(
+        self,
+        positions,
+        indices=None,
+        *,
+        normals=None,
+        uvs=None,
+        tangents=None,
+        material=None,
+        mode=None,
+        name=None,
+    ) -> int:
         attributes = g.Attributes(POSITION=self.accessor(positions, bounds=True))
         if normals is not None:
             attributes.NORMAL = self.accessor(normals)

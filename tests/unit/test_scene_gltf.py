@@ -227,7 +227,7 @@ def test_bad_files_are_errors_naming_what_is_wrong(tmp_path):
     )
     path = builder.save(tmp_path / "missing" / "m.gltf")
     (path.parent / "gone.png").unlink()
-    with pytest.raises(SceneError, match="gone.png") as caught:
+    with pytest.raises(SceneError, match=r"gone\.png") as caught:
         load_scene(path)
     assert caught.value.field == "materials[0].baseColorTexture"
 

@@ -86,11 +86,13 @@ class BSDF(ABC):
         """wi, weight f |cos| / pdf, pdf and whether the sampled lobe is a delta, per row."""
 
     def textures(self, material: Any) -> dict[str, Any]:
-        """The material's textured parameters by slot name (`workers.scene.spec` textures); none by default."""
+        """The material's textured parameters by slot name (`workers.scene.spec` textures); none by default.
+        The slots `normal` and `emission` are the renderer's (`workers.render.materials`)."""
         return {}
 
-    def apply_textures(self, material: Any, s: SurfaceBatch, lookups: dict[str, np.ndarray]) -> None:
-        """Overwrite the rows `s` of `material` with its textures' values `lookups` (slot -> (N, 4) RGBA)."""
+    def apply_textures(self, material: Any, s: SurfaceBatch, lookups: dict[str, np.ndarray]) -> None:  # noqa: B027
+        """Overwrite the rows `s` of `material` with its textures' values `lookups` (slot -> (N, 3) RGB);
+        a family without textures never receives any."""
 
 
 class _Registry:

@@ -69,7 +69,7 @@ def evaluate_texture(
 
 
 def _texel_indices(coordinate: np.ndarray, size: int, wrap: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The two texels a bilinear lookup at `coordinate` (UV along one axis) blends, and the second's weight."""
+    """The two texels a bilinear lookup at `coordinate` (a UV along one axis) blends; the second's weight."""
     if wrap == "repeat":
         coordinate = coordinate % 1.0  # and keep huge coordinates away from int64 overflow
     elif wrap == "mirror":

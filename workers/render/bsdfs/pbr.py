@@ -4,9 +4,10 @@ BSDF (Burley 2012, 2015) restricted to base colour, metallic, roughness, IOR and
 
 With v the direction to the viewer (Mitsuba's si.wi), l the one to the light, h their half vector
 (generalised for refraction), alpha = max(0.001, roughness^2), F_d the exact dielectric Fresnel term of
-the IOR at v.h, and the lobe weights brdf = (1 - metallic)(1 - transmission), bsdf = (1 - metallic) transmission:
+the IOR at v.h, and the lobe weights brdf = (1 - metallic)(1 - transmission) and
+bsdf = (1 - metallic) transmission:
 
-    reflection    [(1 - metallic) F_d + metallic Schlick(base, v.h)] D G / (4 |cos_v|)   (bsdf F_d from inside)
+    reflection    [(1 - metallic) F_d + metallic Schlick(base, v.h)] D G / (4 |cos_v|)  (inside: bsdf F_d)
     transmission  sqrt(base) bsdf (1 - F_d) D G |v.h l.h| / (|cos_v| (v.h + eta l.h)^2)  (radiance: the
                   1/eta^2 of entering a denser medium cancels the eta^2 of the half-vector Jacobian)
     diffuse       brdf base / pi (1 - Fv/2)(1 - Fl/2) + retro-reflection Rr (Fl + Fv + Fl Fv (Rr - 1)),
