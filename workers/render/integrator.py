@@ -73,7 +73,8 @@ class SurfaceRecords:
 class _Paths:
     """The live paths of a wavefront: pixel index, current ray, throughput and the last scattering's pdf.
 
-    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0)."""
+    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0);
+    `spread` is a camera ray's cone angle (radians; 0 once scattered), for mipmapped texture lookups."""
 
     idx: np.ndarray
     o: np.ndarray
@@ -82,6 +83,7 @@ class _Paths:
     prev_pdf: np.ndarray
     prev_delta: np.ndarray
     t_min: np.ndarray
+    spread: np.ndarray
 
     def take(self, rows: np.ndarray) -> _Paths:
         return _Paths(*(getattr(self, f.name)[rows] for f in fields(self)))
@@ -164,6 +166,12 @@ class PathTracer:
         self._smooth = deviation > 1e-6
         self._any_smooth = bool(self._smooth.any())
         self._needs_uv = self.materials.needs_uv
+        with np.errstate(divide="ignore"):
+            uv_edges = self._uv[:, 1:] - self._uv[:, :1]
+            uv_area = 0.5 * np.abs(
+                uv_edges[:, 0, 0] * uv_edges[:, 1, 1] - uv_edges[:, 0, 1] * uv_edges[:, 1, 0]
+            )
+            self._log2_uv_per_length = 0.5 * np.log2(uv_area / np.maximum(scene.areas, 1e-300))
         self._has_emitters = bool((scene.emission > 0).any())
 
     # ------------------------------------------------------------------ geometry helpers
@@ -252,6 +260,18 @@ class PathTracer:
         rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng, it.uv)
         return rec
 
+    def _footprint(
+        self, hits: Hits, it: _Interaction, d: np.ndarray, spread: np.ndarray
+    ) -> np.ndarray | None:
+        """log2 of the width in UV units of ray cones of angle `spread` at the hits (-inf where 0), as ray
+        cones estimate texture LOD (Akenine-Moeller et al. 2019, eq. 34): cone width t * spread over
+        |cos|, times the triangle's UV length per world length; None when no path has a cone."""
+        if not self._needs_uv or not spread.any():
+            return None
+        width = spread * hits.t / np.maximum(np.abs(dot(d, it.ng)), 1e-6)
+        with np.errstate(divide="ignore"):
+            return self._log2_uv_per_length[hits.prim] + np.log2(width)
+
     def _tangents(self, hits: Hits) -> np.ndarray:
         """(N, 4) tangents (xyz, bitangent sign) interpolated at the hits, for normal maps."""
         b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
@@ -264,8 +284,8 @@ class PathTracer:
             mat = np.where(hits.surface.where, hits.surface.material, mat)
         return mat
 
-    def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray):
-        surf = self.materials.surfaces(mat, uv)
+    def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
+        surf = self.materials.surfaces(mat, uv, footprint)
         if hits.surface is not None and hits.surface.where.any():
             surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf
@@ -287,9 +307,11 @@ class PathTracer:
         max_depth: int = 8,
         rr_depth: int = 5,
         observer: PathObserver | None = None,
+        spread: float | np.ndarray = 0.0,
     ) -> TraceResult:
         """Radiance arriving at each origin from its direction (unit directions); `observer` sees the
-        paths' events (`workers.render.observer`) and changes nothing traced."""
+        paths' events (`workers.render.observer`) and changes nothing traced. `spread` is the rays' cone
+        angle (a camera's pixel angle), which selects textures' mip levels at the first hits."""
         n = len(origins)
         radiance = np.zeros((n, 3))
         bounces = np.zeros(n, np.int64)
@@ -302,6 +324,7 @@ class PathTracer:
             prev_pdf=np.zeros(n),
             prev_delta=np.ones(n, bool),  # the camera ray: emitters it sees count fully
             t_min=np.zeros(n),
+            spread=np.broadcast_to(np.asarray(spread, dtype=np.float64), (n,)).copy(),
         )
         env = self.lights.environment
         for segment in range(1, max_depth + 1):
@@ -387,7 +410,7 @@ class PathTracer:
         if segment == max_depth:
             return paths.take(np.zeros(0, np.int64)), 0
 
-        sh = self._shade(it, hits, wo)
+        sh = self._shade(it, hits, wo, self._footprint(hits, it, d, paths.spread))
         u = rng.random((len(idx), 6))
 
         shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
@@ -395,7 +418,9 @@ class PathTracer:
         wi_local, weight, pdf, delta = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
         wi = sh.to_world(wi_local)
         o = self.offset(sh.position, sh.ng, wi, sh.scale)
-        return _Paths(idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx))), shadow_rays
+        return _Paths(
+            idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx)), np.zeros(len(idx))
+        ), shadow_rays
 
     def _scatter_in_aggregate(
         self,
@@ -439,7 +464,8 @@ class PathTracer:
         t_min = self.aggregate.exit_distance(events.voxel, position, wi)
         pdf = np.full(n, UNIFORM_SPHERE_PDF)
         beta = paths.beta * phi / UNIFORM_SPHERE_PDF
-        return _Scattered(_Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min), shadow_rays)
+        paths = _Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min, np.zeros(n))
+        return _Scattered(paths, shadow_rays)
 
     def _next_event_in_aggregate(
         self,
@@ -482,9 +508,9 @@ class PathTracer:
         it = self._interaction(hits, origins, directions, self._needs_uv)
         return self._shade(it, hits, -directions)
 
-    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray) -> Shading:
+    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray, footprint=None) -> Shading:
         material_ids = self._material_ids(hits)
-        surf = self._surfaces(hits, material_ids, it.uv)
+        surf = self._surfaces(hits, material_ids, it.uv, footprint)
         ns = it.ns
         if self.materials.normal_mapped:
             ns = self.materials.perturb_normals(material_ids, it.uv, ns, self._tangents(hits))

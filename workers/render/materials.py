@@ -16,7 +16,7 @@ import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
-from workers.scene.textures import evaluate_texture, load_image_texture
+from workers.scene.textures import MipChain, evaluate_texture, load_image_texture
 
 SHADING_SLOTS = frozenset({"normal", "emission"})  # read by the renderer, not by the BSDF family
 
@@ -34,31 +34,31 @@ class MaterialTable:
         for i, p in enumerate(parameters):
             self.extra[i, : len(p.extra)] = p.extra
         self.base = np.zeros((len(materials), 3))
-        self.textures: dict[int, tuple[spec.Texture, np.ndarray | None]] = {}
+        self.textures: dict[int, tuple[spec.Texture, MipChain | None]] = {}
         for i, (name, p) in enumerate(zip(scene.material_names, parameters, strict=True)):
             if isinstance(p.base, tuple):
                 self.base[i] = p.base
             else:
                 field = f"materials.{name}"
-                image = load_image_texture(p.base, field, scene.base_dir) if p.base.type == "image" else None
+                image = _mip_chain(p.base, field, scene)
                 self.textures[i] = (p.base, image)
         self.slots: dict[int, dict[str, tuple[spec.Texture, np.ndarray | None]]] = {}
         for i, (name, m) in enumerate(zip(scene.material_names, materials, strict=True)):
             slots = bsdf_family(m.type).textures(m)
             if slots:
                 self.slots[i] = {
-                    slot: (t, load_image_texture(t, f"materials.{name}.{slot}_texture", scene.base_dir))
-                    if t.type == "image"
-                    else (t, None)
+                    slot: (t, _mip_chain(t, f"materials.{name}.{slot}_texture", scene))
                     for slot, t in slots.items()
                 }
 
-    def surfaces(self, material_ids: np.ndarray, uv: np.ndarray) -> SurfaceBatch:
+    def surfaces(self, material_ids: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
+        """The rows' SurfaceBatch; image textures are filtered over `footprint` (log2 UV width per row,
+        `MipChain.lookup`) where it is given."""
         base = self.base[material_ids]
         for i, (texture, image) in self.textures.items():
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
-                base[sel] = evaluate_texture(texture, image, uv[sel])
+                base[sel] = evaluate_texture(texture, image, uv[sel], _rows(footprint, sel))
         batch = SurfaceBatch(
             self.family[material_ids],
             base,
@@ -70,7 +70,7 @@ class MaterialTable:
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
                 lookups = {
-                    slot: evaluate_texture(t, image, uv[sel])
+                    slot: evaluate_texture(t, image, uv[sel], _rows(footprint, sel))
                     for slot, (t, image) in slots.items()
                     if slot not in SHADING_SLOTS
                 }
@@ -81,7 +81,7 @@ class MaterialTable:
                 batch.assign(sel, rows)
         return batch
 
-    def _slot(self, name: str) -> dict[int, tuple[spec.Texture, np.ndarray | None]]:
+    def _slot(self, name: str) -> dict[int, tuple[spec.Texture, MipChain | None]]:
         return {i: slots[name] for i, slots in self.slots.items() if name in slots}
 
     @property
@@ -127,3 +127,14 @@ class MaterialTable:
     def roughness(self, material_ids: np.ndarray) -> np.ndarray:
         """Roughness for the AOV: the GGX alpha, and 1 for Lambertian surfaces."""
         return self._roughness[material_ids]
+
+
+def _mip_chain(texture: spec.Texture, field: str, scene: CompiledScene) -> MipChain | None:
+    """The loaded image of an image texture with its mip levels; None for procedural textures."""
+    if texture.type != "image":
+        return None
+    return MipChain(load_image_texture(texture, field, scene.base_dir))
+
+
+def _rows(footprint: np.ndarray | None, rows: np.ndarray) -> np.ndarray | None:
+    return None if footprint is None else footprint[rows]

@@ -49,10 +49,47 @@ def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None
     return np.ascontiguousarray(image, dtype=np.float32)
 
 
+class MipChain:
+    """An image and its box-filtered halvings down to 1 x 1, for lookups over a footprint (trilinear
+    filtering between the two levels whose texels are closest to the footprint's width, Williams 1983)."""
+
+    def __init__(self, image: np.ndarray):
+        self.levels = [np.asarray(image, dtype=np.float32)]
+        while max(self.levels[-1].shape[:2]) > 1:
+            level = self.levels[-1]
+            h, w = level.shape[:2]
+            level = np.pad(level, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")  # odd sizes: repeat the edge
+            halved = 0.25 * (level[0::2, 0::2] + level[1::2, 0::2] + level[0::2, 1::2] + level[1::2, 1::2])
+            self.levels.append(halved)
+        self.log2_texels = 0.5 * np.log2(self.levels[0].shape[0] * self.levels[0].shape[1])
+
+    def lookup(self, uv: np.ndarray, wrap_u: str, wrap_v: str, footprint: np.ndarray | None) -> np.ndarray:
+        """Bilinear at level 0, or trilinear where `footprint` (log2 of the footprint's width in UV units;
+        -inf where unknown) covers more than a texel."""
+        if footprint is None:
+            return bilinear(self.levels[0], uv, wrap_u, wrap_v)
+        lod = np.clip(
+            np.nan_to_num(footprint + self.log2_texels, nan=0.0, neginf=0.0), 0, len(self.levels) - 1
+        )
+        out = np.empty((len(uv), 3), np.float32)
+        below = np.floor(lod).astype(np.int64)
+        for level in np.unique(below):
+            rows = np.flatnonzero(below == level)
+            fine = bilinear(self.levels[level], uv[rows], wrap_u, wrap_v)
+            coarse = bilinear(self.levels[min(level + 1, len(self.levels) - 1)], uv[rows], wrap_u, wrap_v)
+            t = (lod[rows] - level)[:, None]
+            out[rows] = fine * (1.0 - t) + coarse * t
+        return out
+
+
 def evaluate_texture(
-    texture: spec.Albedo | spec.ImageTexture | spec.CheckerTexture, image: np.ndarray | None, uv: np.ndarray
+    texture: spec.Albedo | spec.ImageTexture | spec.CheckerTexture,
+    image: np.ndarray | MipChain | None,
+    uv: np.ndarray,
+    footprint: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(N, 3) float32 colours at (N, 2) `uv`: a constant, a procedural checker, or `image` bilinearly."""
+    """(N, 3) float32 colours at (N, 2) `uv`: a constant, a procedural checker, or `image` bilinearly (a
+    `MipChain` over `footprint`, `MipChain.lookup`)."""
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     uv = np.where(np.isfinite(uv), uv, 0.0)  # a NaN UV from a degenerate hit must not poison a colour
     match texture:
@@ -63,6 +100,8 @@ def evaluate_texture(
         case spec.ImageTexture():
             if image is None:
                 raise ValueError("an image texture needs its loaded image")
+            if isinstance(image, MipChain):
+                return image.lookup(uv, texture.wrap_u, texture.wrap_v, footprint)
             return bilinear(image, uv, texture.wrap_u, texture.wrap_v)
         case _:
             return np.broadcast_to(np.asarray(texture, dtype=np.float32), (len(uv), 3)).copy()
