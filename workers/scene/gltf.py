@@ -364,7 +364,7 @@ def _texture_info(data: dict | None) -> pygltflib.TextureInfo | None:
     return pygltflib.TextureInfo(index=data["index"], texCoord=data.get("texCoord", 0))
 
 
-def _unique(name: str | None, fallback: str, taken: set[str]) -> str:
+def unique_name(name: str | None, fallback: str, taken: set[str]) -> str:
     base = (name or fallback)[:120] or fallback
     candidate, k = base, 1
     while candidate in taken:
@@ -446,18 +446,18 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
         m = doc.meshes[mesh].primitives[j].material
         if m not in material_names:
             if m is None:
-                material_names[m] = _unique("default", "default", taken)
+                material_names[m] = unique_name("default", "default", taken)
                 materials[material_names[m]] = spec.PbrMaterial()  # glTF's default material
             else:
                 material, emitted, two_sided = importer.material(m)
-                material_names[m] = _unique(doc.materials[m].name, f"material_{m}", taken)
+                material_names[m] = unique_name(doc.materials[m].name, f"material_{m}", taken)
                 materials[material_names[m]] = material
                 emission[m] = (emitted, two_sided)
         emitted, two_sided = emission[m]
-        name = _unique(doc.meshes[mesh].name, f"mesh_{mesh}", object_names)
+        name = unique_name(doc.meshes[mesh].name, f"mesh_{mesh}", object_names)
         if len(doc.meshes[mesh].primitives) > 1:
             object_names.discard(name)
-            name = _unique(f"{doc.meshes[mesh].name or f'mesh_{mesh}'}/{j}", "", object_names)
+            name = unique_name(f"{doc.meshes[mesh].name or f'mesh_{mesh}'}/{j}", "", object_names)
         degenerate = int(degenerate_triangles(geometry[mesh, j].vertices, geometry[mesh, j].faces).sum())
         if degenerate:
             importer.notes.append(

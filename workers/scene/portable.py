@@ -32,6 +32,7 @@ from workers.scene.spec import (
     SceneObject,
     SceneSpec,
     SphereShape,
+    UsdShape,
 )
 
 SCENE_FILE = "scene.json"
@@ -75,7 +76,7 @@ def untextured(material: Material) -> Material:
 
 
 def reads_file(obj: SceneObject) -> bool:
-    return isinstance(obj.shape, MeshShape | GltfShape)
+    return isinstance(obj.shape, MeshShape | GltfShape | UsdShape)
 
 
 def file_references(spec: SceneSpec) -> list[str]:

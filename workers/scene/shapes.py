@@ -98,6 +98,13 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
             if not path.is_absolute() and base_dir is not None:
                 path = base_dir / path
             mesh = primitive_mesh(path, shape.mesh, shape.primitive, field)
+        case spec.UsdShape():
+            from workers.scene.usd import prim_mesh
+
+            path = Path(shape.path)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            mesh = prim_mesh(path, shape.prim, field)
         case _:
             raise SceneError(field, f"unsupported shape {type(shape).__name__}")
     return check_mesh(mesh, field, repair=getattr(shape, "repair", False))

@@ -116,6 +116,7 @@ class ImageTexture(Model):
     image: Annotated[int, Field(ge=0)] | None = Field(
         default=None, description="the index of an image inside the glTF file `path` (embedded images)"
     )
+    member: str | None = Field(default=None, description="a file inside the USDZ package `path`")
     color_space: Literal["srgb", "linear"] | None = None
     wrap_u: Wrap = "repeat"
     wrap_v: Wrap = "repeat"
@@ -242,8 +243,18 @@ class GltfShape(Model):
     repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
 
 
+class UsdShape(Model):
+    """A UsdGeom.Mesh prim of a USD file (`.usda`, `.usdc`, `.usd`, `.usdz`), triangulated, in its own space:
+    what `workers.scene.usd` imports each mesh as, placed once per instance of it."""
+
+    type: Literal["usd"] = "usd"
+    path: str
+    prim: str = Field(pattern=r"^/", description="the mesh prim's path in the stage")
+    repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
+
+
 Shape = Annotated[
-    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape | GltfShape,
+    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape | GltfShape | UsdShape,
     Field(discriminator="type"),
 ]
 

@@ -21,6 +21,7 @@ from workers.scene import spec
 from workers.scene.errors import SceneError
 from workers.scene.gltf import embedded_image
 from workers.scene.image_io import read_exr, srgb_to_linear
+from workers.scene.usd import package_member
 
 
 def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> np.ndarray:
@@ -39,6 +40,8 @@ def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None
                 image = srgb_to_linear(image)
         else:
             source = path if tex.image is None else io.BytesIO(embedded_image(path, tex.image))
+            if tex.member is not None:
+                source = io.BytesIO(package_member(path, tex.member))
             with Image.open(source) as opened:
                 encoded = np.asarray(opened.convert("RGB"), dtype=np.float64) / 255.0
             image = encoded if tex.color_space == "linear" else srgb_to_linear(encoded)
