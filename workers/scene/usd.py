@@ -217,7 +217,7 @@ class _Importer:
                 return default, None
             if inp.HasConnectedSource():
                 source, output, _ = inp.GetConnectedSource()
-                return default, (source, output)
+                return default, (_pxr()[4].Shader(source.GetPrim()), output)
             value = inp.Get()
             return (default if value is None else value), None
 
@@ -281,6 +281,8 @@ def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
         importer.notes.append("axes: the stage is Z-up; turned Y-up")
     placements: dict[str, list[np.ndarray]] = {}
     bound: dict[str, object] = {}
+    first_instance: dict[str, str] = {}
+    xforms = usd_geom.XformCache(time)
     cameras, lights = [], []
     prims = iter(usd.PrimRange.Stage(stage, usd.TraverseInstanceProxies(usd.PrimDefaultPredicate)))
     for prim in prims:
@@ -291,11 +293,12 @@ def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
             prims.PruneChildren()  # its prototypes are placed per instance below, not where they sit
             _instanced(prim, up @ _world(prim, time), placements, bound, time, importer)
         elif prim.IsA(usd_geom.Mesh):
+            # Instances of one prototype share its geometry, keyed by the first instance's path (the
+            # prototypes' own paths are made up per session).
             source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
-            placements.setdefault(str(source.GetPath()), []).append(up @ _world(prim, time))
-            bound.setdefault(
-                str(source.GetPath()), usd_shade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
-            )
+            key = first_instance.setdefault(str(source.GetPath()), str(prim.GetPath()))
+            placements.setdefault(key, []).append(up @ _matrix(xforms.GetLocalToWorldTransform(prim)))
+            bound.setdefault(key, usd_shade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0])
         elif prim.IsA(usd_geom.Camera):
             cameras.append(prim)
         elif prim.HasAPI(usd_lux.LightAPI):
@@ -384,7 +387,7 @@ def _instanced(instancer_prim, world: np.ndarray, placements, bound, time, impor
     cache = usd_geom.XformCache(time)
     for p, proto_path in enumerate(prototypes):
         proto = instancer_prim.GetStage().GetPrimAtPath(proto_path)
-        chosen = [_matrix(matrices[i]) for i in np.flatnonzero(proto_indices == p)]
+        chosen = [_matrix(matrices[int(i)]) for i in np.flatnonzero(proto_indices == p)]
         for prim in usd.PrimRange(proto):
             if not prim.IsA(usd_geom.Mesh):
                 continue
