@@ -64,6 +64,11 @@ def _open(path_text: str, modified_ns: int, size: int):
     for layer in stage.GetUsedLayers():
         if layer.realPath:
             _check_inside(folder, layer.realPath, f"{path.name}: layer {layer.identifier}", "layer")
+    errors = stage.GetCompositionErrors()
+    if errors:  # a missing layer, reference or payload: usd-core only warns and composes without it
+        site = getattr(errors[0], "rootSite", None)
+        where = f"{path.name}: {site.path}" if site is not None else path.name
+        raise SceneError(where, f"{errors[0]} ({len(errors)} composition error(s))")
     return stage
 
 

@@ -1,4 +1,4 @@
-"""glTF scenes through the real server and CLI: a `.glb` uploaded on its own renders as a job (its import
+"""glTF and USD scenes through the real server and CLI: a `.glb` uploaded on its own renders as a job (its import
 notes in the plan) to the image a direct render of the file gives; a `.gltf` with its buffer and images,
 and a YAML scene importing a `.glb`, are assets; broken uploads are 4xx naming the glTF field."""
 
@@ -147,3 +147,20 @@ def test_nbake_render_takes_a_glb(tmp_path):
     assert result.exit_code == 0, result.stderr
     assert "camera: none in the file" in result.stderr
     assert read_exr(tmp_path / "out.exr").shape == (24, 24, 3)
+
+
+def test_usdz_and_usda_uploads(client, tmp_path):
+    pytest.importorskip("pxr")
+    from pxr import Sdf, UsdUtils
+
+    from tests.unit.test_scene_usd import write_usd
+
+    source = write_usd(tmp_path / "src", ".usdc")
+    UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(source)), str(tmp_path / "scene.usdz"))
+    response = upload(client, [("scene.usdz", (tmp_path / "scene.usdz").read_bytes())])
+    assert response.status_code == 201, response.text
+    assert response.json()["scene_file"] == "scene.usdz"
+
+    text = '#usda 1.0\ndef "World" {\n    def "Ref" (prepend references = @../elsewhere.usda@) {}\n}\n'
+    body = problem_of(upload(client, [("scene.usda", text.encode())]), 422)
+    assert body["field"] == "scene.usda: /World/Ref" and "elsewhere.usda" in body["detail"]
