@@ -1,4 +1,4 @@
-"""glTF and USD scenes through the real server and CLI: a `.glb` uploaded on its own renders as a job (its import
+"""glTF and USD scenes through the real server and CLI: a `.glb` uploaded on its own renders as a job (its
 notes in the plan) to the image a direct render of the file gives; a `.gltf` with its buffer and images,
 and a YAML scene importing a `.glb`, are assets; broken uploads are 4xx naming the glTF field."""
 
