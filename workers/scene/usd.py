@@ -180,6 +180,11 @@ class _Importer:
             raise SceneError(where, f"texture {asset.path if asset else '(none)'!r} is missing")
         resolved = asset.resolvedPath
         _check_inside(self.folder, resolved, where, "texture")
+        st = shader.GetInput("st")
+        if st and st.HasConnectedSource():
+            reader = _pxr()[4].Shader(st.GetConnectedSource()[0].GetPrim())
+            if reader.GetIdAttr().Get() != "UsdPrimvarReader_float2":
+                self.ignored.add(f"{where}: {reader.GetIdAttr().Get()} on st (the mesh's st is used)")
         declared = shader.GetInput("sourceColorSpace")
         declared = declared.Get() if declared else None
         if declared == "raw":
