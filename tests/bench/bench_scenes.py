@@ -71,7 +71,9 @@ def import_section() -> BenchSection:
         yaml_s = median_seconds(lambda: compile_scene(*load_scene(yaml_path)))
         section.add(scene="glTF file", seconds=gltf_s, vs_yaml=gltf_s / yaml_s)
         section.add(scene="YAML twin", seconds=yaml_s, vs_yaml=1.0)
-        section.notes.append("both read their meshes from the same glTF file (parsed once per process, cached)")
+        section.notes.append(
+            "both read their meshes from the same glTF file (parsed once per process, cached)"
+        )
     return section
 
 
