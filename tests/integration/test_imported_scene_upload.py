@@ -73,6 +73,7 @@ def upload(client, files: list[tuple[str, bytes]]):
     return client.post("/v1/assets", files=[("files", (name, data)) for name, data in files])
 
 
+@pytest.mark.slow
 def test_a_glb_uploaded_alone_renders_as_a_job_like_a_direct_render(client, tmp_path):
     path = textured_scene(external_image=False).save(tmp_path / "model.glb")
     response = upload(client, [("model.glb", path.read_bytes())])
@@ -100,6 +101,14 @@ def test_a_glb_uploaded_alone_renders_as_a_job_like_a_direct_render(client, tmp_
     served = read_exr(tmp_path / "service.exr")
     np.testing.assert_array_equal(served, direct.image)
     assert served.mean() > 1e-3 and (served > 0.02).any()  # lit by the emissive lamps
+
+
+def test_a_glb_uploaded_alone_is_an_asset_whose_scene_is_the_import(client, tmp_path):
+    path = textured_scene(external_image=False).save(tmp_path / "model.glb")
+    response = upload(client, [("model.glb", path.read_bytes())])
+    assert response.status_code == 201, response.text
+    assert response.json()["scene_file"] == "model.glb"
+    assert {f["name"] for f in response.json()["files"]} == {"model.glb"}
 
 
 def test_a_gltf_with_its_files_and_a_yaml_importing_a_glb_are_assets(client, tmp_path):
