@@ -203,3 +203,16 @@ def test_references_outside_the_folder_and_bad_meshes_are_errors(tmp_path):
     with pytest.raises(SceneError, match="fewer than 3") as caught:
         load_scene(tmp_path / "lines.usda")
     assert "/World/Broken" in caught.value.field
+
+
+def test_a_scene_file_imports_a_usd_file_and_overrides_its_camera(tmp_path):
+    write_usd(tmp_path / "assets")
+    (tmp_path / "scene.yaml").write_text(
+        "import: assets/scene.usda\ncamera: {position: [0, 2, 9], target: [0, 0, 0]}\n"
+        "environment: {type: constant, radiance: [0.1, 0.1, 0.1]}\n"
+    )
+    scene, folder = load_scene(tmp_path / "scene.yaml")
+    assert scene.camera.position == (0.0, 2.0, 9.0) and scene.environment.type == "constant"
+    assert scene.objects[0].shape.path == "assets/scene.usda"
+    assert scene.materials["Floor"].base_color_texture.path == "assets/checker.png"
+    assert compile_scene(scene, folder).num_triangles > 0
