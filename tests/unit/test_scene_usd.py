@@ -216,3 +216,17 @@ def test_a_scene_file_imports_a_usd_file_and_overrides_its_camera(tmp_path):
     assert scene.objects[0].shape.path == "assets/scene.usda"
     assert scene.materials["Floor"].base_color_texture.path == "assets/checker.png"
     assert compile_scene(scene, folder).num_triangles > 0
+
+
+@pytest.mark.parametrize("kind_name", ["lod", "lsnif"])
+def test_model_kinds_plan_on_imported_scenes(tmp_path, kind_name):
+    """What `nbake submit model.glb --kind lod` plans on: the imported objects, the same from either file."""
+    from workers.models.registry import get_kind
+    from workers.scene.reference import SceneRef
+
+    kind = get_kind(kind_name)
+    summaries = []
+    for path in (write_gltf(tmp_path / "gltf"), write_usd(tmp_path / "usd")):
+        scene, folder = load_scene(path)
+        summaries.append(kind.plan(SceneRef(scene, folder), kind.resolve_config("quick", {})).summary)
+    assert summaries[0] == summaries[1], summaries

@@ -111,7 +111,7 @@ def _per_corner(values, interpolation: str, indices: np.ndarray, face_of_corner:
 
 
 def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
-    """The triangles of the UsdGeom.Mesh at `prim_path` in its own space, one vertex per face corner."""
+    """The triangles of the UsdGeom.Mesh at `prim_path` in its own space."""
     _, _, usd_geom, _, _ = _pxr()
     try:
         stage = read_stage(path)
@@ -156,7 +156,17 @@ def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
         uvs = _per_corner(st.ComputeFlattened(), st.GetInterpolation(), indices, face_of_corner, len(points))
         if uvs is not None:
             uvs = np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1)  # USD's st origin is the bottom-left
-    return MeshData(points[indices], triangles, normals, uvs)
+    # One vertex per distinct (point, normal, st) among the corners: shared where the data is per vertex,
+    # split along seams of face-varying data.
+    corner_data = [a for a in (normals, uvs) if a is not None]
+    key = np.concatenate([indices[:, None].astype(np.float64), *corner_data], axis=1)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return MeshData(
+        points[indices[first]],
+        inverse.reshape(-1)[triangles],
+        None if normals is None else normals[first],
+        None if uvs is None else uvs[first],
+    )
 
 
 # --------------------------------------------------------------------------- the scene
