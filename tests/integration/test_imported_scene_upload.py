@@ -173,3 +173,14 @@ def test_usdz_and_usda_uploads(client, tmp_path):
     text = '#usda 1.0\ndef "World" {\n    def "Ref" (prepend references = @../elsewhere.usda@) {}\n}\n'
     body = problem_of(upload(client, [("scene.usda", text.encode())]), 422)
     assert body["field"] == "scene.usda: /World/Ref" and "elsewhere.usda" in body["detail"]
+
+
+@pytest.mark.slow
+def test_lod_trains_on_an_uploaded_glb(client, tmp_path):
+    """`nbake submit model.glb --kind lod`: the file alone is the scene the model trains on."""
+    path = textured_scene(external_image=False).save(tmp_path / "model.glb")
+    asset = upload(client, [("model.glb", path.read_bytes())]).json()
+    job = submit(client, kind="lod", scene=asset["asset_id"], preset="quick", config={"samplers": 1})
+    assert any(item["name"] == "scene import" for item in job["plan"]["items"])
+    final = events(client, job["id"], timeout=900)[-1]["data"]
+    assert final["state"] == "SUCCEEDED", final

@@ -87,7 +87,7 @@ class MetallicRoughness(BSDF):
             base=material.base_color,
             alpha=float(gltf_alpha(material.roughness)),
             ior=material.ior,
-            roughness=material.roughness,
+            roughness=float(gltf_alpha(material.roughness)),  # the AOV reports GGX alpha, as for the others
             extra=(material.metallic, material.transmission, material.roughness),
         )
 
