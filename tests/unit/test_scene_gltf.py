@@ -376,3 +376,11 @@ def test_real_files_from_assimp_testmodels_import_or_fail_naming_the_problem():
         with pytest.raises(SceneError, match=problem) as caught:
             load_scene(ASSIMP_GLTF2 / name)
         assert caught.value.field == field, caught.value
+
+
+def test_values_our_format_cannot_hold_are_scene_errors(tmp_path):
+    builder = GltfBuilder()
+    builder.node(mesh=quad(builder, builder.material(pbrMetallicRoughness={"baseColorFactor": [2, 0, 0, 1]})))
+    with pytest.raises(SceneError, match="base_color") as caught:
+        load_scene(builder.save(tmp_path / "bright.glb"))
+    assert caught.value.field == "bright.glb"

@@ -261,8 +261,9 @@ def _walk(document: pygltflib.GLTF2) -> list[tuple[int, np.ndarray]]:
     """(node index, node-to-world matrix) of the default scene's nodes, parents first."""
     if document.scenes:
         roots = document.scenes[document.scene or 0].nodes or []
-    else:
-        roots = list(range(len(document.nodes)))
+    else:  # no scene: every node that is nobody's child
+        children = {c for node in document.nodes for c in node.children or []}
+        roots = [i for i in range(len(document.nodes)) if i not in children]
     out, stack, seen = [], [(r, np.eye(4)) for r in reversed(roots)], set()
     while stack:
         index, parent = stack.pop()
@@ -342,7 +343,7 @@ class _Importer:
             metallic_roughness_texture=self.texture(
                 pbr.metallicRoughnessTexture, "linear", f"{where}.metallicRoughnessTexture"
             ),
-            ior=max(float(_extension(m, "KHR_materials_ior").get("ior", 1.5)), 1.001),
+            ior=min(max(float(_extension(m, "KHR_materials_ior").get("ior", 1.5)), 1.001), 4.0),
             transmission=float(transmission.get("transmissionFactor", 0.0)),
             transmission_texture=self.texture(
                 _texture_info(transmission.get("transmissionTexture")),

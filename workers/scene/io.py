@@ -55,10 +55,16 @@ def load_scene(source: str | Path | dict | SceneSpec) -> tuple[SceneSpec, Path |
 
 
 def import_scene_file(path: Path, prefix: str = "") -> SceneSpec:
-    """A glTF or USD file's scene (`workers.scene.gltf`, `workers.scene.usd`)."""
-    if path.suffix.lower() in GLTF_SUFFIXES:
-        return import_gltf(path, prefix)
-    return import_usd(path, prefix)
+    """A glTF or USD file's scene (`workers.scene.gltf`, `workers.scene.usd`); values our scene format
+    cannot hold (a base colour above 1, say) are a SceneError naming the file and the field."""
+    try:
+        if path.suffix.lower() in GLTF_SUFFIXES:
+            return import_gltf(path, prefix)
+        return import_usd(path, prefix)
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise SceneError(Path(path).name, f"{where}: {first['msg']}") from None
 
 
 def with_import(data: dict[str, Any], folder: Path) -> dict[str, Any]:
