@@ -177,10 +177,15 @@ def test_usdz_and_usda_uploads(client, tmp_path):
 
 @pytest.mark.slow
 def test_lod_trains_on_an_uploaded_glb(client, tmp_path):
-    """`nbake submit model.glb --kind lod`: the file alone is the scene the model trains on."""
-    path = textured_scene(external_image=False).save(tmp_path / "model.glb")
-    asset = upload(client, [("model.glb", path.read_bytes())]).json()
+    """`nbake submit model.gltf --kind lod`: the file and its buffer and texture are the scene the model
+    trains on (two textured spheres, a textured floor, an emissive panel, a point light and a camera)."""
+    from tests.unit.test_scene_usd import write_gltf
+
+    path = write_gltf(tmp_path / "gltf")
+    files = [(p.name, p.read_bytes()) for p in path.parent.iterdir()]
+    asset = upload(client, files).json()
     job = submit(client, kind="lod", scene=asset["asset_id"], preset="quick", config={"samplers": 1})
-    assert any(item["name"] == "scene import" for item in job["plan"]["items"])
+    plan = {item["name"]: item["choice"] for item in job["plan"]["items"]}
+    assert plan["gold"] == plan["blend"] == "prefilter"  # the imported spheres are what lod models
     final = events(client, job["id"], timeout=900)[-1]["data"]
     assert final["state"] == "SUCCEEDED", final
