@@ -16,7 +16,7 @@ from services.artifacts.manifest import store_file
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, Staging, UploadError, UploadLimits
 from services.artifacts.store import BlobStore, read_chunks
 from services.artifacts.validation import validate_scene
-from workers.scene.io import SCENE_FILE_SUFFIXES
+from workers.scene.io import IMPORTED_SCENE_SUFFIXES, SCENE_FILE_SUFFIXES
 
 __all__ = [
     "Asset",
@@ -66,13 +66,20 @@ def ingest_upload(
 
 
 def find_scene_file(names: list[str]) -> str:
-    """`scene.yaml|yml|json` at the root, else the only YAML/JSON file; UploadError if ambiguous or absent."""
+    """`scene.yaml|yml|json` at the root, else the only YAML/JSON file, else the only glTF file; UploadError
+    if ambiguous or absent."""
     at_root = sorted(n for n in names if n.lower() in _ROOT_SCENE_NAMES)
     candidates = at_root or sorted(n for n in names if PurePosixPath(n).suffix.lower() in SCENE_FILE_SUFFIXES)
+    candidates = candidates or sorted(
+        n for n in names if PurePosixPath(n).suffix.lower() in IMPORTED_SCENE_SUFFIXES
+    )
     if len(candidates) == 1:
         return candidates[0]
     if not candidates:
-        raise UploadError("files", "no scene file: add scene.yaml (or .yml, .json) at the root of the upload")
+        raise UploadError(
+            "files",
+            "no scene file: add scene.yaml (or .yml, .json) at the root of the upload, or a .gltf/.glb",
+        )
     raise UploadError(
         "files", f"several possible scene files ({', '.join(candidates)}): keep one, or name it scene.yaml"
     )

@@ -82,6 +82,8 @@ def render_command(
     stderr = Console(stderr=True)
     with user_errors():
         spec, base_dir = load_scene(scene)
+        for note in spec.notes:  # what an importer defaulted or ignored
+            stderr.print(f"note: {note}", markup=False, highlight=False)
         width, height = _resolution(spec.camera, width, height)
         settings = _settings(
             spp=spp, width=width, height=height, max_depth=max_depth, seed=seed, threads=threads, aovs=aov

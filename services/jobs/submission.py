@@ -17,6 +17,7 @@ from services.jobs.scenes import SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
 from workers.models.registry import UnknownKind, get_kind
+from workers.runtime.contract import PlanItem
 from workers.scene.errors import SceneError
 from workers.scene.io import dotted_path
 from workers.scene.reference import SceneRef
@@ -69,6 +70,12 @@ class Submitter:
             raise InvalidInput(error.problem, scene_field(error)) from None
         except ValueError as error:
             raise InvalidInput(str(error), "config") from None
+        plan.items.extend(
+            PlanItem(
+                name="scene import", choice=note, reason="what the scene's importer defaulted or ignored"
+            )
+            for note in scene.spec.notes
+        )
         resolved = config.model_dump(mode="json")
         code = code_version()
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)

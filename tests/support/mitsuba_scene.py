@@ -34,12 +34,15 @@ def _reflectance(value: spec.ColorOrTexture, base_dir: Path | None = None) -> di
                 "to_uv": _scalar_transform(np.diag([value.scale / 2, value.scale / 2, 1.0, 1.0])),
             }
         case spec.ImageTexture():
+            if value.image is not None or value.wrap_u != value.wrap_v:
+                raise TypeError("no Mitsuba export for images inside glTF files or with two wrap modes")
             path = Path(value.path)
             return {
                 "type": "bitmap",
                 "filename": str(path if path.is_absolute() or base_dir is None else base_dir / path),
                 "filter_type": "bilinear",
-                "wrap_mode": "repeat",
+                "wrap_mode": value.wrap_u,
+                "raw": value.color_space == "linear",
             }
         case _:
             return _rgb(value)
@@ -91,9 +94,40 @@ def mitsuba_bsdf(material: spec.Material, base_dir: Path | None = None) -> dict:
                 "int_ior": float(material.ior),
                 "ext_ior": 1.0,
             }
+        case spec.PbrMaterial():
+            return mitsuba_principled(material, base_dir)
         case _:
             raise TypeError(f"no Mitsuba export for {type(material).__name__}")
     return {"type": "twosided", "bsdf": inner}
+
+
+def mitsuba_principled(material: spec.PbrMaterial, base_dir: Path | None = None) -> dict:
+    """`principled` with the parameters our `pbr` family has (workers/render/bsdfs/pbr.py); opaque ones
+    (no transmission lobe) wrapped in `twosided`, as ours are. A base colour texture must have factor 1."""
+    unsupported = [
+        name
+        for name in (
+            "metallic_roughness_texture",
+            "transmission_texture",
+            "normal_texture",
+            "emission_texture",
+        )
+        if getattr(material, name) is not None
+    ]
+    if unsupported or (material.base_color_texture is not None and material.base_color != (1.0, 1.0, 1.0)):
+        raise TypeError(f"no Mitsuba export for a pbr material with {unsupported or 'a scaled texture'}")
+    base = material.base_color_texture if material.base_color_texture is not None else material.base_color
+    principled = {
+        "type": "principled",
+        "base_color": _reflectance(base, base_dir),
+        "metallic": float(material.metallic),
+        "roughness": float(material.roughness),
+        "eta": float(material.ior),
+        "spec_trans": float(material.transmission),
+    }
+    if material.transmission == 0 or material.metallic == 1:
+        return {"type": "twosided", "bsdf": principled}
+    return principled
 
 
 def mitsuba_scene_dict(
@@ -151,6 +185,8 @@ def mitsuba_scene_dict(
                 "position": list(light.position),
                 "intensity": _rgb(light.intensity),
             }
+        elif isinstance(light, spec.SpotLight):
+            raise TypeError("no Mitsuba export for spot lights (Mitsuba's falloff is not glTF's)")
         else:
             out[f"light_{i}"] = {
                 "type": "directional",

@@ -64,3 +64,32 @@ def test_checker_and_constant_colours():
     assert np.isin(got[4], [0.0, 1.0]).all()
     constant = evaluate_texture((0.2, 0.3, 0.4), None, uv)
     assert constant.shape == (5, 3) and np.allclose(constant, [0.2, 0.3, 0.4])
+
+
+def test_clamp_and_mirror_wrap_as_gltf_samplers_do():
+    image = np.arange(4 * 3, dtype=np.float32).reshape(1, 4, 3)
+    centre = lambda column: (column + 0.5) / 4  # noqa: E731
+    v = 0.5
+    clamp = spec.ImageTexture(path="unused.png", wrap_u="clamp")
+    uv = np.array([[-3.0, v], [0.0, v], [1.0, v], [7.5, v], [centre(1), v]])
+    np.testing.assert_allclose(evaluate_texture(clamp, image, uv), image[0, [0, 0, 3, 3, 1]])
+    mirror = spec.ImageTexture(path="unused.png", wrap_u="mirror")
+    # mirrored repeat: [1, 2) reads the image backwards, [2, 3) forwards again; -u reads as u
+    np.testing.assert_allclose(evaluate_texture(mirror, image, np.array([[1 + centre(0), v]])), [image[0, 3]])
+    np.testing.assert_allclose(evaluate_texture(mirror, image, np.array([[2 + centre(1), v]])), [image[0, 1]])
+    np.testing.assert_allclose(evaluate_texture(mirror, image, np.array([[-centre(2), v]])), [image[0, 2]])
+    # at the mirror's seam the edge texel is its own neighbour: no blend with the far edge (repeat blends)
+    np.testing.assert_allclose(evaluate_texture(mirror, image, np.array([[1.0, v]])), [image[0, 3]])
+    repeat = spec.ImageTexture(path="unused.png")
+    np.testing.assert_allclose(
+        evaluate_texture(repeat, image, np.array([[1.0, v]])), [(image[0, 0] + image[0, 3]) / 2]
+    )
+
+
+@pytest.mark.parametrize("color_space", ["srgb", "linear"])
+def test_declared_colour_space_decides_the_decoding(tmp_path, color_space):
+    pixels = np.array([[[0, 128, 255]]], dtype=np.uint8)
+    Image.fromarray(pixels).save(tmp_path / "t.png")
+    image = load_image_texture(spec.ImageTexture(path="t.png", color_space=color_space), "m", tmp_path)
+    expected = pixels / 255.0 if color_space == "linear" else srgb_to_linear(pixels / 255.0)
+    np.testing.assert_allclose(image, expected, rtol=1e-6)

@@ -33,9 +33,17 @@ class SurfaceBatch:
     base: np.ndarray  # (N, 3): diffuse reflectance, or conductor specular colour
     alpha: np.ndarray  # (N,) GGX alpha; 0 means perfectly smooth
     ior: np.ndarray  # (N,) interior over exterior
+    extra: np.ndarray | None = None  # (N, K) family-specific parameters (`MaterialParameters.extra`)
 
     def take(self, idx: np.ndarray) -> SurfaceBatch:
-        return SurfaceBatch(self.family[idx], self.base[idx], self.alpha[idx], self.ior[idx])
+        extra = None if self.extra is None else self.extra[idx]
+        return SurfaceBatch(self.family[idx], self.base[idx], self.alpha[idx], self.ior[idx], extra)
+
+    def assign(self, idx: np.ndarray, rows: SurfaceBatch) -> None:
+        """Write `rows` (a batch of len(idx) rows, e.g. after textures changed them) back at `idx`."""
+        self.base[idx], self.alpha[idx], self.ior[idx] = rows.base, rows.alpha, rows.ior
+        if self.extra is not None and rows.extra is not None:
+            self.extra[idx, : rows.extra.shape[1]] = rows.extra
 
     @property
     def is_delta(self) -> np.ndarray:
@@ -56,6 +64,7 @@ class MaterialParameters:
     alpha: float = 0.0
     ior: float = 1.5
     roughness: float = 0.0  # reported in the `roughness` AOV (1 for a Lambertian surface)
+    extra: tuple[float, ...] = ()  # the family's own per-row parameters (`SurfaceBatch.extra`)
 
 
 class BSDF(ABC):
@@ -75,6 +84,15 @@ class BSDF(ABC):
     @abstractmethod
     def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
         """wi, weight f |cos| / pdf, pdf and whether the sampled lobe is a delta, per row."""
+
+    def textures(self, material: Any) -> dict[str, Any]:
+        """The material's textured parameters by slot name (`workers.scene.spec` textures); none by default.
+        The slots `normal` and `emission` are the renderer's (`workers.render.materials`)."""
+        return {}
+
+    def apply_textures(self, material: Any, s: SurfaceBatch, lookups: dict[str, np.ndarray]) -> None:  # noqa: B027
+        """Overwrite the rows `s` of `material` with its textures' values `lookups` (slot -> (N, 3) RGB);
+        a family without textures never receives any."""
 
 
 class _Registry:

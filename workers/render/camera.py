@@ -22,6 +22,9 @@ class PinholeCamera:
         self.forward = forward
         self.right = right * tan_half * self.width / self.height
         self.up = up * tan_half
+        # A pixel's angle at the image centre: the cone each camera ray stands for, for texture LOD
+        # (Akenine-Moeller et al. 2019, eq. 30).
+        self.spread = math.atan(2.0 * tan_half / self.height)
 
     def rays(self, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rays through continuous pixel coordinates (px right, py down, in pixels)."""

@@ -73,7 +73,8 @@ class SurfaceRecords:
 class _Paths:
     """The live paths of a wavefront: pixel index, current ray, throughput and the last scattering's pdf.
 
-    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0)."""
+    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0);
+    `spread` is a camera ray's cone angle (radians; 0 once scattered), for mipmapped texture lookups."""
 
     idx: np.ndarray
     o: np.ndarray
@@ -82,6 +83,7 @@ class _Paths:
     prev_pdf: np.ndarray
     prev_delta: np.ndarray
     t_min: np.ndarray
+    spread: np.ndarray
 
     def take(self, rows: np.ndarray) -> _Paths:
         return _Paths(*(getattr(self, f.name)[rows] for f in fields(self)))
@@ -149,8 +151,10 @@ class PathTracer:
         self.aggregate_next_event = aggregate_next_event
         self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)
         self.primary = primary if primary is not None else self.rays
-        self.lights = LightSampler(scene)
         self.materials = MaterialTable(scene)
+        self.lights = LightSampler(
+            scene, self.materials.emission_scale if self.materials.emission_textured else None
+        )
         self._positions = scene.positions.astype(np.float64)
         self._ng = scene.geometric_normals.astype(np.float64)
         self._ns = scene.shading_normals.astype(np.float64)
@@ -161,7 +165,13 @@ class PathTracer:
         deviation = np.abs(self._ns - self._ng[:, None, :]).max(axis=(1, 2))
         self._smooth = deviation > 1e-6
         self._any_smooth = bool(self._smooth.any())
-        self._needs_uv = bool(self.materials.textures)
+        self._needs_uv = self.materials.needs_uv
+        with np.errstate(divide="ignore"):
+            uv_edges = self._uv[:, 1:] - self._uv[:, :1]
+            uv_area = 0.5 * np.abs(
+                uv_edges[:, 0, 0] * uv_edges[:, 1, 1] - uv_edges[:, 0, 1] * uv_edges[:, 1, 0]
+            )
+            self._log2_uv_per_length = 0.5 * np.log2(uv_area / np.maximum(scene.areas, 1e-300))
         self._has_emitters = bool((scene.emission > 0).any())
 
     # ------------------------------------------------------------------ geometry helpers
@@ -247,8 +257,26 @@ class PathTracer:
         rec.instance_id[sel] = self.scene.instance_ids[prim]
         rec.albedo[sel] = self._surfaces(sub, mat, it.uv).base
         rec.roughness[sel] = self.materials.roughness(mat)
-        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng)
+        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng, it.uv)
         return rec
+
+    def _footprint(
+        self, hits: Hits, it: _Interaction, d: np.ndarray, spread: np.ndarray
+    ) -> np.ndarray | None:
+        """log2 of the width in UV units of ray cones of angle `spread` at the hits (-inf where 0), as ray
+        cones estimate texture LOD (Akenine-Moeller et al. 2019, eq. 34): cone width t * spread over
+        |cos|, times the triangle's UV length per world length; None when no path has a cone."""
+        if not self._needs_uv or not spread.any():
+            return None
+        width = spread * hits.t / np.maximum(np.abs(dot(d, it.ng)), 1e-6)
+        with np.errstate(divide="ignore"):
+            return self._log2_uv_per_length[hits.prim] + np.log2(width)
+
+    def _tangents(self, hits: Hits) -> np.ndarray:
+        """(N, 4) tangents (xyz, bitangent sign) interpolated at the hits, for normal maps."""
+        b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
+        corners = self.scene.tangents[hits.prim].astype(np.float64)
+        return (1.0 - b1 - b2) * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
 
     def _material_ids(self, hits: Hits) -> np.ndarray:
         mat = self.scene.material_ids[hits.prim]
@@ -256,15 +284,18 @@ class PathTracer:
             mat = np.where(hits.surface.where, hits.surface.material, mat)
         return mat
 
-    def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray):
-        surf = self.materials.surfaces(mat, uv)
+    def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
+        surf = self.materials.surfaces(mat, uv, footprint)
         if hits.surface is not None and hits.surface.where.any():
             surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf
 
-    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray) -> np.ndarray:
+    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray, uv: np.ndarray) -> np.ndarray:
         front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
-        return self._emission[prim] * front[:, None]
+        emitted = self._emission[prim] * front[:, None]
+        if self.materials.emission_textured:
+            emitted = emitted * self.materials.emission_scale(self.scene.material_ids[prim], uv)
+        return emitted
 
     # ------------------------------------------------------------------ path tracing
 
@@ -276,9 +307,11 @@ class PathTracer:
         max_depth: int = 8,
         rr_depth: int = 5,
         observer: PathObserver | None = None,
+        spread: float | np.ndarray = 0.0,
     ) -> TraceResult:
         """Radiance arriving at each origin from its direction (unit directions); `observer` sees the
-        paths' events (`workers.render.observer`) and changes nothing traced."""
+        paths' events (`workers.render.observer`) and changes nothing traced. `spread` is the rays' cone
+        angle (a camera's pixel angle), which selects textures' mip levels at the first hits."""
         n = len(origins)
         radiance = np.zeros((n, 3))
         bounces = np.zeros(n, np.int64)
@@ -291,6 +324,7 @@ class PathTracer:
             prev_pdf=np.zeros(n),
             prev_delta=np.ones(n, bool),  # the camera ray: emitters it sees count fully
             t_min=np.zeros(n),
+            spread=np.broadcast_to(np.asarray(spread, dtype=np.float64), (n,)).copy(),
         )
         env = self.lights.environment
         for segment in range(1, max_depth + 1):
@@ -366,7 +400,7 @@ class PathTracer:
         wo = -d
 
         if self._has_emitters:
-            emitted = self._emitted(prim, wo, it.ng)
+            emitted = self._emitted(prim, wo, it.ng, it.uv)
             lit = np.flatnonzero(max3(emitted) > 0)
             if len(lit):
                 pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
@@ -376,7 +410,7 @@ class PathTracer:
         if segment == max_depth:
             return paths.take(np.zeros(0, np.int64)), 0
 
-        sh = self._shade(it, hits, wo)
+        sh = self._shade(it, hits, wo, self._footprint(hits, it, d, paths.spread))
         u = rng.random((len(idx), 6))
 
         shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
@@ -384,7 +418,9 @@ class PathTracer:
         wi_local, weight, pdf, delta = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
         wi = sh.to_world(wi_local)
         o = self.offset(sh.position, sh.ng, wi, sh.scale)
-        return _Paths(idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx))), shadow_rays
+        return _Paths(
+            idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx)), np.zeros(len(idx))
+        ), shadow_rays
 
     def _scatter_in_aggregate(
         self,
@@ -428,7 +464,8 @@ class PathTracer:
         t_min = self.aggregate.exit_distance(events.voxel, position, wi)
         pdf = np.full(n, UNIFORM_SPHERE_PDF)
         beta = paths.beta * phi / UNIFORM_SPHERE_PDF
-        return _Scattered(_Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min), shadow_rays)
+        paths = _Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min, np.zeros(n))
+        return _Scattered(paths, shadow_rays)
 
     def _next_event_in_aggregate(
         self,
@@ -471,9 +508,12 @@ class PathTracer:
         it = self._interaction(hits, origins, directions, self._needs_uv)
         return self._shade(it, hits, -directions)
 
-    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray) -> Shading:
-        surf = self._surfaces(hits, self._material_ids(hits), it.uv)
+    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray, footprint=None) -> Shading:
+        material_ids = self._material_ids(hits)
+        surf = self._surfaces(hits, material_ids, it.uv, footprint)
         ns = it.ns
+        if self.materials.normal_mapped:
+            ns = self.materials.perturb_normals(material_ids, it.uv, ns, self._tangents(hits))
         flip = (dot(wo, ns) < 0) & surf.two_sided
         ns = np.where(flip[:, None], -ns, ns)
         fs, ft = coordinate_frame(ns)

@@ -1,12 +1,14 @@
 """Next-event estimation: one discrete distribution over every light, proportional to its power.
 
-Entries are emissive triangles (power pi A L, twice for two-sided), point lights (4 pi I),
+Entries are emissive triangles (power pi A L, twice for two-sided), point lights (4 pi I; spot lights
+2 pi (1 - cos outer) I, the point lights' cone, with glTF's falloff `spot_falloff`),
 directional lights (E pi R^2) and the environment (4 pi^2 R^2 L_mean), with R the scene's
 bounding-sphere radius: power-proportional selection keeps shadow rays where the light is.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +27,14 @@ from workers.scene.compile import CompiledScene
 TRIANGLE, POINT, DIRECTIONAL, ENVIRONMENT = 0, 1, 2, 3
 
 
+def spot_falloff(cos_axis: np.ndarray, cones: np.ndarray) -> np.ndarray:
+    """glTF's (KHR_lights_punctual) spot attenuation: clamp((cos - cos_outer) / (cos_inner - cos_outer))^2;
+    1 for point lights, whose cone covers every direction."""
+    cos_inner, cos_outer = cones[:, 0], cones[:, 1]
+    t = np.clip((cos_axis - cos_outer) / np.maximum(cos_inner - cos_outer, 1e-3), 0.0, 1.0)
+    return np.where(cos_outer < -1.0, 1.0, t * t)
+
+
 @dataclass
 class LightSample:
     direction: np.ndarray  # (N, 3) unit, from the shading point to the light
@@ -35,8 +45,11 @@ class LightSample:
 
 
 class LightSampler:
-    def __init__(self, scene: CompiledScene):
+    def __init__(self, scene: CompiledScene, emission_scale: Callable | None = None):
+        """`emission_scale(material_ids, uv)` is what emission textures multiply a triangle's radiance by
+        (`MaterialTable.emission_scale`); selection stays proportional to the untextured power."""
         self.scene = scene
+        self.emission_scale = emission_scale
         corners = scene.positions.astype(np.float64)
         self._origin, self._edge1, self._edge2 = (
             corners[:, 0],
@@ -60,9 +73,20 @@ class LightSampler:
         tri_power = (
             np.pi * scene.areas[emissive] * luminance(scene.emission[emissive].astype(np.float64)) * sides
         )
-        self.points = [l for l in scene.spec.lights if isinstance(l, spec.PointLight)]
+        self.points = [l for l in scene.spec.lights if isinstance(l, spec.PointLight | spec.SpotLight)]
         self.directionals = [l for l in scene.spec.lights if isinstance(l, spec.DirectionalLight)]
-        point_power = [4 * np.pi * luminance(np.asarray(l.intensity)) for l in self.points]
+        spots = [l if isinstance(l, spec.SpotLight) else None for l in self.points]
+        self.point_axis = np.array(
+            [(0.0, 0.0, 0.0) if l is None else l.direction for l in spots], dtype=np.float64
+        ).reshape(-1, 3)
+        self.point_axis /= np.maximum(np.linalg.norm(self.point_axis, axis=1, keepdims=True), 1e-300)
+        self.point_cones = np.array(
+            [(-2.0, -1.0) if l is None else np.cos(np.radians([l.inner_cone, l.outer_cone])) for l in spots]
+        ).reshape(-1, 2)  # (cos inner, cos outer); a point light's cone covers every direction
+        point_power = [
+            2 * np.pi * (1 - cos_outer) * luminance(np.asarray(l.intensity))
+            for l, (_, cos_outer) in zip(self.points, self.point_cones, strict=True)
+        ]
         dir_power = [luminance(np.asarray(l.irradiance)) * np.pi * self.radius**2 for l in self.directionals]
         env_power = []
         if self.environment is not None:
@@ -130,6 +154,10 @@ class LightSampler:
             ok = facing & (cos_abs > 1e-12) & (dist > 0)
             direction[sel], distance[sel] = d, dist
             radiance[sel] = self._emission[tri] * ok[:, None]
+            if self.emission_scale is not None:
+                uvs = self.scene.uvs[tri].astype(np.float64)
+                uv = uvs[:, 0] + b[:, :1] * (uvs[:, 1] - uvs[:, 0]) + b[:, 1:] * (uvs[:, 2] - uvs[:, 0])
+                radiance[sel] *= self.emission_scale(self.scene.material_ids[tri], uv)
             pdf[sel] = np.where(
                 ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0
             )
@@ -140,7 +168,13 @@ class LightSampler:
             dist = np.linalg.norm(d, axis=1)
             direction[sel] = d / np.maximum(dist, 1e-300)[:, None]
             distance[sel] = dist
-            radiance[sel] = self.point_intensity[which[sel]] / np.maximum(dist**2, 1e-300)[:, None]
+            falloff = spot_falloff(
+                -np.einsum("ij,ij->i", direction[sel], self.point_axis[which[sel]]),
+                self.point_cones[which[sel]],
+            )
+            radiance[sel] = (
+                self.point_intensity[which[sel]] * (falloff / np.maximum(dist**2, 1e-300))[:, None]
+            )
             pdf[sel], delta[sel] = select[sel], True
 
         sel = select_where(kind == DIRECTIONAL)

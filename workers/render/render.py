@@ -189,7 +189,9 @@ def _render_tile(
     ys = np.repeat(ys.ravel(), spp)
     jitter = rng.random((len(xs), 2))
     origins, directions = camera.rays(xs + jitter[:, 0], ys + jitter[:, 1])
-    result = tracer.trace(origins, directions, rng, settings.max_depth, settings.rr_depth)
+    result = tracer.trace(
+        origins, directions, rng, settings.max_depth, settings.rr_depth, spread=camera.spread
+    )
     radiance = result.radiance.reshape(h, w, spp, 3).sum(axis=2)
     aovs = {}
     rays = result.rays_traced

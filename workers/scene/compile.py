@@ -44,6 +44,7 @@ class CompiledScene:
     objects: list[ObjectGeometry]
     environment_image: np.ndarray | None = None  # (H, W, 3) float32 lat-long, already scaled
     environment_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))  # local -> world
+    tangents: np.ndarray | None = None  # (T, 3, 4) float32 per corner, when a material has a normal map
 
     @property
     def num_triangles(self) -> int:
@@ -71,8 +72,9 @@ def compile_scene(scene: spec.SceneSpec, base_dir: Path | str | None = None) -> 
     material_names = list(scene.materials)
     material_index = {n: i for i, n in enumerate(material_names)}
     chunks: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("pos", "nrm", "uv", "mat", "obj", "inst", "emit", "two")
+        k: [] for k in ("pos", "nrm", "uv", "mat", "obj", "inst", "emit", "two", "tan")
     }
+    normal_mapped = {n for n, m in scene.materials.items() if getattr(m, "normal_texture", None) is not None}
     objects: list[ObjectGeometry] = []
     start = 0
     instance_counter = 0
@@ -93,6 +95,8 @@ def compile_scene(scene: spec.SceneSpec, base_dir: Path | str | None = None) -> 
             chunks["inst"].append(np.full(n, instance_counter, np.int32))
             chunks["emit"].append(np.tile(np.asarray(obj.emission or (0, 0, 0), np.float32), (n, 1)))
             chunks["two"].append(np.full(n, obj.two_sided_emission, bool))
+            if normal_mapped:
+                chunks["tan"].append(_placed_tangents(mesh, m, faces, obj.material in normal_mapped))
             ranges.append((start, start + n))
             start += n
             instance_counter += 1
@@ -125,6 +129,7 @@ def compile_scene(scene: spec.SceneSpec, base_dir: Path | str | None = None) -> 
         two_sided_emission=np.concatenate(chunks["two"]),
         material_names=material_names,
         objects=objects,
+        tangents=np.concatenate(chunks["tan"]).astype(np.float32) if normal_mapped else None,
     )
     if isinstance(scene.environment, spec.EnvironmentMap):
         from workers.scene.envmaps import load_environment
@@ -152,3 +157,46 @@ def _place(mesh: MeshData, m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
         face_n /= np.maximum(np.linalg.norm(face_n, axis=-1, keepdims=True), 1e-300)
         nrm = np.repeat(face_n[:, None], 3, axis=1)
     return pos, nrm, faces
+
+
+def generated_tangents(mesh: MeshData) -> np.ndarray:
+    """(V, 4) unit tangents along dP/du, orthogonal to the vertex normal, and the sign that makes
+    cross(normal, tangent) * sign point up the image (-dP/dv, as v grows downwards): glTF's convention
+    for normal maps. Accumulated over each vertex's triangles; without usable UVs, any orthonormal frame."""
+    v, f = mesh.vertices, mesh.faces
+    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    if mesh.normals is not None:
+        normals = mesh.normals
+    else:
+        normals = np.zeros_like(v)
+        np.add.at(normals, f.ravel(), np.repeat(face_n, 3, axis=0))
+    normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    du_dp = np.zeros_like(v)
+    dv_dp = np.zeros_like(v)
+    if mesh.uvs is not None:
+        e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
+        t1, t2 = mesh.uvs[f[:, 1]] - mesh.uvs[f[:, 0]], mesh.uvs[f[:, 2]] - mesh.uvs[f[:, 0]]
+        det = t1[:, 0] * t2[:, 1] - t2[:, 0] * t1[:, 1]
+        r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1.0, det), 0.0)[:, None]
+        np.add.at(du_dp, f.ravel(), np.repeat((e1 * t2[:, 1:] - e2 * t1[:, 1:]) * r, 3, axis=0))
+        np.add.at(dv_dp, f.ravel(), np.repeat((e2 * t1[:, :1] - e1 * t2[:, :1]) * r, 3, axis=0))
+    tangent = du_dp - normals * np.einsum("ij,ij->i", du_dp, normals)[:, None]
+    length = np.linalg.norm(tangent, axis=1)
+    fallback = np.cross(normals, np.where(np.abs(normals[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]]))
+    tangent = np.where((length > 1e-12)[:, None], tangent / np.maximum(length, 1e-300)[:, None], fallback)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    sign = np.where(np.einsum("ij,ij->i", np.cross(normals, tangent), -dv_dp) < 0, -1.0, 1.0)
+    return np.concatenate([tangent, sign[:, None]], axis=1)
+
+
+def _placed_tangents(mesh: MeshData, m: np.ndarray, faces: np.ndarray, needed: bool) -> np.ndarray:
+    """World-space corner tangents (T, 3, 4): the mesh's own (glTF TANGENT) or generated; zeros where no
+    normal map reads them. A mirroring placement flips the bitangent's sign."""
+    if not needed:
+        return np.zeros((len(faces), 3, 4))
+    tangents = mesh.tangents if mesh.tangents is not None else generated_tangents(mesh)
+    linear = m[:3, :3]
+    xyz = tangents[:, :3] @ linear.T
+    xyz /= np.maximum(np.linalg.norm(xyz, axis=1, keepdims=True), 1e-300)
+    sign = tangents[:, 3:] * np.sign(np.linalg.det(linear))
+    return np.concatenate([xyz, sign], axis=1)[faces]

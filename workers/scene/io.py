@@ -1,4 +1,10 @@
-"""Load a SceneSpec from a built-in name, a YAML/JSON file or a dict; write one back.
+"""Load a SceneSpec from a built-in name, a YAML/JSON file, a glTF file or a dict; write one back.
+
+A glTF (`.gltf`, `.glb`) or USD (`.usda`, `.usdc`, `.usd`, `.usdz`) file is a scene by itself
+(`workers.scene.gltf`, `workers.scene.usd`). A YAML/JSON scene
+may `import:` one (a path relative to the scene file) and override parts of it: its `camera`,
+`environment` and `name` replace the file's, its `materials` replace the file's of the same name (or add
+new ones), its `lights` replace the file's, and its `objects` are added to the file's.
 
 Every failure is a SceneError naming the field (a dotted path such as
 `objects[2].shape.radius`) or, for unparsable files, the file itself.
@@ -16,9 +22,12 @@ from pydantic import ValidationError
 
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
+from workers.scene.gltf import GLTF_SUFFIXES, import_gltf
 from workers.scene.spec import SceneSpec
+from workers.scene.usd import USD_SUFFIXES, import_usd
 
 SCENE_FILE_SUFFIXES = (".yaml", ".yml", ".json")
+IMPORTED_SCENE_SUFFIXES = GLTF_SUFFIXES + USD_SUFFIXES
 _FIELD_PREFIX = re.compile(r"^(?P<field>[A-Za-z_][\w\[\]\.]*): (?P<problem>.+)$", re.DOTALL)
 
 
@@ -31,13 +40,57 @@ def load_scene(source: str | Path | dict | SceneSpec) -> tuple[SceneSpec, Path |
     if isinstance(source, str) and source in BUILTIN_SCENES:
         return get_builtin(source), None
     path = Path(source)
+    if path.suffix.lower() in IMPORTED_SCENE_SUFFIXES:
+        return import_scene_file(path), path.resolve().parent
     if path.suffix.lower() not in SCENE_FILE_SUFFIXES:
         if path.exists():
             raise SceneError(str(path), f"a scene file must end in {', '.join(SCENE_FILE_SUFFIXES)}")
         return get_builtin(str(source)), None  # raises, listing the built-in scenes
     if not path.is_file():
         raise SceneError(str(path), "scene file not found")
-    return scene_from_dict(_parse_file(path)), path.resolve().parent
+    data = _parse_file(path)
+    if "import" in data:
+        data = with_import(data, path.resolve().parent)
+    return scene_from_dict(data), path.resolve().parent
+
+
+def import_scene_file(path: Path, prefix: str = "") -> SceneSpec:
+    """A glTF or USD file's scene (`workers.scene.gltf`, `workers.scene.usd`); values our scene format
+    cannot hold (a base colour above 1, say) are a SceneError naming the file and the field."""
+    try:
+        if path.suffix.lower() in GLTF_SUFFIXES:
+            return import_gltf(path, prefix)
+        return import_usd(path, prefix)
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise SceneError(Path(path).name, f"{where}: {first['msg']}") from None
+
+
+def with_import(data: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """`data` (a scene with an `import:` key) merged over the scene of the file it imports (module
+    docstring); the imported scene's paths are made relative to `folder`, the scene file's."""
+    data = dict(data)
+    reference = data.pop("import")
+    if not isinstance(reference, str) or Path(reference).suffix.lower() not in IMPORTED_SCENE_SUFFIXES:
+        raise SceneError("import", f"give a glTF or USD file relative to the scene file, not {reference!r}")
+    if Path(reference).is_absolute() or ".." in Path(reference).parts:
+        raise SceneError("import", f"{reference!r} must stay inside the scene file's folder")
+    parent = Path(reference).parent.as_posix()
+    try:
+        imported = import_scene_file(folder / reference, prefix="" if parent == "." else parent)
+    except SceneError as error:
+        raise SceneError(f"import.{error.field}", error.problem) from None
+    merged = imported.model_dump(mode="json", exclude_none=True)
+    replaced = {key for key in ("name", "camera", "environment", "lights") if key in data}
+    merged.update({key: data[key] for key in replaced})
+    merged["materials"] = {**merged["materials"], **data.get("materials", {})}
+    merged["objects"] = merged["objects"] + list(data.get("objects", []))
+    overridden = {"camera"} & replaced | ({"environment"} if replaced & {"environment", "lights"} else set())
+    merged["notes"] = [n for n in merged["notes"] if n.split(":")[0] not in overridden]
+    unknown = set(data) - set(merged) - {"materials", "objects"}
+    merged.update({key: data[key] for key in unknown})  # validation names them
+    return merged
 
 
 def scene_from_dict(data: dict[str, Any]) -> SceneSpec:

@@ -25,12 +25,14 @@ from workers.scene.spec import (
     ConstantBackground,
     DirectionalLight,
     EnvironmentMap,
+    GltfShape,
     ImageTexture,
     Material,
     MeshShape,
     SceneObject,
     SceneSpec,
     SphereShape,
+    UsdShape,
 )
 
 SCENE_FILE = "scene.json"
@@ -68,11 +70,13 @@ def untextured(material: Material) -> Material:
         for name in ("reflectance", "diffuse")
         if isinstance(getattr(material, name, None), ImageTexture)
     }
+    if isinstance(getattr(material, "base_color_texture", None), ImageTexture):
+        updates["base_color_texture"] = None  # pbr: the factor stays
     return material.model_copy(update=updates)
 
 
 def reads_file(obj: SceneObject) -> bool:
-    return isinstance(obj.shape, MeshShape)
+    return isinstance(obj.shape, MeshShape | GltfShape | UsdShape)
 
 
 def file_references(spec: SceneSpec) -> list[str]:
@@ -80,9 +84,7 @@ def file_references(spec: SceneSpec) -> list[str]:
     fields = [f"objects[{i}].shape.path" for i, obj in enumerate(spec.objects) if reads_file(obj)]
     for name, material in spec.materials.items():
         fields += [
-            f"materials.{name}.{field}.path"
-            for field in ("reflectance", "diffuse")
-            if isinstance(getattr(material, field, None), ImageTexture)
+            f"materials.{name}.{field}.path" for field, value in material if isinstance(value, ImageTexture)
         ]
     if isinstance(spec.environment, EnvironmentMap) and spec.environment.path is not None:
         fields.append("environment.path")

@@ -21,6 +21,7 @@ class MeshData:
     faces: np.ndarray  # (F, 3) int64
     normals: np.ndarray | None = None  # (V, 3)
     uvs: np.ndarray | None = None  # (V, 2)
+    tangents: np.ndarray | None = None  # (V, 4): xyz and the bitangent's sign (glTF's TANGENT)
 
     @property
     def num_triangles(self) -> int:
@@ -90,6 +91,20 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
             from workers.scene.procedural import generate
 
             mesh = generate(shape.generator, shape.params, field)
+        case spec.GltfShape():
+            from workers.scene.gltf import primitive_mesh
+
+            path = Path(shape.path)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            mesh = primitive_mesh(path, shape.mesh, shape.primitive, field)
+        case spec.UsdShape():
+            from workers.scene.usd import prim_mesh
+
+            path = Path(shape.path)
+            if not path.is_absolute() and base_dir is not None:
+                path = base_dir / path
+            mesh = prim_mesh(path, shape.prim, field)
         case _:
             raise SceneError(field, f"unsupported shape {type(shape).__name__}")
     return check_mesh(mesh, field, repair=getattr(shape, "repair", False))
@@ -98,6 +113,12 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def degenerate_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Which triangles have (relatively) zero area: they would break the renderer's normals and sampling."""
+    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
+    return triangle_areas(vertices, faces) <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
 
 
 def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
@@ -114,9 +135,7 @@ def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
         )
     if f.min() < 0 or f.max() >= len(v):
         raise SceneError(field, f"face indices out of range [0, {len(v)})")
-    extent = float(np.ptp(v, axis=0).max()) if len(v) else 0.0
-    areas = triangle_areas(v, f)
-    degenerate = areas <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
+    degenerate = degenerate_triangles(v, f)
     normals, uvs = mesh.normals, mesh.uvs
     if degenerate.all():
         raise SceneError(field, "every triangle is degenerate (zero area)")
@@ -139,4 +158,7 @@ def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
         uvs = np.asarray(uvs, dtype=np.float64)
         if uvs.shape != (len(v), 2) or not np.isfinite(uvs).all():
             raise SceneError(field, "texture coordinates are malformed or not finite")
-    return MeshData(v, f, normals, uvs)
+    tangents = mesh.tangents
+    if tangents is not None and (tangents.shape != (len(v), 4) or not np.isfinite(tangents).all()):
+        tangents = None  # unusable tangents: generated from the UVs instead
+    return MeshData(v, f, normals, uvs, tangents)

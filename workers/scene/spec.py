@@ -104,11 +104,22 @@ def euler_xyz(degrees: Vec3) -> np.ndarray:
 # --------------------------------------------------------------------------- textures
 
 
+Wrap = Literal["repeat", "clamp", "mirror"]
+
+
 class ImageTexture(Model):
-    """An 8-bit (sRGB-decoded) or EXR (linear) image addressed by UV; wraps (repeat)."""
+    """An image addressed by UV (`workers.scene.textures`): by default 8-bit images are sRGB-decoded and
+    EXR is linear; `color_space` says otherwise (data such as roughness or normals is linear)."""
 
     type: Literal["image"] = "image"
     path: str
+    image: Annotated[int, Field(ge=0)] | None = Field(
+        default=None, description="the index of an image inside the glTF file `path` (embedded images)"
+    )
+    member: str | None = Field(default=None, description="a file inside the USDZ package `path`")
+    color_space: Literal["srgb", "linear"] | None = None
+    wrap_u: Wrap = "repeat"
+    wrap_v: Wrap = "repeat"
 
 
 class CheckerTexture(Model):
@@ -157,7 +168,30 @@ class Dielectric(Model):
     roughness: Roughness = 0.0
 
 
-Material = Annotated[Diffuse | Conductor | Plastic | Dielectric, Field(discriminator="type")]
+class PbrMaterial(Model):
+    """glTF 2.0's metallic-roughness material (`workers.render.bsdfs.pbr`), with glTF's defaults.
+
+    Textures multiply their factors, as in glTF: `base_color_texture` (sRGB), `metallic_roughness_texture`
+    (linear; roughness in G, metallic in B), `transmission_texture` (R), `normal_texture` (tangent space,
+    linear, +Y up as glTF's), and `emission_texture` (sRGB) scaling the emission of the objects using it.
+    `roughness` is glTF's perceptual roughness (GGX alpha = roughness^2).
+    """
+
+    type: Literal["pbr"] = "pbr"
+    base_color: Albedo = (1.0, 1.0, 1.0)
+    base_color_texture: Texture | None = None
+    metallic: Annotated[FiniteFloat, Field(ge=0, le=1)] = 1.0
+    roughness: Annotated[FiniteFloat, Field(ge=0, le=1)] = 1.0
+    metallic_roughness_texture: Texture | None = None
+    ior: Annotated[FiniteFloat, Field(gt=1.0, le=4.0)] = 1.5
+    transmission: Annotated[FiniteFloat, Field(ge=0, le=1)] = 0.0
+    transmission_texture: Texture | None = None
+    normal_texture: Texture | None = None
+    normal_scale: FiniteFloat = 1.0
+    emission_texture: Texture | None = None
+
+
+Material = Annotated[Diffuse | Conductor | Plastic | Dielectric | PbrMaterial, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------- shapes
@@ -198,8 +232,30 @@ class ProceduralShape(Model):
     params: dict[str, Any] = Field(default_factory=dict)
 
 
+class GltfShape(Model):
+    """One primitive of a mesh in a glTF 2.0 file (`.gltf` or `.glb`), in the mesh's own space: what
+    `workers.scene.gltf` imports each (mesh, primitive) as, placed once per node that uses the mesh."""
+
+    type: Literal["gltf"] = "gltf"
+    path: str
+    mesh: Annotated[int, Field(ge=0)] = 0
+    primitive: Annotated[int, Field(ge=0)] = 0
+    repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
+
+
+class UsdShape(Model):
+    """A UsdGeom.Mesh prim of a USD file (`.usda`, `.usdc`, `.usd`, `.usdz`), triangulated, in its own space:
+    what `workers.scene.usd` imports each mesh as, placed once per instance of it."""
+
+    type: Literal["usd"] = "usd"
+    path: str
+    prim: str = Field(pattern=r"^/", description="the mesh prim's path in the stage")
+    repair: bool = Field(default=False, description="drop degenerate triangles instead of rejecting the mesh")
+
+
 Shape = Annotated[
-    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape, Field(discriminator="type")
+    MeshShape | SphereShape | RectangleShape | BoxShape | ProceduralShape | GltfShape | UsdShape,
+    Field(discriminator="type"),
 ]
 
 
@@ -245,7 +301,27 @@ class DirectionalLight(Model):
         return d
 
 
-Light = Annotated[PointLight | DirectionalLight, Field(discriminator="type")]
+class SpotLight(Model):
+    """A point light limited to a cone, with glTF's (KHR_lights_punctual) smooth falloff: full intensity
+    within `inner_cone` of `direction`, squared-linear in the cosine down to zero at `outer_cone`."""
+
+    type: Literal["spot"] = "spot"
+    position: Vec3
+    direction: Vec3 = Field(description="the cone's axis, the direction light travels")
+    intensity: NonNegRGB = Field(description="radiant intensity on the axis, W/sr")
+    inner_cone: Annotated[FiniteFloat, Field(ge=0, lt=90)] = 0.0
+    outer_cone: Annotated[FiniteFloat, Field(gt=0, le=90)] = 45.0
+
+    @model_validator(mode="after")
+    def _cones(self):
+        if math.hypot(*self.direction) < 1e-12:
+            raise ValueError("direction must be non-zero")
+        if self.inner_cone >= self.outer_cone:
+            raise ValueError("inner_cone must be smaller than outer_cone")
+        return self
+
+
+Light = Annotated[PointLight | DirectionalLight | SpotLight, Field(discriminator="type")]
 
 
 class EnvironmentMap(Model):
@@ -318,6 +394,9 @@ class SceneSpec(Model):
     lights: list[Light] = Field(default_factory=list)
     environment: Environment | None = None
     camera: Camera = Camera()
+    notes: list[str] = Field(
+        default_factory=list, description="what an importer defaulted or ignored; job plans list them"
+    )
 
     @model_validator(mode="after")
     def _references(self):

@@ -1,0 +1,202 @@
+"""The metallic-roughness material of glTF 2.0 and UsdPreviewSurface, shaded as Mitsuba 3's `principled`
+BSDF (Burley 2012, 2015) restricted to base colour, metallic, roughness, IOR and specular transmission
+(no sheen, clearcoat, anisotropy, spec tint or flatness), which is how Mitsuba and Blender render glTF.
+
+With v the direction to the viewer (Mitsuba's si.wi), l the one to the light, h their half vector
+(generalised for refraction), alpha = max(0.001, roughness^2), F_d the exact dielectric Fresnel term of
+the IOR at v.h, and the lobe weights brdf = (1 - metallic)(1 - transmission) and
+bsdf = (1 - metallic) transmission:
+
+    reflection    [(1 - metallic) F_d + metallic Schlick(base, v.h)] D G / (4 |cos_v|)  (inside: bsdf F_d)
+    transmission  sqrt(base) bsdf (1 - F_d) D G |v.h l.h| / (|cos_v| (v.h + eta l.h)^2)  (radiance: the
+                  1/eta^2 of entering a denser medium cancels the eta^2 of the half-vector Jacobian)
+    diffuse       brdf base / pi (1 - Fv/2)(1 - Fl/2) + retro-reflection Rr (Fl + Fv + Fl Fv (Rr - 1)),
+                  Rr = 2 roughness (h.l)^2, F. = (1 - |cos .|)^5                                 (front only)
+
+Sampling picks a lobe with probabilities proportional to (1 - bsdf (1 - F_d(m)), bsdf (1 - F_d(m)), brdf)
+for (reflection, transmission, diffuse) at a visible normal m (Heitz 2018), (F_d, 1 - F_d, 0) from inside,
+so the pdf is exact and `eval`'s. Burley's diffuse (with its retro-reflection) is not energy-conserving: a
+white, rough, non-metallic surface returns up to ~1.4x the light at grazing angles, as Mitsuba's does.
+
+Rows with no transmission lobe (bsdf = 0) are two-sided (Mitsuba's `twosided` wrapper: the back side is
+mirrored onto the front); transmissive rows see the back side as the inside of the object.
+`SurfaceBatch.extra` holds (metallic, transmission, roughness) per row.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, register_material
+from workers.render.microfacet import (
+    fresnel_dielectric,
+    ggx_d,
+    reflect,
+    sample_visible_normal,
+    smith_g1,
+    visible_normal_pdf,
+)
+from workers.render.sampling import INV_PI, dot, normalize, safe_sqrt, square_to_cosine_hemisphere
+from workers.scene import spec
+
+ALPHA_FLOOR = 0.001  # Mitsuba's calc_dist_params: roughness 0 is a very sharp lobe, never a delta
+METALLIC, TRANSMISSION, ROUGHNESS = 0, 1, 2
+
+
+def gltf_alpha(roughness: np.ndarray | float) -> np.ndarray:
+    """GGX alpha of a glTF (perceptual) roughness."""
+    return np.maximum(ALPHA_FLOOR, np.square(roughness))
+
+
+def schlick_weight(cos: np.ndarray) -> np.ndarray:
+    return np.clip(1.0 - cos, 0.0, 1.0) ** 5
+
+
+def schlick(r0: np.ndarray, cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """Schlick's Fresnel from normal-incidence reflectance `r0` (N, 3); the transmitted cosine where the
+    light leaves the denser side (Mitsuba's calc_schlick)."""
+    eta_it = np.where(cos_i >= 0, eta, 1.0 / eta)
+    cos_t = safe_sqrt(1.0 - (1.0 - cos_i * cos_i) / (eta_it * eta_it))
+    w = np.where(eta_it > 1.0, schlick_weight(np.abs(cos_i)), schlick_weight(cos_t))[:, None]
+    return w + r0 * (1.0 - w)
+
+
+def _weights(s: SurfaceBatch):
+    metallic, transmission = s.extra[:, METALLIC], s.extra[:, TRANSMISSION]
+    return (1.0 - metallic) * (1.0 - transmission), (1.0 - metallic) * transmission
+
+
+def _mirror(s: SurfaceBatch, wo: np.ndarray) -> np.ndarray:
+    """-1 on opaque rows seen from the back (mirrored onto the front), else 1."""
+    _, bsdf = _weights(s)
+    return np.where((bsdf <= 0) & (wo[:, 2] < 0), -1.0, 1.0)
+
+
+def _flip_z(v: np.ndarray, sign: np.ndarray) -> np.ndarray:
+    out = v.copy()
+    out[:, 2] *= sign
+    return out
+
+
+@register_material("pbr")
+class MetallicRoughness(BSDF):
+    two_sided = False  # per row instead: see `_mirror`
+
+    def parameters(self, material: spec.PbrMaterial) -> MaterialParameters:
+        return MaterialParameters(
+            base=material.base_color,
+            alpha=float(gltf_alpha(material.roughness)),
+            ior=material.ior,
+            roughness=float(gltf_alpha(material.roughness)),  # the AOV reports GGX alpha, as for the others
+            extra=(material.metallic, material.transmission, material.roughness),
+        )
+
+    def textures(self, material: spec.PbrMaterial) -> dict:
+        slots = {
+            "base_color": material.base_color_texture,
+            "metallic_roughness": material.metallic_roughness_texture,
+            "transmission": material.transmission_texture,
+            "normal": material.normal_texture,
+            "emission": material.emission_texture,
+        }
+        return {slot: texture for slot, texture in slots.items() if texture is not None}
+
+    def apply_textures(self, material: spec.PbrMaterial, s: SurfaceBatch, lookups) -> None:
+        """glTF: texels multiply the factors; roughness in G and metallic in B of one linear texture."""
+        if "base_color" in lookups:
+            s.base = s.base * lookups["base_color"]
+        if "metallic_roughness" in lookups:
+            texel = lookups["metallic_roughness"]
+            s.extra[:, ROUGHNESS] = material.roughness * texel[:, 1]
+            s.extra[:, METALLIC] = material.metallic * texel[:, 2]
+            s.alpha = gltf_alpha(s.extra[:, ROUGHNESS])
+        if "transmission" in lookups:
+            s.extra[:, TRANSMISSION] = material.transmission * lookups["transmission"][:, 0]
+
+    def eval(self, s: SurfaceBatch, wo, wi):
+        side = _mirror(s, wo)
+        return self._eval(s, _flip_z(wo, side), _flip_z(wi, side))
+
+    def _eval(self, s: SurfaceBatch, v, l):
+        """f |cos_l| (N, 3) and pdf (N,) for v, l as Mitsuba's principled sees them (module docstring)."""
+        brdf, bsdf = _weights(s)
+        roughness = s.extra[:, ROUGHNESS]
+        metallic = s.extra[:, METALLIC]
+        transmissive = s.extra[:, TRANSMISSION] > 0
+        eta, a = s.ior, s.alpha
+        cos_v, cos_l = v[:, 2], l[:, 2]
+        active = cos_v != 0
+        reflection, refraction = cos_v * cos_l > 0, cos_v * cos_l < 0
+        front = cos_v > 0
+        eta_path = np.where(front, eta, 1.0 / eta)
+        h = normalize(v + l * np.where(reflection, 1.0, eta_path)[:, None])
+        h *= np.where(h[:, 2] < 0, -1.0, 1.0)[:, None]
+        v_h, l_h = dot(v, h), dot(l, h)
+        f_d, _, _ = fresnel_dielectric(v_h, eta)
+        outward = np.where(cos_v >= 0, 1.0, -1.0)
+        v_m, l_m = v_h * outward, l_h * outward
+        reflect_ok = reflection & (v_m > 0) & (l_m > 0)
+        refract_ok = refraction & (v_m > 0) & (l_m < 0)
+        d, g = ggx_d(h, a), smith_g1(v, h, a) * smith_g1(l, h, a)
+        abs_cos_v = np.maximum(np.abs(cos_v), 1e-300)
+
+        fresnel = (1.0 - metallic)[:, None] * f_d[:, None] + metallic[:, None] * schlick(s.base, v_h, eta)
+        fresnel = np.where(front[:, None], fresnel, (bsdf * f_d)[:, None])
+        specular = np.where(active & reflect_ok & (f_d > 0), d * g / (4.0 * abs_cos_v), 0.0)
+        value = fresnel * specular[:, None]
+
+        denom = np.maximum((v_h + eta_path * l_h) ** 2, 1e-300)
+        transmitted = bsdf * np.abs((1.0 - f_d) * d * g * v_h * l_h / (abs_cos_v * denom))
+        transmitted = np.where(active & transmissive & (bsdf > 0) & refract_ok & (f_d < 1), transmitted, 0.0)
+        value += np.sqrt(s.base) * transmitted[:, None]
+
+        fo, fi = schlick_weight(np.abs(cos_l)), schlick_weight(np.abs(cos_v))
+        retro = 2.0 * roughness * l_h**2
+        lobe = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + retro * (fo + fi + fo * fi * (retro - 1.0))
+        diffuse = np.where(
+            active & (brdf > 0) & reflection & front, brdf * np.abs(cos_l) * INV_PI * lobe, 0.0
+        )
+        value += s.base * diffuse[:, None]
+
+        p_reflect = np.where(front, 1.0 - bsdf * (1.0 - f_d), f_d)
+        p_transmit = np.where(transmissive, np.where(front, bsdf * (1.0 - f_d), 1.0 - f_d), 0.0)
+        p_diffuse = np.where(front, brdf, 0.0)
+        total = np.maximum(p_reflect + p_transmit + p_diffuse, 1e-300)
+        jacobian = np.abs(
+            np.where(reflection, 1.0 / np.where(l_h == 0, 1e-300, 4.0 * l_h), eta_path**2 * l_h / denom)
+        )
+        visible = visible_normal_pdf(v * outward[:, None], h, a) * jacobian
+        pdf = np.where(reflect_ok, p_reflect * visible, 0.0)
+        pdf += np.where(reflection & front, p_diffuse * cos_l * INV_PI, 0.0)
+        pdf += np.where(transmissive & refract_ok, p_transmit * visible, 0.0)
+        pdf = np.where(active, pdf / total, 0.0)
+        return np.where(active[:, None], value, 0.0), pdf
+
+    def sample(self, s: SurfaceBatch, wo, u, uc):
+        side = _mirror(s, wo)
+        v = _flip_z(wo, side)
+        brdf, bsdf = _weights(s)
+        transmissive = s.extra[:, TRANSMISSION] > 0
+        cos_v = v[:, 2]
+        front = cos_v > 0
+        outward = np.where(cos_v >= 0, 1.0, -1.0)
+        m = sample_visible_normal(v * outward[:, None], s.alpha, u)
+        v_m = dot(v, m)
+        f_d, cos_t, eta_ti = fresnel_dielectric(v_m, s.ior)
+        p_transmit = np.where(transmissive, np.where(front, bsdf * (1.0 - f_d), 1.0 - f_d), 0.0)
+        p_diffuse = np.where(front, brdf, 0.0)
+        total = np.where(front, 1.0 - bsdf * (1.0 - f_d), f_d) + p_transmit + p_diffuse
+        p_diffuse, p_transmit = p_diffuse / total, p_transmit / total
+        choose_diffuse = uc < p_diffuse
+        choose_transmit = ~choose_diffuse & (uc < p_diffuse + p_transmit)
+        refracted = (v_m * eta_ti + cos_t)[:, None] * m - eta_ti[:, None] * v
+        l = np.where(choose_transmit[:, None], normalize(refracted), reflect(v, m))
+        l = np.where(choose_diffuse[:, None], square_to_cosine_hemisphere(u), l)
+        sides_ok = np.where(choose_transmit, cos_v * l[:, 2] < 0, cos_v * l[:, 2] > 0)
+        m_out = m * outward[:, None]
+        microfacet_ok = (dot(v, m_out) > 0) & np.where(choose_transmit, dot(l, m_out) < 0, dot(l, m_out) > 0)
+        valid = (cos_v != 0) & (front | (bsdf > 0)) & sides_ok & (choose_diffuse | microfacet_ok)
+        f_cos, pdf = self._eval(s, v, l)
+        valid &= pdf > 0
+        weight = np.where(valid[:, None], f_cos / np.maximum(pdf, 1e-300)[:, None], 0.0)
+        return _flip_z(l, side), weight, np.where(valid, pdf, 0.0), np.zeros(len(v), bool)
