@@ -18,7 +18,7 @@ KIND = Kind(
     config_model=PrtConfig,
     presets=PRESETS,
     plan_function="workers.models.prt.plan:plan",
-    example=Example("glossy_row"),
+    example=Example("env_lit_objects"),
     method="workers.models.prt.run:PrtMethod",
     infer_module="workers.models.prt.infer",
 )

@@ -119,7 +119,9 @@ class PrtConfig(TrainedKindConfig):
 
 
 PRESETS: dict[str, dict] = {
-    # Seconds: a 6 x 4^2 cube, 4 training views of 16^2 with 48 rows each, a tiny network.
+    # Seconds: a 6 x 4^2 cube, 8 training views of 16^2 with 96 rows each, a tiny network. Measured on
+    # env_lit_objects (loaded CPU): 1024 rows, 500 steps at lr 0.01 gave held-out indirect PSNR 14.5 dB
+    # against 12.8 for no indirect; at lr 0.002, 7.0 (not converged).
     "quick": {
         "cube_size": 4,
         "wavelets": 16,
@@ -130,14 +132,14 @@ PRESETS: dict[str, dict] = {
         "directions": {"degree": 2},
         "mlp": {"width": 32, "depth": 1},
         "image_size": 16,
-        "rows_per_view": 48,
-        "row_spp": 16,
-        "test_spp": 16,
+        "rows_per_view": 96,
+        "row_spp": 24,
+        "test_spp": 32,
         "max_depth": 5,
         "lighting": {"test_procedural": 1, "map_width": 64},
-        "cameras": {"train_views": 4, "near_views": 1, "far_views": 1},
-        "train": {"steps": 120, "checkpoint_every": 60, "progress_every": 20},
-        "evaluation_spp": 2,
+        "cameras": {"train_views": 8, "near_views": 1, "far_views": 1},
+        "train": {"steps": 300, "checkpoint_every": 100, "progress_every": 20},
+        "evaluation_spp": 4,
         "reference_spp": 32,
     },
     "default": {},

@@ -1,8 +1,11 @@
 """Held-out figures of a trained `prt` model (Table 1's layout): PSNR and SSIM of the full frame and of
 the indirect light alone, and FLIP of the full frame, on near and far test views under lightings never
-trained on. Ground truth is each test pixel's binned transport dotted with the lighting (`transport`); the
-model's frame is its own path-traced direct light plus predicted indirect (`frame`). The trivial baseline
-is the same direct light with no indirect at all."""
+trained on. The indirect ground truth is each test pixel's binned transport dotted with the lighting
+(`transport`); the direct ground truth is path-traced with importance sampling of the lighting at `test_spp`
+(rows are traced with a lighting-independent, near-uniform sampler: under a sun they are far noisier for
+direct light than importance sampling). The model's frame is its own path-traced direct light at
+`evaluation_spp` plus predicted indirect (`frame`). The trivial baseline is the same direct light with no
+indirect at all."""
 
 from __future__ import annotations
 
@@ -12,12 +15,16 @@ import numpy as np
 
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.data import TestView, test_views
-from workers.models.prt.frame import Frame, render_frame
+from workers.models.prt.frame import DIRECT_DEPTH, Frame, render_frame
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.source import unit_mean
 from workers.nn.metrics import flip, psnr, ssim
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
 from workers.scene.reference import SceneRef
+
+TRUTH_SEED = 1000  # the direct ground truth's noise is independent of the frame's
 
 
 @dataclass
@@ -43,12 +50,17 @@ class Case:
         }
 
 
-def truth(view: TestView, cube: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The view's full and indirect images (H, W, 3) float32 under cube map `cube`."""
-    shape = (view.camera.height, view.camera.width, 3)
-    indirect = view.rows.radiance(cube, ("indirect",)).reshape(shape)
-    full = view.rows.radiance(cube).reshape(shape)
-    return full.astype(np.float32), indirect.astype(np.float32)
+def truth(
+    view: TestView, cube: np.ndarray, tracer: PathTracer, spp: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The view's full and indirect images (H, W, 3) float32 under cube map `cube` (`tracer` renders it)."""
+    camera = view.camera
+    indirect = view.rows.radiance(cube, ("indirect",)).reshape(camera.height, camera.width, 3)
+    settings = RenderSettings(
+        spp=spp, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed + TRUTH_SEED
+    )
+    direct = render(tracer, settings, view=camera).image
+    return (direct + indirect).astype(np.float32), indirect.astype(np.float32)
 
 
 def held_out_cases(
@@ -67,7 +79,7 @@ def held_out_cases(
         cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
         tracer = relit_tracer(scene.compiled(), cube)
         for view in views:
-            full, indirect = truth(view, cube)
+            full, indirect = truth(view, cube, tracer, config.test_spp, seed)
             frame = render_frame(
                 model, box, objects, tracer, cube, view.camera, k=k or config.wavelets, weighting=config.selection,
                 spp=config.evaluation_spp, seed=seed,
