@@ -39,6 +39,7 @@ from workers.scene.spec import EnvironmentMap
 DEFAULT_LIGHTING = EnvironmentMap(builtin="courtyard")
 UPLOAD = "environment"
 MAX_UPLOAD_TEXELS = 4096 * 2048
+SERVED_WIDTH = 1024  # procedural maps are generated this wide; larger maps are box-filtered down to it
 
 
 class Relighting(BaseModel):
@@ -82,8 +83,8 @@ class PrtModel:
         if upload is not None and upload.shape[0] * upload.shape[1] > MAX_UPLOAD_TEXELS:
             raise ValueError(f"arrays.environment: at most {MAX_UPLOAD_TEXELS} texels")
         try:
-            # Full resolution for the direct light, the artifact's cube for the network.
-            latlong, rotation = latlong_of(env, 1 << 16, "params.lighting", upload)
+            # Full resolution (up to SERVED_WIDTH) for the direct light, the artifact's cube for the network.
+            latlong, rotation = latlong_of(env, SERVED_WIDTH, "params.lighting", upload)
         except SceneError as error:
             raise ValueError(str(error)) from None
         return latlong, rotation, cube_of(latlong, rotation, self.config.cube_size)
