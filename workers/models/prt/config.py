@@ -68,9 +68,11 @@ class PrtConfig(TrainedKindConfig):
         64, ge=1, description="K: run-time wavelets, selected per frame by area-weighted magnitude"
     )
     selection: Literal["area", "magnitude"] = "area"
-    train_top_wavelets: int = Field(64, ge=0, description="per step: largest |L_k| (paper 150)")
-    train_uniform_wavelets: int = Field(64, ge=0, description="per step: uniform among the rest (paper 150)")
-    pixels_per_step: int = Field(256, ge=4, description="paper 2048, a quarter from each pixel map")
+    # A step costs ~ pixels x wavelets through f: 256 x 128 pairs took 0.33 s on the loaded 2-core CPU
+    # (0.26 s in f), so the default takes 128 x 96.
+    train_top_wavelets: int = Field(48, ge=0, description="per step: largest |L_k| (paper 150)")
+    train_uniform_wavelets: int = Field(48, ge=0, description="per step: uniform among the rest (paper 150)")
+    pixels_per_step: int = Field(128, ge=4, description="paper 2048, an equal share from each pixel map")
     grid: HashGridConfig = HashGridConfig(
         levels=8, features_per_level=2, log2_table_size=14, base_resolution=8, per_level_scale=1.5
     )
@@ -83,20 +85,18 @@ class PrtConfig(TrainedKindConfig):
     image_size: int = Field(48, ge=4, le=4096, description="side of training and test views")
     rows_per_view: int = Field(512, ge=1, description="pixels per training view whose transport is stored")
     row_spp: int = Field(128, ge=1, le=1 << 16, description="paths per stored pixel")
-    test_spp: int = Field(128, ge=1, le=1 << 16, description="paths per pixel of the test views' rows")
+    test_spp: int = Field(64, ge=1, le=1 << 16, description="paths per pixel of the test views' rows")
     max_depth: int = Field(8, ge=3, le=64)
     probe_spp: int = Field(4, ge=1, le=256, description="plan: paths per pixel of the indirect-light probe")
     lighting: LightingConfig = LightingConfig()
     cameras: CamerasConfig = CamerasConfig()
-    # A step of 256 pixels x 128 wavelets costs ~25 ms here; 3000 steps (~80 s) bring the held-out
-    # indirect loss near its floor on env_lit_objects (measured in tests/bench/bench_prt.py).
     train: TrainConfig = TrainConfig(
-        steps=3000,
+        steps=2000,
         schedule=Schedule(lr=0.01, kind="cosine", final_lr_fraction=0.05),
         checkpoint_every=500,
         progress_every=20,
     )
-    evaluation_spp: int = Field(4, ge=1, le=65536, description="spp of the model's direct light")
+    evaluation_spp: int = Field(8, ge=1, le=65536, description="spp of the model's direct light")
     reference_spp: int = 256
 
     @model_validator(mode="after")

@@ -64,8 +64,21 @@ def cached(key: tuple, build):
     return value
 
 
-def _key(what: str, scene: SceneRef, config: PrtConfig, seed: int) -> tuple:
-    return (what, scene.content_key, str(scene.folder), config.model_dump_json(), seed)
+# What the traced data depends on: changing the network or the training loop reuses it.
+TRACING_FIELDS = {
+    "cube_size",
+    "image_size",
+    "rows_per_view",
+    "row_spp",
+    "test_spp",
+    "max_depth",
+    "probe_spp",
+    "cameras",
+}
+
+
+def tracing_key(what: str, scene: SceneRef, config: PrtConfig, seed: int) -> tuple:
+    return (what, scene.content_key, str(scene.folder), config.model_dump_json(include=TRACING_FIELDS), seed)
 
 
 def transport_tracer(scene: SceneRef, config: PrtConfig) -> PathTracer:
@@ -94,12 +107,12 @@ def scene_box(scene: SceneRef, config: PrtConfig) -> np.ndarray:
         pad = BOX_PADDING * max(float(np.linalg.norm(hi - lo)), 1e-6)
         return np.stack([lo - pad, hi + pad])
 
-    return cached(_key("box", scene, config, 0), build)
+    return cached(tracing_key("box", scene, config, 0), build)
 
 
 def training_set(scene: SceneRef, config: PrtConfig, seed: int, objects: tuple[int, ...]) -> TrainingSet:
     """Rows of the pixels on `objects` (the modelled ones, `probe`)."""
-    key = (*_key("train", scene, config, seed), objects)
+    key = (*tracing_key("train", scene, config, seed), objects)
     return cached(key, lambda: _build_training_set(scene, config, seed, objects))
 
 
@@ -152,7 +165,7 @@ def _pixel_maps(inputs: SurfaceInputs, rows: np.ndarray, size: int) -> dict[str,
 
 
 def test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
-    return cached(_key("test", scene, config, seed), lambda: _build_test_views(scene, config, seed))
+    return cached(tracing_key("test", scene, config, seed), lambda: _build_test_views(scene, config, seed))
 
 
 def _build_test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:

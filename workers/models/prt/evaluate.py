@@ -89,13 +89,16 @@ def held_out_cases(
 
 
 def summarise(cases: list[Case]) -> dict[str, float]:
-    """Means over all cases, and over near and far views apart (`near.psnr_full`, ...)."""
+    """Means over all cases, over near and far views apart (`near.psnr_full`, ...) and per lighting
+    (`sunset.psnr_full`, ...)."""
     out: dict[str, float] = {}
     groups = {"": cases}
     for split in ("near", "far"):
         chosen = [c for c in cases if c.view.startswith(split)]
         if chosen:
             groups[f"{split}."] = chosen
+    for lighting in dict.fromkeys(c.lighting for c in cases):
+        groups[f"{lighting}."] = [c for c in cases if c.lighting == lighting]
     for prefix, group in groups.items():
         figures = [c.figures() for c in group]
         for key in figures[0]:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workers.models.prt.config import PrtConfig
-from workers.models.prt.data import cached, cameras, transport_tracer
+from workers.models.prt.data import cached, cameras, tracing_key, transport_tracer
 from workers.models.prt.gbuffer import surface_inputs
 from workers.models.prt.transport import DIRECT, INDIRECT, trace_rows
 from workers.models.prt.views import TRAIN, pixel_rays
@@ -32,8 +32,7 @@ class ObjectChoice:
 
 def probe_objects(scene: SceneRef, config: PrtConfig) -> list[ObjectChoice]:
     """Every object's choice (cached per process: the plan, the method and the source ask alike)."""
-    key = ("probe", scene.content_key, str(scene.folder), config.model_dump_json())
-    return cached(key, lambda: _probe(scene, config))
+    return cached(tracing_key("probe", scene, config, 0), lambda: _probe(scene, config))
 
 
 def modelled_objects(scene: SceneRef, config: PrtConfig) -> tuple[int, ...]:
