@@ -22,7 +22,7 @@ import numpy as np
 from tests.bench.common import BenchSection
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
-from workers.models.prt.data import cameras, test_views
+from workers.models.prt.data import test_views
 from workers.models.prt.evaluate import truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer

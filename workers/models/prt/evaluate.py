@@ -81,8 +81,8 @@ def held_out_cases(
         for view in views:
             full, indirect = truth(view, cube, tracer, config.test_spp, seed)
             frame = render_frame(
-                model, box, objects, tracer, cube, view.camera, k=k or config.wavelets, weighting=config.selection,
-                spp=config.evaluation_spp, seed=seed,
+                model, box, objects, tracer, cube, view.camera,
+                k=k or config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=seed,
             )  # fmt: skip
             cases.append(Case(view.name, name, full, indirect, frame))
     return cases

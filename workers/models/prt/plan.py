@@ -6,6 +6,8 @@ The probe (`probe`) decides which objects' indirect light is modelled.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from workers.models.prt.config import PrtConfig
@@ -29,7 +31,7 @@ def parameter_counts(config: PrtConfig) -> dict[str, int]:
     m = config.grid.levels * config.grid.features_per_level
     inputs = m + (config.directions.degree + 1) ** 2 + 10
     widths = [inputs] + [config.mlp.width] * config.mlp.depth + [3]
-    f = sum(a * b + b for a, b in zip(widths[:-1], widths[1:], strict=True))
+    f = sum(a * b + b for a, b in itertools.pairwise(widths))
     return {"S": table * config.grid.features_per_level, "W": config.n_wavelets * m, "U": m * m, "f": f}
 
 
@@ -49,8 +51,8 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         PlanItem(
             name="lighting",
             choice=f"cube map 6 x {r}^2 ({6 * r * r} Haar wavelets), K = {config.wavelets} per frame",
-            reason=f"{config.selection}-weighted selection; training uses {config.train_top_wavelets} largest "
-            f"+ {config.train_uniform_wavelets} uniform wavelets of a fresh lighting every step",
+            reason=f"{config.selection}-weighted selection; training uses {config.train_top_wavelets} "
+            f"largest + {config.train_uniform_wavelets} uniform wavelets of a fresh lighting every step",
         ),
         PlanItem(
             name="hash grid box",
@@ -65,8 +67,8 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         PlanItem(
             name="ground truth",
             choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB)",
-            reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at {config.row_spp} spp, "
-            "binned by escape texel: one trace serves every lighting",
+            reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
+            f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting",
         ),
     ]
     test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2

@@ -85,8 +85,8 @@ class PrtMethod:
         view = PathTracedView(at_view, settings, config.reference_spp, tracer=tracer)
         ctx.log(f"report view: {camera.width}x{camera.height}, far view under {name}")
         frame = render_frame(
-            model, source.data.box, objects, tracer, cube, camera, k=config.wavelets, weighting=config.selection,
-            spp=config.evaluation_spp, seed=ctx.seed,
+            model, source.data.box, objects, tracer, cube, camera,
+            k=config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
         )  # fmt: skip
         timed = TimedImage(
             f"direct {config.evaluation_spp} spp + K={config.wavelets}", frame.image, frame.seconds
