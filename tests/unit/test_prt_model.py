@@ -143,3 +143,24 @@ def test_the_split_first_layer_equals_f_of_the_cp_features():
     h = model.mix(spatial[:, None, :] * model.wavelet_factors[wavelets][None])  # Eq. 7 as written
     explicit = model.f(torch.cat([h, rest[:, None, :].expand(-1, 3, -1)], dim=-1))
     assert torch.allclose(model.transport(spatial, rest, wavelets), explicit, atol=1e-12)
+
+
+def test_pixels_that_see_the_environment_get_no_indirect_light():
+    from workers.models.prt.frame import predict_indirect
+    from workers.models.prt.gbuffer import SurfaceInputs
+
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    model = PrtNetwork(config)
+    torch.nn.init.normal_(model.f.layers[-2].weight)  # a network that predicts something everywhere
+    n = 6
+    inputs = SurfaceInputs(
+        hit=np.array([True, False, True, False, True, True]), position=np.zeros((n, 3)),
+        normal=np.tile([0.0, 1.0, 0.0], (n, 1)), reflected=np.tile([0.0, 1.0, 0.0], (n, 1)),
+        kd=np.full((n, 3), 0.5), ks=np.zeros((n, 3)), roughness=np.ones(n),
+        object_id=np.array([0, -1, 0, -1, 1, 0]),
+    )  # fmt: skip
+    box = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    out = predict_indirect(model, inputs, box, np.array([0]), np.ones((6, 4, 4, 3)), 8, "area")
+    assert (out[[1, 3]] == 0).all()  # the environment, seen directly: masked
+    assert (out[4] == 0).all()  # an object left to direct light
+    assert (out[[0, 2, 5]] != 0).any(axis=1).all()

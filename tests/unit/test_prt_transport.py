@@ -95,3 +95,32 @@ def test_a_convex_object_alone_has_no_indirect_light():
     rows = trace_rows(tracer, origins, directions, 8, SIZE, np.random.default_rng(0), MAX_DEPTH, ALL)
     assert rows.direct.any()
     assert not rows.indirect.any()
+
+
+@pytest.mark.parametrize("roughness", [0.0, 1e-3, 1.0])
+def test_mirror_to_rough_surfaces_give_finite_rows_and_their_lobes(roughness):
+    mirror_on_floor = spec.SceneSpec(
+        materials={"metal": spec.Conductor(roughness=roughness), "floor": spec.Diffuse()},
+        objects=[
+            spec.SceneObject(name="ball", shape=spec.SphereShape(subdivisions=2), material="metal"),
+            spec.SceneObject(
+                name="floor", shape=spec.RectangleShape(), material="floor",
+                transform=spec.Transform(translate=(0.0, -1.0, 0.0), rotate=(-90.0, 0.0, 0.0), scale=4.0),
+            ),
+        ],
+        environment=spec.ConstantBackground(),
+        camera=spec.Camera(position=(0.0, 0.5, 4.0), width=8, height=8),
+    )  # fmt: skip
+    scene = compile_scene(mirror_on_floor)
+    origins, directions = pixel_rays(scene.spec.camera)
+    cube = lighting(5, sun=1e5)
+    rows_tracer, render_tracer = tracers_with_the_same_paths(scene, cube)
+    rows = trace_rows(rows_tracer, origins, directions, 1, SIZE, np.random.default_rng(9), MAX_DEPTH, ALL)
+    rendered = render_tracer.trace(origins, directions, np.random.default_rng(9), MAX_DEPTH).radiance
+    np.testing.assert_allclose(rows.radiance(cube), rendered, rtol=1e-9, atol=1e-7)
+    inputs = surface_inputs(rows_tracer, origins, directions)
+    ball = inputs.object_id == 0
+    assert ball.any() and (inputs.kd[ball] == 0).all() and (inputs.ks[ball] > 0.9).all()
+    floor = inputs.object_id == 1
+    assert (inputs.roughness[floor] == 1).all() and (inputs.ks[floor] == 0).all()
+    assert np.allclose(np.linalg.norm(inputs.reflected[inputs.hit], axis=1), 1.0)
