@@ -17,7 +17,7 @@ from workers.models.registry import QUERY, RENDER
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
 
-SEED = 3
+SEED = 5  # the contract test's: in one pytest process the traced rows (cached per process) are shared
 SCENE = "env_lit_objects"
 MIN_INDIRECT_GAIN_DB = 1.0  # held-out indirect PSNR over predicting no indirect light
 
