@@ -16,8 +16,10 @@ from workers.models.prt.probe import probe_objects
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.reference import SceneRef
 
-PATHS_PER_SECOND = 60_000.0  # binned paths per second (6 x 8^2 rows, env_lit_objects, loaded 2-core CPU)
-STEP_PAIRS_PER_SECOND = 1.5e6  # pixel-wavelet pairs per second through f, forward and backward, default f
+# Measured on the default preset's env_lit_objects job, 2-core CPU under a load of ~15 (bench_prt): 2.2M
+# binned paths in ~55 s; 2000 steps of 128 pixels x 96 wavelets in 481 s.
+PATHS_PER_SECOND = 40_000.0
+STEP_PAIRS_PER_SECOND = 50_000.0  # pixel-wavelet pairs through f per second, forward and backward
 BYTES_PER_PARAMETER = 2  # float16 as stored
 
 
