@@ -164,3 +164,17 @@ def test_pixels_that_see_the_environment_get_no_indirect_light():
     assert (out[[1, 3]] == 0).all()  # the environment, seen directly: masked
     assert (out[4] == 0).all()  # an object left to direct light
     assert (out[[0, 2, 5]] != 0).any(axis=1).all()
+
+
+def test_per_wavelet_transport_targets_sum_to_the_row_dotted_with_the_lighting():
+    from workers.models.prt.source import wavelet_transport
+
+    rng = np.random.default_rng(3)
+    rows, cube = rng.random((5, 6 * 4 * 4, 3)), rng.random((6, 4, 4, 3)) ** 3
+    everything = torch.arange(6 * 4 * 4)
+    per_wavelet = wavelet_transport(rows, everything, 4).double()
+    lighting = wavelets_of(cube).reshape(-1, 3)
+    by_wavelet = torch.einsum("pkc,kc->pc", per_wavelet, lighting)  # Eq. 3 with every wavelet
+    np.testing.assert_allclose(
+        by_wavelet.numpy(), np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)), rtol=1e-6
+    )

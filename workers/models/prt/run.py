@@ -46,7 +46,7 @@ class PrtMethod:
         ctx.log(f"{len(source.data.rows)} transport rows traced at {config.row_spp} spp")
         torch.manual_seed(ctx.seed)
         model = PrtNetwork(config)
-        phases = [Phase("main", partial(prt_loss, mu=config.mu))]
+        phases = [Phase("main", partial(prt_loss, mu=config.mu, transport_weight=config.transport_weight))]
         return [Trainable(model, phases, spec, config.train, stored_dtype=artifact.STORAGE_DTYPE)]
 
     def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:

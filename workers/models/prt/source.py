@@ -16,6 +16,7 @@ from workers.models.prt.data import PIXEL_MAPS, TrainingSet, training_set
 from workers.models.prt.lighting import lighting_cube, training_lighting
 from workers.models.prt.probe import modelled_objects
 from workers.models.prt.selection import training_selection
+from workers.nn.haar import cubemap_wavelets
 from workers.render.sampling import luminance
 from workers.runtime.sources import Batch, batch_rng
 from workers.runtime.threads import torch_threads
@@ -32,6 +33,15 @@ def unit_mean(cube: np.ndarray) -> np.ndarray:
     """The cube map scaled to mean luminance 1 (a black map stays black)."""
     mean = float(luminance(cube.reshape(-1, 3)).mean())
     return cube / mean if mean > 0 else cube
+
+
+def wavelet_transport(rows: np.ndarray, wavelets: torch.Tensor, size: int) -> torch.Tensor:
+    """Each pixel's transport of the selected wavelets [P, K, 3]: the Haar transform of its row (exact per
+    wavelet, as noisy as the row; what the paper could not afford to supervise)."""
+    faces = torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double()
+    with torch_threads(1):
+        coefficients = cubemap_wavelets(faces).reshape(len(rows), 6 * size * size, 3)
+    return coefficients[:, wavelets].float()
 
 
 def sample_pixels(data: TrainingSet, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -69,4 +79,6 @@ class PrtSource:
             coefficients=chosen.values.float(),
             target=torch.from_numpy(target.astype(np.float32)),
         )
+        if c.transport_weight > 0:
+            batch["transport"] = wavelet_transport(self.data.rows[pixels], chosen.indices, c.cube_size)
         return batch
