@@ -27,6 +27,7 @@ KIND_MODULES = (
     "workers.models.lsnif",
     "workers.models.lod",
     "workers.models.mesogan",
+    "workers.models.prt",
 )
 __all__ = ["PRESET_NAMES", "Kind", "UnknownKind", "get_inference", "get_kind", "kind_names"]
 

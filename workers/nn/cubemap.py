@@ -101,16 +101,23 @@ def _subtexel_offsets(supersample: int, like: Tensor) -> Tensor:
     return (torch.arange(supersample, dtype=like.dtype, device=like.device) + 0.5) / supersample - 0.5
 
 
-def latlong_to_cubemap(latlong: Tensor, size: int, supersample: int = 4) -> Tensor:
+def latlong_to_cubemap(
+    latlong: Tensor, size: int, supersample: int = 4, rotation: Tensor | None = None
+) -> Tensor:
     """Resample a lat-long map [H, W, C] to a cube map [6, S, S, C], averaging supersample^2 bilinear
-    taps per texel so that small bright sources are not missed when S is much coarser than W / 4."""
+    taps per texel so that small bright sources are not missed when S is much coarser than W / 4.
+    `rotation` [3, 3] (local -> world, as the path tracer's environment) turns the map before it is
+    resampled: the cube's world direction d reads the map at d @ rotation."""
     offsets = _subtexel_offsets(supersample, latlong)
     centres = _texel_centres(size, latlong)
     t = (centres[:, None] + offsets[None, :] / size).reshape(-1)
     t_grid, s_grid = torch.meshgrid(t, t, indexing="ij")
     n = size * supersample
     face = torch.arange(6, device=latlong.device)[:, None, None].expand(6, n, n)
-    u, v = direction_to_latlong(face_uv_to_direction(face, s_grid.expand(6, n, n), t_grid.expand(6, n, n)))
+    directions = face_uv_to_direction(face, s_grid.expand(6, n, n), t_grid.expand(6, n, n))
+    if rotation is not None:
+        directions = directions @ rotation.to(directions)
+    u, v = direction_to_latlong(directions)
     taps = _bilinear(latlong, u, v, wrap_u=True)
     return taps.view(6, size, supersample, size, supersample, -1).mean(dim=(2, 4))
 
@@ -141,3 +148,12 @@ def latlong_solid_angles(height: int, width: int, dtype: torch.dtype = torch.flo
     cos_edges = torch.cos(torch.linspace(0.0, math.pi, height + 1, dtype=torch.float64))
     rows = (cos_edges[:-1] - cos_edges[1:]) * (2 * math.pi / width)
     return rows[:, None].expand(height, width).to(dtype)
+
+
+def direction_to_texel(direction: Tensor, size: int) -> Tensor:
+    """Flat index (face * S + row) * S + col [...] of the texel each direction [..., 3] passes through
+    (nearest texel: the lookup under which a cube map's Haar coefficients are the lighting's)."""
+    face, s, t = direction_to_face_uv(direction)
+    col = (s * size).long().clamp(0, size - 1)
+    row = (t * size).long().clamp(0, size - 1)
+    return (face * size + row) * size + col

@@ -395,3 +395,55 @@ def closed_box() -> SceneSpec:
         environment=ConstantBackground(radiance=(6.0, 4.0, 2.0)),
         camera=Camera(position=(0.0, 1.0, 0.9), target=(0.0, 1.0, -1.0), fov=70.0, width=256, height=256),
     )
+
+
+@builtin
+def glossy_row() -> SceneSpec:
+    """Glossy objects facing each other on a glossy floor before a glossy back panel, under the `studio`
+    HDRI: strong glossy interreflections (the `prt` kind's second scene; indirect light is most of what
+    the panel and the floor show between the objects)."""
+
+    def sphere(name: str, material: str, x: float, z: float, r: float) -> SceneObject:
+        return SceneObject(
+            name=name,
+            shape=SphereShape(radius=r, subdivisions=4),
+            material=material,
+            transform=Transform(translate=(x, r, z)),
+        )
+
+    return SceneSpec(
+        name="glossy_row",
+        materials={
+            "floor": Conductor(roughness=0.15, specular=(0.8, 0.8, 0.82)),
+            "panel": Plastic(diffuse=(0.85, 0.82, 0.75), roughness=0.08),
+            "gold": Conductor(roughness=0.1, specular=(1.0, 0.78, 0.34)),
+            "copper": Conductor(roughness=0.25, specular=(0.95, 0.64, 0.54)),
+            "red_plastic": Plastic(diffuse=(0.75, 0.1, 0.08), roughness=0.05),
+            "white_diffuse": Diffuse(reflectance=(0.8, 0.8, 0.8)),
+        },
+        objects=[
+            SceneObject(
+                name="floor",
+                shape=RectangleShape(),
+                material="floor",
+                transform=Transform(rotate=(-90.0, 0.0, 0.0), scale=2.0),
+            ),
+            SceneObject(
+                name="panel",
+                shape=RectangleShape(),
+                material="panel",
+                transform=Transform(translate=(0.0, 0.8, -1.2), scale=(2.0, 0.8, 1.0)),
+            ),
+            sphere("gold_sphere", "gold", -0.9, -0.2, 0.35),
+            sphere("red_sphere", "red_plastic", 0.0, 0.1, 0.35),
+            sphere("copper_sphere", "copper", 0.9, -0.2, 0.35),
+            SceneObject(
+                name="white_box",
+                shape=BoxShape(),
+                material="white_diffuse",
+                transform=Transform(translate=(0.0, 0.25, -0.7), rotate=(0.0, 30.0, 0.0), scale=0.25),
+            ),
+        ],
+        environment=EnvironmentMap(builtin="studio"),
+        camera=Camera(position=(0.0, 1.2, 3.2), target=(0.0, 0.3, 0.0), fov=40.0, width=256, height=256),
+    )

@@ -1,0 +1,138 @@
+"""`prt` (issue 15, "Targets"): held-out quality as Table 1, time per frame against K (Table 2 on this CPU),
+the equal-time comparison with path tracing of the same frame, and an ablation of where S lives (hash
+table size, Table 3; a coarser volume, Table 6).
+
+Per scene (`env_lit_objects`, `glossy_row`) one job at `PRT_BENCH_PRESET` (default `default`) through the
+driver: PSNR / SSIM of the full frame and of indirect light, FLIP, on near and far held-out views under
+held-out lightings (HDRIs and procedural maps never trained on), against the trivial baseline of no
+indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
+(log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
+Then frame time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
+`ABLATION_STEPS` steps each (the traced data is shared: only the network changes).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from tests.bench.common import BenchSection
+from tests.support.jobs import run_kind_job
+from workers.models.prt.artifact import load
+from workers.models.prt.data import test_views
+from workers.models.prt.evaluate import truth
+from workers.models.prt.frame import render_frame
+from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.source import unit_mean
+from workers.nn.metrics import flip, psnr
+from workers.runtime.report import Report
+from workers.scene.builtin import get_builtin
+from workers.scene.reference import SceneRef
+
+PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
+SCENES = ("env_lit_objects", "glossy_row")
+SEED = 0
+K_SWEEP = (8, 16, 32, 64, 128)
+ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
+ABLATION = (
+    ("table 2^10", {"grid": {"log2_table_size": 10}}),
+    ("table 2^14 (default)", {}),
+    ("coarser volume (4 levels from 4)", {"grid": {"levels": 4, "base_resolution": 4}}),
+)
+FIGURES = ("psnr_full", "psnr_indirect", "ssim_full", "ssim_indirect", "flip_full", "baseline_psnr_full",
+           "baseline_psnr_indirect", "baseline_flip_full", "seconds_per_frame")  # fmt: skip
+
+
+def equal_error_seconds(report: Report) -> float:
+    """Path-tracing seconds at the model's FLIP, log-log interpolated along the curve (inf beyond it)."""
+    curve = sorted(report.path_tracing, key=lambda p: p.seconds_per_frame)
+    seconds = np.log([p.seconds_per_frame for p in curve])
+    errors = np.log([p.error.flip for p in curve])
+    target = np.log(report.model.error.flip)
+    if target < errors.min():
+        return float("inf")
+    order = np.argsort(errors)
+    return float(np.exp(np.interp(target, errors[order], seconds[order])))
+
+
+def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
+    artifact = load(folder)
+    config = artifact.config
+    ref = SceneRef(get_builtin(scene))
+    views = [v for v in test_views(ref, config, SEED) if v.name.startswith("far")] or test_views(
+        ref, config, SEED
+    )
+    view = views[0]
+    name, env = next(iter(held_out_lightings(config.lighting, SEED).items()))
+    cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
+    tracer = relit_tracer(ref.compiled(), cube)
+    full, indirect = truth(view, cube, tracer, config.test_spp, SEED)
+    for k in (k for k in K_SWEEP if k <= config.n_wavelets):
+        frames = [
+            render_frame(
+                artifact.model, artifact.box, artifact.objects, tracer, cube, view.camera, k=k,
+                weighting=config.selection, spp=config.evaluation_spp, seed=SEED + r,
+            )
+            for r in range(3)
+        ]  # fmt: skip
+        frame = frames[-1]
+        section.add(
+            scene=scene, view=view.name, lighting=name, K=k,
+            frame_s=float(np.median([f.seconds for f in frames])),
+            network_s=float(np.median([f.network_seconds for f in frames])),
+            psnr_full=psnr(full, frame.image), psnr_indirect=psnr(indirect, frame.indirect),
+            flip_full=flip(full, frame.image),
+        )  # fmt: skip
+
+
+def run() -> list[BenchSection]:
+    quality = BenchSection(f"prt held-out quality ({PRESET} preset; Table 1 layout, not denoised)")
+    lightings = BenchSection("prt per held-out lighting (never trained on)")
+    timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
+    sweep = BenchSection("prt time per frame and error against K (Table 2 on this CPU)")
+    ablation = BenchSection(f"prt ablation on env_lit_objects, {ABLATION_STEPS} steps each (Tables 3, 6)")
+    with tempfile.TemporaryDirectory(prefix="bench-prt-") as tmp:
+        for scene in SCENES:
+            folder = Path(tmp) / scene
+            _, outcome = run_kind_job("prt", get_builtin(scene), folder, preset=PRESET, seed=SEED)
+            if outcome.state != "succeeded":
+                raise RuntimeError(f"{scene}: {outcome.error}")
+            report = Report.read(str(folder / "out"))
+            m = report.method_metrics
+            for split in ("", "near.", "far."):
+                quality.add(
+                    scene=scene, views=split.rstrip(".") or "all", **{k: m[f"{split}{k}"] for k in FIGURES}
+                )
+            config = get_kind_config(PRESET)
+            for name in held_out_lightings(config.lighting, SEED):
+                lightings.add(scene=scene, lighting=name, **{k: m[f"{name}.{k}"] for k in FIGURES[:5]})
+            pt_seconds = equal_error_seconds(report)
+            timing.add(
+                scene=scene, model=report.model.label, model_s=report.model.seconds_per_frame,
+                model_flip=report.model.error.flip, equal_time_pt=report.path_tracing_equal_time.label,
+                equal_time_pt_flip=report.path_tracing_equal_time.error.flip, pt_s_at_model_flip=pt_seconds,
+                equal_time_ratio=report.model.seconds_per_frame / pt_seconds,
+                training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
+            )  # fmt: skip
+            k_sweep(folder / "out", scene, sweep)
+        for label, overrides in ABLATION:
+            folder = Path(tmp) / f"ablation-{len(ablation.rows)}"
+            merged = {**overrides, "train": {"steps": ABLATION_STEPS}}
+            _, outcome = run_kind_job(
+                "prt", get_builtin("env_lit_objects"), folder, merged, preset=PRESET, seed=SEED
+            )
+            m = Report.read(str(folder / "out")).method_metrics
+            size = sum(m[f"parameters.{p}"] for p in "SWUf") * 2
+            ablation.add(variant=label, stored_bytes=size, **{k: m[k] for k in FIGURES[:5]})
+    timing.notes.append("equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP")
+    sweep.notes.append("frame_s: G-buffer + network + direct light; network_s: selection and network only")
+    return [quality, lightings, timing, sweep, ablation]
+
+
+def get_kind_config(preset: str):
+    from workers.models.registry import get_kind
+
+    return get_kind("prt").resolve_config(preset, {})

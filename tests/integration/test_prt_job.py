@@ -1,0 +1,87 @@
+"""The `prt` kind end to end through the job driver's `run_job` (no Ray actor): probe, trace rows, train,
+export, measure on held-out lightings and views, report; then the artifact relights the scene under maps
+it never saw, through the inference operations the service calls.
+
+The quality gate compares the trained model with the trivial baseline that predicts no indirect light
+(the same path-traced direct light alone), on lightings and views held out from training.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.support.jobs import run_kind_job
+from workers.models.prt.infer import INFERENCE, PrtQuery, PrtRender
+from workers.models.registry import QUERY, RENDER
+from workers.runtime.report import Report
+from workers.scene.builtin import get_builtin
+
+SEED = 5  # the contract test's: in one pytest process the traced rows (cached per process) are shared
+SCENE = "env_lit_objects"
+MIN_INDIRECT_GAIN_DB = 1.0  # held-out indirect PSNR over predicting no indirect light
+
+
+@pytest.fixture(scope="module")
+def job(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("prt")
+    _, outcome = run_kind_job("prt", get_builtin(SCENE), folder, seed=SEED)
+    assert outcome.state == "succeeded", outcome.error
+    return folder / "out", outcome
+
+
+@pytest.fixture(scope="module")
+def served(job):
+    return INFERENCE.load(job[0], "cpu")
+
+
+def test_the_model_beats_no_indirect_light_on_held_out_lightings_and_views(job):
+    out, _ = job
+    figures = Report.read(str(out)).method_metrics
+    assert figures["psnr_indirect"] > figures["baseline_psnr_indirect"] + MIN_INDIRECT_GAIN_DB, figures
+    assert figures["psnr_full"] > figures["baseline_psnr_full"], figures
+    assert figures["flip_full"] < figures["baseline_flip_full"], figures
+    assert {"near.psnr_full", "far.psnr_full", "parameters.W"} <= set(figures)
+
+
+def test_render_relights_under_a_new_map_linearly_in_its_scale(served):
+    camera = {"width": 12, "height": 10}
+    sky = {"procedural": "sky", "params": {"sun_elevation": 20.0, "sun_azimuth": 200.0}}
+    once = served.answer(RENDER, PrtRender(camera=camera, lighting=sky, spp=2, wavelets=8), {})
+    brighter = PrtRender(camera=camera, lighting={**sky, "scale": 2.0}, spp=2, wavelets=8)
+    twice = served.answer(RENDER, brighter, {})
+    image = once.arrays["image"]
+    assert image.shape == (10, 12, 3) and np.isfinite(image).all() and image.mean() > 0
+    np.testing.assert_allclose(twice.arrays["image"], 2 * image, rtol=1e-4, atol=1e-5)
+    assert once.meta["wavelets"] == 8 and once.meta["network_seconds"] > 0
+
+
+def test_render_takes_an_uploaded_map_and_refuses_nan_naming_the_field(served):
+    upload = np.ones((16, 32, 3), np.float32)
+    params = PrtRender(camera={"width": 8, "height": 8}, lighting={"path": "mine.exr"}, spp=1)
+    answer = served.answer(RENDER, params, {"environment": upload})
+    assert np.isfinite(answer.arrays["image"]).all()
+    upload[2, 3] = np.inf
+    with pytest.raises(ValueError, match=r"^params\.lighting\.path: 1 NaN/Inf texels"):
+        served.answer(RENDER, PrtRender(lighting={"path": "mine.exr"}), {"environment": upload})
+    with pytest.raises(ValueError, match=r"^params\.wavelets: at most"):
+        served.answer(RENDER, PrtRender(wavelets=10**6), {})
+
+
+def test_query_gives_indirect_light_at_g_buffer_points(served):
+    rng = np.random.default_rng(0)
+    n = 5
+    arrays = {
+        "position": rng.uniform(-0.5, 0.5, (n, 3)),
+        "normal": np.tile([0.0, 1.0, 0.0], (n, 1)),
+        "view": np.tile([0.0, 0.6, 0.8], (n, 1)),
+        "kd": np.full((n, 3), 0.4),
+        "ks": np.zeros((n, 3)),
+        "roughness": np.ones(n),
+    }
+    studio = PrtQuery(lighting={"builtin": "studio"})
+    brighter = PrtQuery(lighting={"builtin": "studio", "scale": 3.0})
+    one = served.answer(QUERY, studio, arrays).arrays["indirect"]
+    three = served.answer(QUERY, brighter, arrays).arrays["indirect"]
+    assert one.shape == (n, 3) and np.isfinite(one).all()
+    np.testing.assert_allclose(three, 3 * one, rtol=1e-4, atol=1e-6)

@@ -1,0 +1,180 @@
+"""`prt` lighting and network: Haar on cube maps of several sizes, texel conventions, selection, linearity of
+B in L, the roughness map, and bad uploaded maps (issue 15's hard cases)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from workers.models.prt.config import PRESETS, PrtConfig
+from workers.models.prt.lighting import (
+    CubeMapLight,
+    cube_directions,
+    cube_of,
+    latlong_of,
+    sampling_latlong,
+    texels_of,
+)
+from workers.models.prt.network import PrtNetwork, roughness_feature
+from workers.models.prt.selection import run_time_selection, training_selection, wavelets_of
+from workers.nn.cubemap import cubemap_solid_angles
+from workers.nn.haar import cubemap_from_wavelets
+from workers.render.environment import EnvironmentMapLight
+from workers.runtime.contract import resolve_preset
+from workers.scene.envmaps import texel_directions
+from workers.scene.errors import SceneError
+from workers.scene.spec import EnvironmentMap, euler_xyz
+
+SIZES = [1, 2, 4, 8, 16, 32]
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_cube_haar_is_orthonormal_and_reconstructs_exactly(size):
+    cube = torch.rand(6, size, size, 3, dtype=torch.float64) ** 3
+    coefficients = wavelets_of(cube.numpy())
+    assert torch.allclose(cubemap_from_wavelets(coefficients), cube, atol=1e-12)
+    assert (coefficients**2).sum().item() == pytest.approx((cube**2).sum().item(), rel=1e-12)
+    n = 6 * size * size
+    basis = torch.eye(n, dtype=torch.float64).reshape(n, 6, size, size, 1)
+    matrix = torch.stack([wavelets_of(b.numpy()).reshape(-1) for b in basis[: min(n, 96)]])
+    assert torch.allclose(matrix @ matrix.T, torch.eye(len(matrix), dtype=torch.float64), atol=1e-12)
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_a_constant_map_has_exactly_six_nonzero_coefficients(size):
+    coefficients = wavelets_of(np.full((6, size, size, 3), 2.5)).reshape(-1, 3)
+    nonzero = np.flatnonzero(coefficients.abs().amax(1).numpy() > 1e-12)
+    assert list(nonzero) == [face * size * size for face in range(6)]
+    np.testing.assert_allclose(coefficients[nonzero].numpy(), 2.5 * size)
+
+
+@pytest.mark.parametrize("size", [2, 4, 8, 16, 64])
+def test_texel_directions_round_trip_and_solid_angles_cover_the_sphere(size):
+    assert np.array_equal(texels_of(cube_directions(size), size), np.arange(6 * size * size))
+    assert cubemap_solid_angles(size, torch.float64).sum().item() == pytest.approx(4 * math.pi, rel=1e-12)
+
+
+def test_a_rotated_map_resamples_to_the_texels_the_path_tracer_reads():
+    height, width = 64, 128
+    d = texel_directions(height, width)
+    latlong = np.stack([1 + d[..., 0], 1 + d[..., 1] ** 2, 1 + 0.5 * d[..., 2]], axis=-1)  # smooth
+    rotation = euler_xyz((20.0, 75.0, -10.0))
+    cube = cube_of(latlong, rotation, 16)
+    traced = EnvironmentMapLight(latlong, rotation).radiance(cube_directions(16))
+    np.testing.assert_allclose(cube.reshape(-1, 3), traced, atol=0.02)
+
+
+def test_cube_map_light_reads_its_nearest_texel_and_samples_everywhere():
+    cube = np.zeros((6, 4, 4, 3))
+    cube[3, 2, 1] = 7.0
+    light = CubeMapLight(cube, EnvironmentMapLight(sampling_latlong(cube), np.eye(3)))
+    directions = cube_directions(4)
+    np.testing.assert_array_equal(light.radiance(directions), cube.reshape(-1, 3))
+    sampled, pdf = light.sample(np.random.default_rng(0).random((4096, 2)))
+    assert (pdf > 0).all()
+    assert (light.radiance(sampled).max(1) > 0).mean() > 0.5  # importance sampling follows the lit texel
+
+
+def test_selection_is_invariant_to_scaling_the_map():
+    cube = np.random.default_rng(0).random((6, 8, 8, 3)) ** 4
+    chosen, scaled = run_time_selection(cube, 20), run_time_selection(37.5 * cube, 20)
+    assert torch.equal(chosen.indices, scaled.indices)
+    assert torch.allclose(scaled.values, 37.5 * chosen.values)
+    area = run_time_selection(cube, 6, "area")
+    assert (area.face_row_col()[:, 1:] == 0).all()  # the face averages cover the most area
+
+
+def test_training_selection_takes_the_largest_and_distinct_others():
+    cube = np.random.default_rng(1).random((6, 4, 4, 3)) ** 4
+    chosen = training_selection(cube, 10, 20, np.random.default_rng(2))
+    largest = torch.topk(wavelets_of(cube).reshape(-1, 3).norm(dim=-1), 10).indices
+    assert set(largest.tolist()) <= set(chosen.indices.tolist())
+    assert len(set(chosen.indices.tolist())) == 30
+
+
+def test_b_is_linear_in_the_lighting_for_a_fixed_selection():
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(0)
+    model = PrtNetwork(config).double()
+    n = 16
+    inputs = {
+        "position": torch.rand(n, 3, dtype=torch.float64),
+        "normal": torch.nn.functional.normalize(torch.randn(n, 3, dtype=torch.float64), dim=-1),
+        "reflected": torch.nn.functional.normalize(torch.randn(n, 3, dtype=torch.float64), dim=-1),
+        "kd": torch.rand(n, 3, dtype=torch.float64),
+        "ks": torch.rand(n, 3, dtype=torch.float64),
+        "roughness": torch.rand(n, 1, dtype=torch.float64),
+    }
+    wavelets = torch.tensor([0, 3, 17, 40, 95])
+    l1, l2 = torch.randn(5, 3, dtype=torch.float64), torch.randn(5, 3, dtype=torch.float64)
+    with torch.no_grad():
+        combined = model(inputs, wavelets, 2.0 * l1 - 0.5 * l2)
+        separate = 2.0 * model(inputs, wavelets, l1) - 0.5 * model(inputs, wavelets, l2)
+        sun = model(inputs, wavelets, 1e5 * l1)  # a sun-sized coefficient stays finite and linear
+    assert torch.allclose(combined, separate, rtol=1e-10, atol=1e-12)
+    assert torch.isfinite(sun).all() and torch.allclose(sun, 1e5 * model(inputs, wavelets, l1), rtol=1e-9)
+
+
+def test_the_roughness_map_spreads_near_mirror_roughness():
+    sigma = torch.tensor([0.0, 1e-4, 0.05, 0.5, 1.0, 1.0 + 1e-6])
+    mapped = roughness_feature(sigma)
+    assert mapped[0] == 0 and mapped[4] == pytest.approx(1.0) and mapped[5] == pytest.approx(1.0)
+    assert (mapped.diff() >= 0).all() and mapped[2] > 0.24  # 0.05 maps to a quarter of the range
+
+
+def test_an_uploaded_map_with_nan_or_inf_is_refused_naming_the_field():
+    image = np.ones((8, 16, 3), np.float32)
+    image[3, 5, 1] = np.nan
+    with pytest.raises(SceneError, match=r"lighting\.path: 1 NaN/Inf texels \(first at row 3, column 5\)"):
+        latlong_of(EnvironmentMap(path="upload.exr"), 64, "lighting", image)
+    with pytest.raises(SceneError, match=r"lighting\.builtin: unknown built-in map 'moon'"):
+        latlong_of(EnvironmentMap(builtin="moon"), 64)
+
+
+def test_the_split_first_layer_equals_f_of_the_cp_features():
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(1)
+    model = PrtNetwork(config).double()
+    spatial, rest = torch.randn(5, 8, dtype=torch.float64), torch.randn(5, 19, dtype=torch.float64)
+    wavelets = torch.tensor([1, 7, 30])
+    h = model.mix(spatial[:, None, :] * model.wavelet_factors[wavelets][None])  # Eq. 7 as written
+    explicit = model.f(torch.cat([h, rest[:, None, :].expand(-1, 3, -1)], dim=-1))
+    assert torch.allclose(model.transport(spatial, rest, wavelets), explicit, atol=1e-12)
+
+
+def test_pixels_that_see_the_environment_get_no_indirect_light():
+    from workers.models.prt.frame import predict_indirect
+    from workers.models.prt.gbuffer import SurfaceInputs
+
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    model = PrtNetwork(config)
+    torch.nn.init.normal_(model.f.layers[-2].weight)  # a network that predicts something everywhere
+    n = 6
+    inputs = SurfaceInputs(
+        hit=np.array([True, False, True, False, True, True]), position=np.zeros((n, 3)),
+        normal=np.tile([0.0, 1.0, 0.0], (n, 1)), reflected=np.tile([0.0, 1.0, 0.0], (n, 1)),
+        kd=np.full((n, 3), 0.5), ks=np.zeros((n, 3)), roughness=np.ones(n),
+        object_id=np.array([0, -1, 0, -1, 1, 0]),
+    )  # fmt: skip
+    box = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    out = predict_indirect(model, inputs, box, np.array([0]), np.ones((6, 4, 4, 3)), 8, "area")
+    assert (out[[1, 3]] == 0).all()  # the environment, seen directly: masked
+    assert (out[4] == 0).all()  # an object left to direct light
+    assert (out[[0, 2, 5]] != 0).any(axis=1).all()
+
+
+def test_per_wavelet_transport_targets_sum_to_the_row_dotted_with_the_lighting():
+    from workers.models.prt.source import wavelet_transport
+
+    rng = np.random.default_rng(3)
+    rows, cube = rng.random((5, 6 * 4 * 4, 3)), rng.random((6, 4, 4, 3)) ** 3
+    everything = torch.arange(6 * 4 * 4)
+    per_wavelet = wavelet_transport(rows, everything, 4).double()
+    lighting = wavelets_of(cube).reshape(-1, 3)
+    by_wavelet = torch.einsum("pkc,kc->pc", per_wavelet, lighting)  # Eq. 3 with every wavelet
+    np.testing.assert_allclose(
+        by_wavelet.numpy(), np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)), rtol=1e-6
+    )

@@ -1,0 +1,22 @@
+"""`prt`'s plan: a probe path trace leaves objects without measurable indirect light to direct lighting."""
+
+from __future__ import annotations
+
+from workers.models.registry import get_kind
+from workers.scene import spec
+from workers.scene.reference import SceneRef
+
+
+def test_a_convex_object_alone_is_left_to_direct_light_and_the_plan_says_why():
+    scene = spec.SceneSpec(
+        materials={"m": spec.Conductor(roughness=0.3)},
+        objects=[spec.SceneObject(name="box", shape=spec.BoxShape(), material="m")],
+        environment=spec.ConstantBackground(),
+        camera=spec.Camera(position=(2.0, 1.5, 3.0), width=16, height=16),
+    )
+    kind = get_kind("prt")
+    plan = kind.plan(SceneRef(scene), kind.resolve_config("quick", {}))
+    items = {item.name: item for item in plan.items}
+    assert items["box"].choice == "direct only" and "indirect is 0.0%" in items["box"].reason
+    assert {"lighting", "hash grid box", "memory", "ground truth"} <= set(items)
+    assert plan.summary.startswith("indirect light of 0 of 1 objects") and plan.estimated_seconds > 0

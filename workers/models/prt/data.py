@@ -1,0 +1,185 @@
+"""The traced data a `prt` job learns from and is measured on, built once per process and cached.
+
+- The training set: for each training view, `rows_per_view` pixels that see geometry, their G-buffer
+  inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from.
+- The test set: every pixel of the near and far held-out views with indirect rows, so the indirect ground
+  truth under any held-out lighting is a dot product.
+- The box of the hash grid: what the camera sees from every view, padded.
+
+Everything is a function of (scene, config, seed).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from workers.models.prt.config import PrtConfig
+from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
+from workers.models.prt.lighting import relit_tracer, uniform_cube
+from workers.models.prt.transport import TransportRows, trace_rows
+from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays, trajectory_cameras
+from workers.nn.haar import cubemap_wavelets
+from workers.render.integrator import PathTracer
+from workers.scene.reference import SceneRef
+from workers.scene.spec import Camera
+
+BOX_PADDING = 0.02  # of the box's diagonal, around every point a view sees
+PIXEL_MAPS = ("uniform", "glossy", "transport_detail")
+CACHE_SIZE = 8  # traced sets and tracers kept per process (a job needs four)
+
+
+@dataclass
+class TrainingSet:
+    inputs: SurfaceInputs  # (P,) pixels, all hitting geometry
+    rows: np.ndarray  # (P, 6 R^2, 3) float32 indirect transport
+    box: np.ndarray  # (2, 3)
+    map_weights: dict[str, np.ndarray]  # pixel map -> (P,) sampling weights
+
+
+@dataclass
+class TestView:
+    name: str  # "near_0", "far_1", ...
+    camera: Camera
+    inputs: SurfaceInputs  # every pixel, row-major
+    rows: TransportRows  # indirect
+
+
+_cache: dict[tuple, object] = {}
+_lock = threading.Lock()
+
+
+def cached(key: tuple, build):
+    with _lock:
+        if key in _cache:
+            return _cache[key]
+    value = build()
+    with _lock:
+        while len(_cache) >= CACHE_SIZE:
+            _cache.pop(next(iter(_cache)))
+        _cache[key] = value
+    return value
+
+
+# What the traced data depends on: changing the network or the training loop reuses it.
+TRACING_FIELDS = {
+    "cube_size",
+    "image_size",
+    "rows_per_view",
+    "row_spp",
+    "test_spp",
+    "max_depth",
+    "probe_spp",
+    "cameras",
+}
+
+
+def tracing_key(what: str, scene: SceneRef, config: PrtConfig, seed: int) -> tuple:
+    return (what, scene.content_key, str(scene.folder), config.model_dump_json(include=TRACING_FIELDS), seed)
+
+
+def transport_tracer(scene: SceneRef, config: PrtConfig) -> PathTracer:
+    """The scene under a white cube map: the tracer every row is binned from (built once per process)."""
+    key = ("tracer", scene.content_key, str(scene.folder), config.cube_size)
+    return cached(key, lambda: relit_tracer(scene.compiled(), uniform_cube(config.cube_size)))
+
+
+def cameras(scene: SceneRef, config: PrtConfig) -> dict[str, list[Camera]]:
+    return trajectory_cameras(scene.spec.camera, config.cameras, config.image_size)
+
+
+def scene_box(scene: SceneRef, config: PrtConfig) -> np.ndarray:
+    """The hash grid's box: every first hit of every (training and test) view's pixel centres, padded."""
+
+    def build():
+        tracer = transport_tracer(scene, config)
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for camera in (c for views in cameras(scene, config).values() for c in views):
+            rec = tracer.first_hits(*pixel_rays(camera))
+            if rec.hit.any():
+                lo = np.minimum(lo, rec.position[rec.hit].min(0))
+                hi = np.maximum(hi, rec.position[rec.hit].max(0))
+        if not np.isfinite(lo).all():
+            raise ValueError("scene: no camera of the trajectory sees any geometry")
+        pad = BOX_PADDING * max(float(np.linalg.norm(hi - lo)), 1e-6)
+        return np.stack([lo - pad, hi + pad])
+
+    return cached(tracing_key("box", scene, config, 0), build)
+
+
+def training_set(scene: SceneRef, config: PrtConfig, seed: int, objects: tuple[int, ...]) -> TrainingSet:
+    """Rows of the pixels on `objects` (the modelled ones, `probe`)."""
+    key = (*tracing_key("train", scene, config, seed), objects)
+    return cached(key, lambda: _build_training_set(scene, config, seed, objects))
+
+
+def _build_training_set(
+    scene: SceneRef, config: PrtConfig, seed: int, objects: tuple[int, ...]
+) -> TrainingSet:
+    tracer = transport_tracer(scene, config)
+    rng = np.random.default_rng([seed, 15])
+    inputs, rows = [], []
+    for camera in cameras(scene, config)[TRAIN]:
+        origins, directions = pixel_rays(camera)
+        surfaces = surface_inputs(tracer, origins, directions)
+        seen = np.flatnonzero(surfaces.modelled(np.asarray(objects, np.int64)))
+        if len(seen) == 0:
+            continue
+        chosen = rng.choice(seen, min(config.rows_per_view, len(seen)), replace=False)
+        traced = trace_rows(
+            tracer,
+            origins[chosen],
+            directions[chosen],
+            config.row_spp,
+            config.cube_size,
+            rng,
+            config.max_depth,
+        )
+        inputs.append(surfaces.take(chosen))
+        rows.append(traced.indirect.astype(np.float32))
+    if not inputs:
+        raise ValueError("scene: no training view sees an object whose indirect light is modelled")
+    merged = SurfaceInputs(
+        *(np.concatenate([getattr(i, k) for i in inputs]) for k in SurfaceInputs.__dataclass_fields__)
+    )
+    all_rows = np.concatenate(rows)
+    return TrainingSet(
+        merged, all_rows, scene_box(scene, config), _pixel_maps(merged, all_rows, config.cube_size)
+    )
+
+
+def _pixel_maps(inputs: SurfaceInputs, rows: np.ndarray, size: int) -> dict[str, np.ndarray]:
+    """Sec. 5's pixel maps, as far as sparse rows allow: uniform; ks (1 - sigma), where glossy
+    interreflections are; and the energy of each row's Haar detail coefficients, where indirect light
+    changes most with the lighting (standing in for the paper's variance-across-views and high-frequency
+    maps, which need whole images)."""
+    glossy = inputs.ks.mean(1) * (1 - np.clip(inputs.roughness, 0, 1))
+    coefficients = cubemap_wavelets(torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double())
+    coefficients = coefficients.reshape(len(rows), 6, size, size, 3)
+    coefficients[:, :, 0, 0] = 0  # drop the scaling functions: what is left varies with direction
+    detail = coefficients.square().sum(dim=(1, 2, 3, 4)).sqrt().numpy()
+    return {"uniform": np.ones(len(rows)), "glossy": glossy, "transport_detail": detail}
+
+
+def test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
+    return cached(tracing_key("test", scene, config, seed), lambda: _build_test_views(scene, config, seed))
+
+
+def _build_test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
+    tracer = transport_tracer(scene, config)
+    rng = np.random.default_rng([seed, 16])
+    views = []
+    by_split = cameras(scene, config)
+    for split in (NEAR, FAR):
+        for number, camera in enumerate(by_split[split]):
+            origins, directions = pixel_rays(camera)
+            rows = trace_rows(
+                tracer, origins, directions, config.test_spp, config.cube_size, rng, config.max_depth
+            )
+            views.append(
+                TestView(f"{split}_{number}", camera, surface_inputs(tracer, origins, directions), rows)
+            )
+    return views

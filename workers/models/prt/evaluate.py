@@ -1,0 +1,106 @@
+"""Held-out figures of a trained `prt` model (Table 1's layout): PSNR and SSIM of the full frame and of
+the indirect light alone, and FLIP of the full frame, on near and far test views under lightings never
+trained on. The indirect ground truth is each test pixel's binned transport dotted with the lighting
+(`transport`); the direct ground truth is path-traced with importance sampling of the lighting at `test_spp`
+(rows are traced with a lighting-independent, near-uniform sampler: under a sun they are far noisier for
+direct light than importance sampling). The model's frame is its own path-traced direct light at
+`evaluation_spp` plus predicted indirect (`frame`). The trivial baseline is the same direct light with no
+indirect at all."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from workers.models.prt.config import PrtConfig
+from workers.models.prt.data import TestView, test_views
+from workers.models.prt.frame import DIRECT_DEPTH, Frame, render_frame
+from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.network import PrtNetwork
+from workers.models.prt.source import unit_mean
+from workers.nn.metrics import flip, psnr, ssim
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.scene.reference import SceneRef
+
+TRUTH_SEED = 1000  # the direct ground truth's noise is independent of the frame's
+
+
+@dataclass
+class Case:
+    view: str
+    lighting: str
+    truth_full: np.ndarray
+    truth_indirect: np.ndarray
+    frame: Frame
+
+    def figures(self) -> dict[str, float]:
+        no_indirect = np.zeros_like(self.truth_indirect)
+        return {
+            "psnr_full": psnr(self.truth_full, self.frame.image),
+            "psnr_indirect": psnr(self.truth_indirect, self.frame.indirect),
+            "ssim_full": ssim(self.truth_full, self.frame.image),
+            "ssim_indirect": ssim(self.truth_indirect, self.frame.indirect),
+            "flip_full": flip(self.truth_full, self.frame.image),
+            "baseline_psnr_full": psnr(self.truth_full, self.frame.direct),
+            "baseline_psnr_indirect": psnr(self.truth_indirect, no_indirect),
+            "baseline_flip_full": flip(self.truth_full, self.frame.direct),
+            "seconds_per_frame": self.frame.seconds,
+        }
+
+
+def truth(
+    view: TestView, cube: np.ndarray, tracer: PathTracer, spp: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The view's full and indirect images (H, W, 3) float32 under cube map `cube` (`tracer` renders it)."""
+    camera = view.camera
+    indirect = view.rows.radiance(cube, ("indirect",)).reshape(camera.height, camera.width, 3)
+    settings = RenderSettings(
+        spp=spp, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed + TRUTH_SEED
+    )
+    direct = render(tracer, settings, view=camera).image
+    return (direct + indirect).astype(np.float32), indirect.astype(np.float32)
+
+
+def held_out_cases(
+    model: PrtNetwork,
+    box: np.ndarray,
+    objects: np.ndarray,
+    scene: SceneRef,
+    config: PrtConfig,
+    seed: int,
+    k: int | None = None,
+) -> list[Case]:
+    """Every (test view, held-out lighting) pair, lightings at unit mean radiance."""
+    cases = []
+    views = test_views(scene, config, seed)
+    for name, env in held_out_lightings(config.lighting, seed).items():
+        cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
+        tracer = relit_tracer(scene.compiled(), cube)
+        for view in views:
+            full, indirect = truth(view, cube, tracer, config.test_spp, seed)
+            frame = render_frame(
+                model, box, objects, tracer, cube, view.camera,
+                k=k or config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=seed,
+            )  # fmt: skip
+            cases.append(Case(view.name, name, full, indirect, frame))
+    return cases
+
+
+def summarise(cases: list[Case]) -> dict[str, float]:
+    """Means over all cases, over near and far views apart (`near.psnr_full`, ...) and per lighting
+    (`sunset.psnr_full`, ...)."""
+    out: dict[str, float] = {}
+    groups = {"": cases}
+    for split in ("near", "far"):
+        chosen = [c for c in cases if c.view.startswith(split)]
+        if chosen:
+            groups[f"{split}."] = chosen
+    for lighting in dict.fromkeys(c.lighting for c in cases):
+        groups[f"{lighting}."] = [c for c in cases if c.lighting == lighting]
+    for prefix, group in groups.items():
+        figures = [c.figures() for c in group]
+        for key in figures[0]:
+            out[f"{prefix}{key}"] = float(np.mean([f[key] for f in figures]))
+    return out

@@ -1,0 +1,87 @@
+"""A relit frame (Algorithm 1): G-buffer from a 1-spp raycast, the K wavelets of the lighting with the
+largest area-weighted magnitude, B = sum_k L_k T_k from the network at every pixel that sees geometry
+(pixels that see the environment get no indirect light: they are masked, not learned), plus direct light
+path-traced at the first hit (next-event estimation and BSDF-sampled escapes: `max_depth` 2), which also
+draws the environment where camera rays escape."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
+from workers.models.prt.network import PrtNetwork
+from workers.models.prt.selection import run_time_selection
+from workers.models.prt.views import pixel_rays
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.scene.spec import Camera
+
+DIRECT_DEPTH = 2  # camera segment + one bounce: emitters seen, NEE and BSDF-sampled escapes at the first hit
+
+
+@dataclass
+class Frame:
+    image: np.ndarray  # (H, W, 3) float32: direct + indirect
+    direct: np.ndarray
+    indirect: np.ndarray
+    seconds: float  # the whole frame
+    network_seconds: float  # selection and network only
+
+
+def predict_indirect(
+    model: PrtNetwork,
+    inputs: SurfaceInputs,
+    box: np.ndarray,
+    objects: np.ndarray,
+    cube: np.ndarray,
+    k: int,
+    weighting: str,
+) -> np.ndarray:
+    """Indirect radiance (N, 3) float32 of every pixel under `cube`: 0 where the camera ray escapes and on
+    objects not modelled."""
+    out = np.zeros((len(inputs.hit), 3), np.float32)
+    seen = np.flatnonzero(inputs.modelled(objects))
+    if len(seen) == 0:
+        return out
+    chosen = run_time_selection(cube, k, weighting)
+    device = next(model.parameters()).device
+    tensors = {name: t.to(device) for name, t in inputs.take(seen).tensors(box).items()}
+    with torch.inference_mode():
+        b = model(tensors, chosen.indices.to(device), chosen.values.float().to(device))
+    out[seen] = b.float().cpu().numpy()
+    return out
+
+
+def render_frame(
+    model: PrtNetwork,
+    box: np.ndarray,
+    objects: np.ndarray,
+    tracer: PathTracer,
+    cube: np.ndarray,
+    camera: Camera,
+    *,
+    k: int,
+    weighting: str,
+    spp: int,
+    seed: int = 0,
+    threads: int = 1,
+) -> Frame:
+    """The frame through `camera`: `tracer` lights the scene for the direct light (its environment is the
+    lighting, at whatever resolution) and `cube` is the same lighting as the network's cube map."""
+    start = time.perf_counter()
+    origins, directions = pixel_rays(camera)
+    inputs = surface_inputs(tracer, origins, directions)
+    network_start = time.perf_counter()
+    indirect = predict_indirect(model, inputs, box, objects, cube, k, weighting).reshape(
+        camera.height, camera.width, 3
+    )
+    network_seconds = time.perf_counter() - network_start
+    settings = RenderSettings(
+        spp=spp, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed, threads=threads
+    )
+    direct = render(tracer, settings, view=camera).image
+    return Frame(direct + indirect, direct, indirect, time.perf_counter() - start, network_seconds)

@@ -1,0 +1,86 @@
+"""What a scene needs from `prt`: the cube map and K, the hash grid's box, which objects' indirect light
+is modelled (a short probe path trace), the memory of S, W, U and f, and the cost.
+
+The probe (`probe`) decides which objects' indirect light is modelled.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from workers.models.prt.config import PrtConfig
+from workers.models.prt.data import scene_box
+from workers.models.prt.probe import probe_objects
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.reference import SceneRef
+
+# Measured on the default preset's env_lit_objects job, 2-core CPU under a load of ~15 (bench_prt): 2.2M
+# binned paths in ~55 s; 2000 steps of 128 pixels x 96 wavelets in 481 s.
+PATHS_PER_SECOND = 40_000.0
+STEP_PAIRS_PER_SECOND = 50_000.0  # pixel-wavelet pairs through f per second, forward and backward
+BYTES_PER_PARAMETER = 2  # float16 as stored
+
+
+def parameter_counts(config: PrtConfig) -> dict[str, int]:
+    """Parameters of S (hash table), W, U and f."""
+    geometry = config.grid.geometry(3)
+    table = sum(
+        min(geometry.vertices_per_side(level) ** 3, 2**config.grid.log2_table_size)
+        for level in range(geometry.n_levels)
+    )
+    m = config.grid.levels * config.grid.features_per_level
+    inputs = m + (config.directions.degree + 1) ** 2 + 10
+    widths = [inputs] + [config.mlp.width] * config.mlp.depth + [3]
+    f = sum(a * b + b for a, b in itertools.pairwise(widths))
+    return {"S": table * config.grid.features_per_level, "W": config.n_wavelets * m, "U": m * m, "f": f}
+
+
+def plan(scene: SceneRef, config: PrtConfig) -> Plan:
+    choices = probe_objects(scene, config)
+    box = scene_box(scene, config)
+    counts = parameter_counts(config)
+    sizes = ", ".join(f"{name} {n * BYTES_PER_PARAMETER / 2**20:.2f} MiB" for name, n in counts.items())
+    r = config.cube_size
+    row_bytes = 6 * r * r * 3 * 4
+    rows = config.cameras.train_views * config.rows_per_view
+    items = [
+        PlanItem(name=c.name, choice="modelled" if c.modelled else "direct only", reason=c.reason)
+        for c in choices
+    ]
+    items += [
+        PlanItem(
+            name="lighting",
+            choice=f"cube map 6 x {r}^2 ({6 * r * r} Haar wavelets), K = {config.wavelets} per frame",
+            reason=f"{config.selection}-weighted selection; training uses {config.train_top_wavelets} "
+            f"largest + {config.train_uniform_wavelets} uniform wavelets of a fresh lighting every step",
+        ),
+        PlanItem(
+            name="hash grid box",
+            choice=f"{np.round(box[0], 3).tolist()} to {np.round(box[1], 3).tolist()}",
+            reason="every surface point a training or test view sees, padded",
+        ),
+        PlanItem(
+            name="memory",
+            choice=f"{sum(counts.values()) * BYTES_PER_PARAMETER / 2**20:.2f} MiB as float16",
+            reason=f"{sizes}; {config.grid.describe()}, {config.mlp.describe()}",
+        ),
+        PlanItem(
+            name="ground truth",
+            choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB)",
+            reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
+            f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting",
+        ),
+    ]
+    test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2
+    paths = rows * config.row_spp + test_pixels * config.test_spp
+    pairs = (
+        config.train.steps
+        * config.pixels_per_step
+        * (config.train_top_wavelets + config.train_uniform_wavelets)
+    )
+    seconds = paths / PATHS_PER_SECOND + pairs / STEP_PAIRS_PER_SECOND
+    modelled = sum(c.modelled for c in choices)
+    summary = f"indirect light of {modelled} of {len(choices)} objects under any lighting; {rows} rows"
+    return Plan(items=items, estimated_seconds=seconds, summary=summary)

@@ -1,0 +1,84 @@
+"""Training batches of the `prt` kind (Sec. 5): every batch draws a fresh lighting from the training
+distribution, takes its Haar transform and picks wavelets (largest + uniform), then samples pixels from the
+pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L.
+Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss).
+Batch i is a pure function of (seed, i)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from workers.models.prt.config import PrtConfig
+from workers.models.prt.data import PIXEL_MAPS, TrainingSet, training_set
+from workers.models.prt.lighting import lighting_cube, training_lighting
+from workers.models.prt.probe import modelled_objects
+from workers.models.prt.selection import training_selection
+from workers.nn.haar import cubemap_wavelets
+from workers.render.sampling import luminance
+from workers.runtime.sources import Batch, batch_rng
+from workers.runtime.threads import torch_threads
+from workers.scene.reference import SceneRef
+
+
+@dataclass(frozen=True)
+class PrtSourceConfig:
+    scene: SceneRef
+    prt: PrtConfig
+
+
+def unit_mean(cube: np.ndarray) -> np.ndarray:
+    """The cube map scaled to mean luminance 1 (a black map stays black)."""
+    mean = float(luminance(cube.reshape(-1, 3)).mean())
+    return cube / mean if mean > 0 else cube
+
+
+def wavelet_transport(rows: np.ndarray, wavelets: torch.Tensor, size: int) -> torch.Tensor:
+    """Each pixel's transport of the selected wavelets [P, K, 3]: the Haar transform of its row (exact per
+    wavelet, as noisy as the row; what the paper could not afford to supervise)."""
+    faces = torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double()
+    with torch_threads(1):
+        coefficients = cubemap_wavelets(faces).reshape(len(rows), 6 * size * size, 3)
+    return coefficients[:, wavelets].float()
+
+
+def sample_pixels(data: TrainingSet, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n pixel indices, an equal share (the first map takes the remainder) from each pixel map."""
+    shares = np.full(len(PIXEL_MAPS), n // len(PIXEL_MAPS))
+    shares[0] += n - shares.sum()
+    picks = []
+    for name, share in zip(PIXEL_MAPS, shares, strict=True):
+        weights = data.map_weights[name]
+        total = float(weights.sum())
+        p = weights / total if total > 0 else None  # a map that is zero everywhere falls back to uniform
+        picks.append(rng.choice(len(weights), share, p=p))
+    return np.concatenate(picks)
+
+
+class PrtSource:
+    def __init__(self, config: PrtSourceConfig, seed: int) -> None:
+        self.config = config
+        self.seed = seed
+        self.objects = modelled_objects(config.scene, config.prt)
+        self.data = training_set(config.scene, config.prt, seed, self.objects)
+
+    def batch(self, index: int) -> Batch:
+        c = self.config.prt
+        rng = batch_rng(self.seed, index)
+        env = training_lighting(c.lighting, rng)
+        with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
+            cube = unit_mean(lighting_cube(env, c.cube_size, c.lighting.map_width))
+            chosen = training_selection(cube, c.train_top_wavelets, c.train_uniform_wavelets, rng)
+        pixels = sample_pixels(self.data, c.pixels_per_step, rng)
+        target = np.einsum("pjc,jc->pc", self.data.rows[pixels].astype(np.float64), cube.reshape(-1, 3))
+        batch = self.data.inputs.take(pixels).tensors(self.data.box)
+        batch.update(
+            wavelets=chosen.indices.long(),
+            coefficients=chosen.values.float(),
+            target=torch.from_numpy(target.astype(np.float32)),
+        )
+        if c.transport_weight > 0:
+            batch["transport"] = wavelet_transport(self.data.rows[pixels], chosen.indices, c.cube_size)
+        return batch
