@@ -47,6 +47,13 @@ class TrainedKindConfig(KindConfig):
         le=1 << 20,
         description="spp of the converged path-traced image the report measures against",
     )
+    torch_threads: int | None = Field(
+        None,
+        ge=1,
+        le=256,
+        description="torch's intra-op threads while the job runs (None: the process's setting); kinds of "
+        "small networks set 1, since extra threads only busy-wait on their tiny ops",
+    )
 
     @model_validator(mode="after")
     def _reference_converges_further(self) -> TrainedKindConfig:

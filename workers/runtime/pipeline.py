@@ -25,6 +25,7 @@ from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.report import TimedImage, build_report, parameter_bytes
 from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
+from workers.runtime.threads import torch_threads
 from workers.runtime.training import Phase, Progress, TrainConfig, TrainResult, train_phases
 from workers.runtime.view import PathTracedView
 from workers.scene.image_io import write_png
@@ -86,7 +87,16 @@ class Method(Protocol):
 
 
 def run_method(method: Method, ctx: JobContext) -> RunOutput:
-    """Train, export and measure a kind's method as one job (the module docstring lists the steps)."""
+    """Train, export and measure a kind's method as one job (the module docstring lists the steps), with
+    the config's `torch_threads` for the job's duration only."""
+    config: TrainedKindConfig = ctx.config
+    if config.torch_threads is None:
+        return _run_method(method, ctx)
+    with torch_threads(config.torch_threads):
+        return _run_method(method, ctx)
+
+
+def _run_method(method: Method, ctx: JobContext) -> RunOutput:
     config: TrainedKindConfig = ctx.config
     trainables = method.trainables(ctx)
     trained = _train_all(ctx, trainables, config.samplers)

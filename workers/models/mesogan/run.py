@@ -52,9 +52,6 @@ class MesoganMethod:
         config: MesoganConfig = ctx.config
         covering(ctx.scene.compiled(), config.surfaces, config.shell_height, config.texel)  # fail early
         spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), ctx.seed)
-        # The GAN's ops are small: more intra-op threads only busy-wait (a step took 0.3 s on one thread
-        # and 3 s on two on the loaded 2-core CPU), so training and its renders keep to one.
-        torch.set_num_threads(1)
         torch.manual_seed(ctx.seed)
         model = MesoGAN(config)
         return [Trainable(model, phases(model), spec, config.train, stored_dtype=artifact.STORAGE_DTYPE)]

@@ -36,9 +36,6 @@ class PrtMethod:
 
     def trainables(self, ctx: JobContext) -> list[Trainable]:
         config: PrtConfig = ctx.config
-        # Small networks on a shared CPU: torch's extra intra-op threads busy-wait (a quick-preset step took
-        # 0.28 s with 2 threads and 0.027 s with 1 on the loaded 2-core machine).
-        torch.set_num_threads(config.torch_threads)
         for choice in probe_objects(ctx.scene, config):
             ctx.log(f"{choice.name}: {choice.reason}")
         spec = SourceSpec(PrtSource, PrtSourceConfig(ctx.scene, config), ctx.seed)
