@@ -157,7 +157,8 @@ class Scheduler:
         except Exception as error:  # Ray refused the actor: the cluster's fault, not the job's
             self._finish(job.id, JobOutcome(state="failed", error=str(error), infrastructure_failure=True))
             return
-        self.jobs.append_events(job.id, [("log", {"message": message, "attempt": job.attempts})])
+        started = {"message": message, "attempt": job.attempts, "scheduler": self.settings.owner}
+        self.jobs.append_events(job.id, [("log", started)])
 
     def _spec(self, job: Job) -> JobSpec:
         """Everything the driver reads or writes is in the store, so it may run on any node."""
