@@ -25,6 +25,11 @@ from tests.support.s3 import free_port
 RAY = str(Path(sys.executable).with_name("ray"))
 START_TIMEOUT_S = 120
 STOP_TIMEOUT_S = 20
+START_ATTEMPTS = 3
+
+
+class NodeDidNotStart(RuntimeError):
+    pass
 
 
 @dataclass
@@ -94,14 +99,34 @@ class LocalCluster:
         return {**self.env, "RAY_ADDRESS": self.address}
 
     def start_head(self, cpus: int) -> RayNode:
-        port = free_port()
-        self.address = f"127.0.0.1:{port}"
-        args = ["--head", f"--port={port}", "--include-dashboard=false"]
-        args.append(f"--ray-client-server-port={free_port()}")
-        return self._start("head", cpus, args, hidden=())
+        def head_args() -> list[str]:
+            port = free_port()
+            self.address = f"127.0.0.1:{port}"
+            return [
+                "--head",
+                f"--port={port}",
+                "--include-dashboard=false",
+                f"--ray-client-server-port={free_port()}",
+            ]
+
+        return self._start_retrying("head", cpus, head_args, hidden=())
 
     def add_node(self, name: str, cpus: int, hidden: tuple[Path, ...] = ()) -> RayNode:
-        return self._start(name, cpus, [f"--address={self.address}"], hidden)
+        return self._start_retrying(name, cpus, lambda: [f"--address={self.address}"], hidden)
+
+    def _start_retrying(self, name: str, cpus: int, args, hidden: tuple[Path, ...]) -> RayNode:
+        """`ray start` gives a raylet 30 s to register, which a machine busy with other work can miss: a
+        node that did not start is tried again, up to START_ATTEMPTS."""
+        for attempt in range(1, START_ATTEMPTS + 1):
+            try:
+                return self._start(name, cpus, args(), hidden)
+            except NodeDidNotStart:
+                if attempt == START_ATTEMPTS:
+                    raise
+                failed = self.nodes.pop()
+                failed.stop()
+                failed.folder.rename(failed.folder.with_name(f"{name}-failed-{attempt}"))
+        raise AssertionError("unreachable")
 
     def _start(self, name: str, cpus: int, args: list[str], hidden: tuple[Path, ...]) -> RayNode:
         folder = self.folder / name
@@ -132,7 +157,7 @@ class LocalCluster:
         while not node.started():
             if process.poll() is not None or time.monotonic() > deadline:
                 log = (folder / "node.log").read_text()[-3000:]
-                raise RuntimeError(f"Ray node {name} did not start:\n{log}")
+                raise NodeDidNotStart(f"Ray node {name} did not start:\n{log}")
             time.sleep(0.2)
         return node
 
