@@ -52,9 +52,9 @@ def store_throughput(s3) -> BenchSection:
                 digest = store.put_file(source)
                 store.delete(digest)  # the next put writes again instead of finding it stored
 
+            put_s = median_seconds(put, repeats=REPEATS, warmup=0)
             store = BlobStore(url)
             digest = store.put_file(source)
-            put_s = median_seconds(put, repeats=REPEATS, warmup=0)
             get_s = median_seconds(
                 lambda s=store, d=digest: s.download(d, Path(root) / "out.bin"), REPEATS, 0
             )
