@@ -175,6 +175,9 @@ def progress_after(job_events: list[dict], marker: str) -> list[int]:
 
 
 def test_a_job_with_its_samplers_on_the_second_node_reads_the_scene_from_the_bucket(scaleout, api):
+    server_file = scaleout.server_root / "api" / "visible-to-the-server-only"
+    server_file.write_text("only the server's machine sees this")
+    assert scaleout.head.sees(server_file) and not scaleout.worker.sees(server_file)
     with client_of(api) as client:
         asset_id = upload_blob_scene(client)
         job = submit(client, kind="render", scene=asset_id, preset="quick", config={"samplers": 2})

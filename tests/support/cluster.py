@@ -60,6 +60,10 @@ class RayNode:
                     return pid
         raise LookupError(f"node {self.name} has no raylet running")
 
+    def sees(self, path: Path) -> bool:
+        """Whether `path` exists as the node's raylet sees it (in its own mount namespace)."""
+        return (Path(f"/proc/{self.raylet_pid()}/root") / path.relative_to("/")).exists()
+
     def kill_raylet(self) -> None:
         os.kill(self.raylet_pid(), signal.SIGKILL)
 
