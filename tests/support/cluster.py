@@ -233,14 +233,15 @@ class ServeReplica:
         except httpx.TransportError:
             return False
 
-    def stop(self) -> None:
-        """SIGTERM (the scheduler stops and leaves its jobs RUNNING for the next start), then its session."""
+    def stop(self, grace_s: float = STOP_TIMEOUT_S) -> None:
+        """SIGTERM (the scheduler stops and leaves its jobs RUNNING for the next start), SIGKILL after
+        `grace_s`, then whatever is left of its session."""
         if self.process is None:
             return
         if self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout=STOP_TIMEOUT_S)
+                self.process.wait(timeout=grace_s)
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
