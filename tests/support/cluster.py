@@ -44,13 +44,14 @@ class RayNode:
         return self.folder / "scenes"
 
     def pids(self) -> list[int]:
-        """Every live process of the node (its session: `ray start` and all it started)."""
+        """Every live process of the node (its session: `ray start` and all it started); zombies, which
+        only wait for a reaper, do not count."""
         found = []
-        for entry in Path("/proc").iterdir():
-            if entry.name.isdigit():
-                with contextlib.suppress(OSError, ValueError):
-                    if os.getsid(int(entry.name)) == self.process.pid:
-                        found.append(int(entry.name))
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            with contextlib.suppress(OSError, ValueError, IndexError):
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+                if int(fields[3]) == self.process.pid and fields[0] != "Z":  # field 6 of stat: session
+                    found.append(int(stat.parent.name))
         return found
 
     def raylet_pid(self) -> int:
