@@ -42,6 +42,7 @@ lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
+	$(VENV)/bin/hadolint docker/Dockerfile
 
 ## Regenerate the gRPC stubs from proto/ into the client package (the server imports them from there).
 PROTO_OUT ?= clients/python

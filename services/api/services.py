@@ -40,7 +40,7 @@ class Services:
         db = Database(settings.db_url, settings.database_schema)
         jobs = JobRepository(db)
         blobs = BlobStore(settings.store)
-        artifacts = ArtifactStore(blobs, settings.store, checkpoint_root=data_dir / "checkpoints")
+        artifacts = ArtifactStore(blobs, settings.store)  # checkpoints in the store: any node resumes a job
         scenes = SceneResolver(blobs, settings.store, data_dir / "scenes")
         metrics = ServiceMetrics(jobs.count_by_state)
         scheduler_settings = SchedulerSettings(

@@ -1,15 +1,16 @@
 """Artifacts: files published from a finished job, addressed by their manifest's id.
 
 The manifest is stored as a blob (its digest is the artifact id, so reading it re-verifies
-it) and indexed under `<root>/manifests/<hex>.json`. Checkpoints are mutable, so they live
-outside the content-addressed store, under `<checkpoint root>/<job_id>/`, until the job ends.
+it) and indexed under `<root>/manifests/<hex>.json`. Checkpoints and a job's outputs are mutable,
+so they live outside the content-addressed store, under `<root>/checkpoints/<job_id>/` and
+`<root>/outputs/<job_id>/`, until the job ends. Both are in the store itself (`s3://` at scale), so a
+driver on any node writes them and a job resumes wherever it runs next.
 """
 
 from __future__ import annotations
 
 import json
 import re
-import shutil
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,20 @@ from services.artifacts.store import BlobNotFound, BlobStore, indexed_digests, w
 _JOB_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 
+def checked_job_id(job_id: str) -> str:
+    """`job_id`, which becomes a folder name in the store: ValueError unless it is one plain name."""
+    if not isinstance(job_id, str) or _JOB_ID.fullmatch(job_id) is None:
+        raise ValueError(f"not a job id: {job_id!r}")
+    return job_id
+
+
+def _remove_tree(fs, path: str) -> None:
+    """Remove `path` and everything below it; nothing there is fine (collection may run twice)."""
+    fs.invalidate_cache(path)
+    if fs.exists(path):
+        fs.rm(path, recursive=True)
+
+
 class ArtifactNotFound(LookupError):
     def __init__(self, artifact_id: str):
         self.artifact_id = artifact_id
@@ -40,9 +55,9 @@ class FileNotFoundInArtifact(LookupError):
 
 
 class ArtifactStore:
-    """Manifests and checkpoints under `root_url`; file contents in `blobs`.
+    """Manifests, checkpoints and job outputs under `root_url`; file contents in `blobs`.
 
-    `checkpoint_root` defaults to `<root>/checkpoints` and must be local (workers write there).
+    `checkpoint_root` (a local path or fsspec URL) defaults to `<root>/checkpoints`.
     """
 
     def __init__(self, blobs: BlobStore, root_url: str, checkpoint_root: str | Path | None = None):
@@ -50,11 +65,10 @@ class ArtifactStore:
         self.root_url = str(root_url)
         self.fs, root = fsspec.core.url_to_fs(self.root_url)
         self.root = root.rstrip("/")
-        if checkpoint_root is None:
-            if not isinstance(self.fs, LocalFileSystem):
-                raise ValueError("checkpoints need a local folder: pass checkpoint_root for a remote store")
-            checkpoint_root = Path(self.root) / "checkpoints"
-        self.checkpoint_root = Path(checkpoint_root)
+        self.checkpoint_fs, checkpoint_path = fsspec.core.url_to_fs(
+            str(checkpoint_root) if checkpoint_root is not None else self._url("checkpoints")
+        )
+        self.checkpoint_root = checkpoint_path.rstrip("/")
 
     # ------------------------------------------------------------------ artifacts
 
@@ -121,21 +135,42 @@ class ArtifactStore:
     # ------------------------------------------------------------------ checkpoints
 
     def checkpoint_dir(self, job_id: str) -> str:
-        """The (created) local folder for `job_id`'s checkpoints."""
-        path = self._checkpoint_path(job_id)
-        path.mkdir(parents=True, exist_ok=True)
-        return str(path)
+        """Where `job_id`'s checkpoints live (created): a local path, or a URL every node can reach."""
+        path = f"{self.checkpoint_root}/{checked_job_id(job_id)}"
+        self.checkpoint_fs.makedirs(path, exist_ok=True)
+        return (
+            path
+            if isinstance(self.checkpoint_fs, LocalFileSystem)
+            else self.checkpoint_fs.unstrip_protocol(path)
+        )
 
     def delete_checkpoints(self, job_id: str) -> None:
         """Garbage collection for a finished job; nothing to delete is fine."""
-        path = self._checkpoint_path(job_id)
-        if path.exists():
-            shutil.rmtree(path)
+        _remove_tree(self.checkpoint_fs, f"{self.checkpoint_root}/{checked_job_id(job_id)}")
 
-    def _checkpoint_path(self, job_id: str) -> Path:
-        if not isinstance(job_id, str) or _JOB_ID.fullmatch(job_id) is None:
-            raise ValueError(f"not a job id: {job_id!r}")
-        return self.checkpoint_root / job_id
+    # ------------------------------------------------------------------ job outputs
+
+    def output_url(self, job_id: str) -> str:
+        """Where the driver of `job_id` uploads the artifact's files before the service publishes them."""
+        return self._url(f"outputs/{checked_job_id(job_id)}")
+
+    @staticmethod
+    def local_output(url: str, download_to: Path) -> Path:
+        """A local file with the content of the uploaded output at `url`: the file itself in a local
+        store, else a download to `download_to`."""
+        fs, path = fsspec.core.url_to_fs(url)
+        if isinstance(fs, LocalFileSystem):
+            return Path(path)
+        download_to.parent.mkdir(parents=True, exist_ok=True)
+        fs.get_file(path, str(download_to))
+        return download_to
+
+    def delete_outputs(self, job_id: str) -> None:
+        _remove_tree(self.fs, f"{self.root}/outputs/{checked_job_id(job_id)}")
+
+    def _url(self, relative: str) -> str:
+        path = f"{self.root}/{relative}"
+        return path if isinstance(self.fs, LocalFileSystem) else self.fs.unstrip_protocol(path)
 
     # ------------------------------------------------------------------ garbage collection
 

@@ -193,6 +193,10 @@ class BlobStore:
             raise BlobNotFound(digest)
         return path
 
+    def blob_url(self, digest: str) -> str:
+        """The blob's fsspec URL, which a worker on any node with access to the store can read."""
+        return self.fs.unstrip_protocol(self._path(digest))
+
     def digests(self) -> Iterator[str]:
         """Every stored digest (temporary files of writes in progress are skipped)."""
         base = f"{self.root}/blobs/sha256"

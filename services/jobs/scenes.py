@@ -20,6 +20,7 @@ from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
 from workers.scene.io import load_scene, scene_from_dict
 from workers.scene.spec import SceneSpec
+from workers.scene.stored import StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"
 
@@ -67,6 +68,19 @@ class SceneResolver:
     def scene_dir(self, ref: dict[str, str]) -> Path | None:
         """The folder a driver resolves the scene's relative paths against (None without files)."""
         return self._materialized(ref["asset_id"])[0] if ref["source"] == "asset" else None
+
+    def stored_files(self, ref: dict[str, str]) -> StoredScene | None:
+        """The scene's files as a driver on any node fetches them: store URLs and digests (None without
+        files)."""
+        if ref["source"] != "asset":
+            return None
+        asset = load_asset(ref["asset_id"], self.assets_root)
+        return StoredScene(
+            key=ref["asset_id"].removeprefix(ASSET_PREFIX),
+            files={
+                e.name: StoredFile(url=self.blobs.blob_url(e.digest), digest=e.digest) for e in asset.files
+            },
+        )
 
     def _asset(self, asset_id: str) -> ResolvedScene:
         try:

@@ -157,20 +157,21 @@ class Scheduler:
         except Exception as error:  # Ray refused the actor: the cluster's fault, not the job's
             self._finish(job.id, JobOutcome(state="failed", error=str(error), infrastructure_failure=True))
             return
-        self.jobs.append_events(job.id, [("log", {"message": message, "attempt": job.attempts})])
+        started = {"message": message, "attempt": job.attempts, "scheduler": self.settings.owner}
+        self.jobs.append_events(job.id, [("log", started)])
 
     def _spec(self, job: Job) -> JobSpec:
-        scene_dir = self.scenes.scene_dir(job.scene_ref)
+        """Everything the driver reads or writes is in the store, so it may run on any node."""
         return JobSpec(
             job_id=job.id,
             kind=job.kind,
             scene=job.scene,
-            scene_dir=str(scene_dir) if scene_dir else None,
+            scene_files=self.scenes.stored_files(job.scene_ref),
             config=job.config,
             seed=job.seed,
             num_gpus=self._gpus(job),
             checkpoint_dir=self.artifacts.checkpoint_dir(job.id),
-            output_dir=str(self.settings.work_dir / job.id / "output"),
+            output_url=self.artifacts.output_url(job.id),
         )
 
     @staticmethod
@@ -222,11 +223,14 @@ class Scheduler:
             self._end(job, JobState.FAILED, "failed", error=outcome.error or "the job failed")
 
     def _succeed(self, job: Job, outcome: JobOutcome) -> None:
-        output = self.settings.work_dir / job.id / "output"
+        downloads = self.settings.work_dir / job.id / "output"
         manifest = self.artifacts.publish(
             {
-                name: (str(output / path), outcome.media_types.get(name, ""))
-                for name, path in outcome.files.items()
+                name: (
+                    str(self.artifacts.local_output(url, downloads / name)),
+                    outcome.media_types.get(name, ""),
+                )
+                for name, url in outcome.files.items()
             },
             kind=job.kind,
             job_id=job.id,
@@ -259,4 +263,5 @@ class Scheduler:
         with contextlib.suppress(KeyError):  # only jobs that reported samples/s have a gauge
             self.metrics.samples_per_s.remove(job.id, job.kind)
         self.artifacts.delete_checkpoints(job.id)
+        self.artifacts.delete_outputs(job.id)
         shutil.rmtree(self.settings.work_dir / job.id, ignore_errors=True)

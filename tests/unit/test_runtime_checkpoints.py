@@ -29,10 +29,11 @@ def test_keeps_only_the_last_k(tmp_path):
 def test_a_crashed_write_is_invisible_and_cleared(tmp_path):
     store = CheckpointStore(str(tmp_path), keep=3)
     store.save(1, files_of(1))
-    partial = tmp_path / ".partial-crashed"
+    partial = tmp_path / "step-000000007"  # a save that crashed before its commit marker
     partial.mkdir()
     (partial / "model.safetensors").write_bytes(b"half")
     assert store.steps() == [1]
+    assert store.latest() == 1
     store.save(2, files_of(2))
     assert not partial.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["step-000000001", "step-000000002"]

@@ -11,6 +11,8 @@ from __future__ import annotations
 import collections
 import contextlib
 import math
+import shutil
+import tempfile
 import threading
 import time
 import traceback
@@ -18,8 +20,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
+import fsspec
 import ray
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ValidationError, model_validator
 from ray.exceptions import (
     GetTimeoutError,
     NodeDiedError,
@@ -46,6 +49,7 @@ from workers.runtime.pipeline import run_method
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.scene.errors import SceneError
 from workers.scene.reference import SceneRef
+from workers.scene.stored import StoredScene
 
 NAMESPACE = "neuralbake"
 MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory
@@ -62,6 +66,7 @@ INFRASTRUCTURE_ERRORS = (
     RaySystemError,
 )
 SAMPLER_CPUS = 1.0
+CHUNK_BYTES = 1 << 20
 
 
 class JobSpec(BaseModel):
@@ -71,11 +76,19 @@ class JobSpec(BaseModel):
     kind: str
     scene: dict  # SceneSpec.model_dump(mode="json")
     scene_dir: str | None = None  # local directory with the scene's files (meshes, textures)
+    scene_files: StoredScene | None = None  # or the files in the store, fetched on the driver's node
     config: dict  # resolved config
     seed: int
     num_gpus: float = 0
-    checkpoint_dir: str  # the driver resumes from it if non-empty
-    output_dir: str  # the driver writes the artifact's files here
+    checkpoint_dir: str  # a local path or an fsspec URL (s3://...); the driver resumes from it if non-empty
+    output_dir: str | None = None  # the driver writes the artifact's files here (None: a private temp dir)
+    output_url: str | None = None  # then uploads them here (a store URL), for a service on another node
+
+    @model_validator(mode="after")
+    def _outputs_land_somewhere(self) -> JobSpec:
+        if self.output_dir is None and self.output_url is None:
+            raise ValueError("a job needs an output_dir or an output_url for its artifact's files")
+        return self
 
 
 class JobEvent(BaseModel):
@@ -92,7 +105,7 @@ class JobEvent(BaseModel):
 class JobOutcome(BaseModel):
     state: Literal["succeeded", "failed", "cancelled"]
     error: str | None = None
-    files: dict[str, str] = {}  # artifact file name -> absolute path of the file, inside output_dir
+    files: dict[str, str] = {}  # artifact file name -> its absolute path in output_dir, or its output_url URL
     media_types: dict[str, str] = {}  # artifact file name -> media type
     metrics: dict[str, float] = {}
     infrastructure_failure: bool = False  # True: retrying may help (a worker died); False: the job failed
@@ -127,14 +140,15 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
     def log(message: str) -> None:
         emit(JobEvent(type="log", time=time.time(), message=message))
 
+    output_dir = Path(spec.output_dir or tempfile.mkdtemp(prefix=f"nbake-{spec.job_id}-"))
     try:
         kind = get_kind(spec.kind)
         ctx = JobContext(
             job_id=spec.job_id,
-            scene=SceneRef.from_json(spec.scene, spec.scene_dir),
+            scene=SceneRef.from_json(spec.scene, spec.scene_dir, spec.scene_files),
             config=kind.config_model.model_validate(spec.config),
             seed=spec.seed,
-            output_dir=Path(spec.output_dir),
+            output_dir=output_dir,
             checkpoints=CheckpointStore(spec.checkpoint_dir, keep=2),
             reserve_samplers=sampler_reserver(spec.job_id, SAMPLER_CPUS, cancel, log),
             on_progress=lambda **fields: emit(JobEvent(type="progress", time=time.time(), **fields)),
@@ -142,6 +156,9 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
             cancel_requested=cancel,
         )
         output = run_kind(kind, ctx)
+        files = {name: path for name, (path, _) in output.files.items()}
+        if spec.output_url is not None:
+            files = upload_outputs(files, spec.output_url)
     except JobCancelled:
         return JobOutcome(state="cancelled")
     except INFRASTRUCTURE_ERRORS as error:
@@ -149,15 +166,37 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
     except Exception as error:
         emit(JobEvent(type="log", time=time.time(), message=traceback.format_exc(limit=8)))
         return JobOutcome(state="failed", error=one_line(error))
+    finally:
+        if spec.output_dir is None:
+            shutil.rmtree(output_dir, ignore_errors=True)
     return JobOutcome(
         state="succeeded",
-        files={name: path for name, (path, _) in output.files.items()},
+        files=files,
         media_types={name: media_type for name, (_, media_type) in output.files.items()},
         # A figure over an empty set (an asset no pixel sees) is NaN in the report and absent here: the
         # artifact's manifest is canonical JSON, which has no NaN.
         metrics={name: value for name, value in output.metrics.items() if math.isfinite(value)},
         warnings=output.warnings,
     )
+
+
+def upload_outputs(files: dict[str, str], output_url: str) -> dict[str, str]:
+    """Copy the artifact's files (name -> local path or URL) to `output_url`; name -> uploaded URL.
+
+    A store that fails here is the infrastructure's fault: the job is retried and resumes from its
+    checkpoints rather than failing."""
+    fs, root = fsspec.core.url_to_fs(output_url)
+    uploaded = {}
+    try:
+        for name, path in files.items():
+            target = f"{root.rstrip('/')}/{name}"
+            fs.makedirs(target.rsplit("/", 1)[0], exist_ok=True)
+            with fsspec.open(path, "rb") as source, fs.open(target, "wb") as out:
+                shutil.copyfileobj(source, out, CHUNK_BYTES)
+            uploaded[name] = fs.unstrip_protocol(target)
+    except OSError as error:
+        raise InfrastructureFailure(f"uploading the output {name!r} to the store failed: {error}") from error
+    return uploaded
 
 
 @ray.remote

@@ -7,12 +7,15 @@ consumed: a slow trainer stalls the samplers instead of letting results pile up 
 
 from __future__ import annotations
 
+import time
 from typing import Any, Protocol
 
 import numpy as np
 import ray
 import torch
 from ray.exceptions import ObjectLostError, RayActorError
+from ray.util.placement_group import placement_group_table
+from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from workers.runtime.contract import InfrastructureFailure
 from workers.runtime.resources import ResourceRequest, actor_options
@@ -22,6 +25,10 @@ SAMPLER_FAILURES = (RayActorError, ObjectLostError)
 # Samplers that keep dying on one batch (killed, out of memory, a lost node) fail the job as the cluster's
 # fault: InfrastructureFailure, which the service retries up to the job's attempts.
 REPLACEMENTS_PER_BATCH = 3
+# A reservation that lost a node is placed again when the cluster still fits it; one that is not placed
+# within this time never will be on the nodes left, so the job restarts (from its checkpoint) on them.
+RESERVATION_REPLACE_S = 15.0
+RESERVATION_POLL_S = 0.25
 
 
 class BatchStream(Protocol):
@@ -136,11 +143,27 @@ class SamplerPool:
                 self._request(index, self._least_busy_slot())
 
     def _replace(self, slot: int) -> None:
+        self._check_reservation()
         ray.kill(self.actors[slot], no_restart=True)
         self.actors[slot] = self._start_actor()
         self.replacements += 1
         for index in sorted(i for i, (_, s) in self.pending.items() if s == slot):
             self._request(index, slot)
+
+    def _check_reservation(self) -> None:
+        """A replacement in a reservation Ray cannot place again (its node left a cluster too small for
+        it) would wait forever: InfrastructureFailure instead, so the job restarts sized to the nodes left."""
+        strategy = self.actor_options.get("scheduling_strategy")
+        if not isinstance(strategy, PlacementGroupSchedulingStrategy):
+            return
+        deadline = time.monotonic() + RESERVATION_REPLACE_S
+        while placement_group_table(strategy.placement_group).get("state") != "CREATED":
+            if time.monotonic() > deadline:
+                raise InfrastructureFailure(
+                    "a node holding the job's sampler actors left the cluster and the nodes left cannot "
+                    "hold them all; the job restarts from its checkpoint on the nodes left"
+                )
+            time.sleep(RESERVATION_POLL_S)
 
     def seek(self, index: int) -> None:
         self.pending.clear()  # dropped results are freed by Ray once their references are gone

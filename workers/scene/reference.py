@@ -1,9 +1,10 @@
-"""A scene as it travels through a job: the validated spec and the folder its files live in.
+"""A scene as it travels through a job: the validated spec and where its files live.
 
-The reference is what the plan, the driver and every sampler actor receive (it pickles small: a spec and a
-path), and `compiled()` turns it into triangles once per process: compiling is cached by the scene's
-content (its JSON) and folder, so a driver that plans, trains and renders a scene, or a sampler actor that
-builds several sources over it, compiles it once.
+The reference is what the plan, the driver and every sampler actor receive (it pickles small: a spec and
+either a local folder or the files' store URLs and digests), and `compiled()` turns it into triangles once
+per process: compiling is cached by the scene's content (its JSON) and files, so a driver that plans,
+trains and renders a scene, or a sampler actor that builds several sources over it, compiles it once. A
+reference to stored files works on any node: the files are fetched into the node's cache on first use.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.io import scene_from_dict
 from workers.scene.spec import SceneSpec
+from workers.scene.stored import StoredScene
 
 COMPILED_CACHE_SIZE = 4  # scenes kept compiled per process; a driver needs one, a test process a few
 
@@ -26,15 +28,27 @@ _cache_lock = threading.Lock()
 
 @dataclass(frozen=True)
 class SceneRef:
-    """`spec`, and `folder` (a local directory) that relative file paths in it resolve against."""
+    """`spec`, and where relative file paths in it resolve: `folder` (a local directory), or `stored`
+    (files in the artifact store, fetched on the node that compiles the scene)."""
 
     spec: SceneSpec
     folder: Path | None = None
+    stored: StoredScene | None = None
 
     @classmethod
-    def from_json(cls, scene: dict, folder: str | Path | None = None) -> SceneRef:
+    def from_json(
+        cls, scene: dict, folder: str | Path | None = None, stored: StoredScene | dict | None = None
+    ) -> SceneRef:
         """A reference to a scene given as JSON (validated here: SceneError names a bad field)."""
-        return cls(scene_from_dict(scene), None if folder is None else Path(folder))
+        if isinstance(stored, dict):
+            stored = StoredScene.model_validate(stored)
+        return cls(scene_from_dict(scene), None if folder is None else Path(folder), stored)
+
+    def local_folder(self) -> Path | None:
+        """The local directory of the scene's files (fetched into this node's cache if stored)."""
+        if self.folder is None and self.stored is not None:
+            return self.stored.local_folder()
+        return self.folder
 
     @cached_property
     def content_key(self) -> str:
@@ -42,12 +56,13 @@ class SceneRef:
         return hashlib.sha256(self.spec.model_dump_json().encode()).hexdigest()
 
     def compiled(self) -> CompiledScene:
-        """The scene's triangles, compiled at most once per process for equal content and folder."""
-        key = (self.content_key, None if self.folder is None else str(self.folder))
+        """The scene's triangles, compiled at most once per process for equal content and files."""
+        files = f"stored:{self.stored.key}" if self.stored is not None and self.folder is None else None
+        key = (self.content_key, files or (None if self.folder is None else str(self.folder)))
         with _cache_lock:
             scene = _cache.get(key)
         if scene is None:
-            scene = compile_scene(self.spec, self.folder)
+            scene = compile_scene(self.spec, self.local_folder())
             with _cache_lock:
                 while len(_cache) >= COMPILED_CACHE_SIZE:
                     _cache.pop(next(iter(_cache)))
