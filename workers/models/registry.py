@@ -22,7 +22,12 @@ if TYPE_CHECKING:
     import numpy as np
 
 # One line per kind: a module exposing `KIND`, a `workers.runtime.contract.Kind` declaration.
-KIND_MODULES = ("workers.models.render", "workers.models.lsnif", "workers.models.lod")
+KIND_MODULES = (
+    "workers.models.render",
+    "workers.models.lsnif",
+    "workers.models.lod",
+    "workers.models.explore",
+)
 __all__ = ["PRESET_NAMES", "Kind", "UnknownKind", "get_inference", "get_kind", "kind_names"]
 
 

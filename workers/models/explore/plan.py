@@ -1,0 +1,103 @@
+"""What a variable scene needs from `explore`: its variables and dimensions, what stays static, which
+variables change what the camera sees, the sizes for the preset and the estimated cost.
+
+A variable "changes the view" when the camera sees a difference between the scene at its two ends (the
+others at the middle): a 16 x 16 G-buffer and a 4-spp render at each end are compared. A variable that
+moves an object the camera never sees, or lights nothing it sees, is reported as such.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workers.models.explore.config import ExploreConfig
+from workers.render.camera import PinholeCamera
+from workers.render.gbuffer import primary_gbuffers
+from workers.render.render import RenderSettings, render
+from workers.render.variable_tracer import VariableTracer
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.errors import SceneError
+from workers.scene.reference import SceneRef
+from workers.scene.variable_scene import CompiledVariableScene
+from workers.scene.variables import dimension_labels, variable_slices
+
+PROBE_SIZE = 16
+PROBE_SPP = 4
+# Seconds per path segment traced on one core, and per network evaluation (pixel x layer of width 128),
+# measured on this CPU with cornell_variable at the default preset.
+SECONDS_PER_PATH_SEGMENT = 1.5e-6
+SECONDS_PER_PIXEL_LAYER = 4e-8
+
+
+def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: str, where: slice) -> bool:
+    """Whether the camera sees a change between the variable at 0 and at 1 (others at the middle)."""
+    images = []
+    for end in (0.0, 1.0):
+        v = np.full(scene.dimensions, 0.5)
+        v[where] = end
+        state = scene.at(v)
+        path_tracer = tracer.state_tracer(state)
+        camera = state.compiled.spec.camera
+        buffers = primary_gbuffers(path_tracer, PinholeCamera(camera, PROBE_SIZE, PROBE_SIZE))
+        settings = RenderSettings(
+            spp=PROBE_SPP, width=PROBE_SIZE, height=PROBE_SIZE, max_depth=3, seed=0, threads=1
+        )
+        image = render(path_tracer, settings).image
+        images.append(np.concatenate([buffers.position, buffers.albedo, buffers.roughness, image], -1))
+    return not np.allclose(images[0], images[1], atol=1e-4)
+
+
+def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
+    spec = scene.spec
+    if not spec.variables:
+        raise SceneError(
+            "variables", "explore trains a renderer for a variable scene: name at least one variable"
+        )
+    compiled = CompiledVariableScene(spec, scene.folder)
+    tracer = VariableTracer(compiled)
+    slices = variable_slices(spec)
+    items = []
+    for variable in spec.variables:
+        labels = dimension_labels(variable)
+        seen = visible_effect(tracer, compiled, variable.name, slices[variable.name])
+        reason = f"{len(labels)} dimension(s): {', '.join(labels)}"
+        if not seen:
+            reason += "; the camera sees no change over its range (it moves or lights nothing in view)"
+        items.append(PlanItem(name=variable.name, choice=variable.type if seen else "unseen", reason=reason))
+    static = [
+        compiled.base.objects[i].name for i in range(len(compiled.base.objects)) if i not in compiled.moved
+    ]
+    items.append(
+        PlanItem(
+            name="static",
+            choice=f"{len(compiled.static_triangles)} triangles in one BVH",
+            reason=f"no variable moves {', '.join(static)}",
+        )
+    )
+    schedule = (
+        f"R {config.resolution_start} -> {config.resolution_max} by {config.resolution_step} every "
+        f"{config.resolution_every} iterations"
+        if config.exploration != "uniform"
+        else f"R {config.resolution_start} fixed (uniform baseline)"
+    )
+    items.append(
+        PlanItem(
+            name="exploration",
+            choice=f"{config.exploration}: {config.chains} chains of {config.patch}^2 patches",
+            reason=f"{schedule}; {config.spp} spp, depth {config.max_depth}; "
+            f"p_LS {config.large_step_probability}, beta {config.reuse_beta}, bootstrap {config.bootstrap}",
+        )
+    )
+    items.append(
+        PlanItem(name="network", choice=config.mlp.describe(), reason="position preconditioning, skips")
+    )
+    patches = config.chains * config.patch**2
+    render_seconds = patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT
+    # every generation renders the chains' patches and evaluates f twice per chain; reuse costs one step
+    generation_share = 0.05 + config.bootstrap / max(config.train.steps, 1)
+    network = SECONDS_PER_PIXEL_LAYER * patches * (config.mlp.depth + 1) * config.mlp.width / 128
+    seconds = config.train.steps * (min(generation_share, 1.0) * (render_seconds + 2 * network) + 3 * network)
+    summary = (
+        f"{spec.dimensions} dimension(s), {len(spec.variables)} variable(s); {config.exploration} exploration"
+    )
+    return Plan(items=items, estimated_seconds=float(seconds), summary=summary)
