@@ -433,3 +433,14 @@ def mirror_variable() -> SceneSpec:
             _LightPosition(name="light", light="light", min=(-0.5, 0.0, 0.0), max=(0.5, 0.0, 0.0)),
         ],
     )
+
+
+@builtin
+def cornell_moving_light() -> SceneSpec:
+    """The Cornell box with its ceiling light moving in x and z: the smallest variable scene (2
+    dimensions), where moving shadows and colour bleeding change with the light."""
+    base = cornell_box()
+    light = _LightPosition(name="light", light="light", min=(-0.5, 0.0, -0.5), max=(0.5, 0.0, 0.5))
+    return SceneSpec.model_validate(
+        base.model_dump() | {"name": "cornell_moving_light", "variables": [light]}
+    )

@@ -1,0 +1,83 @@
+"""The `explore` kind end to end through the job driver's `run_job` (no Ray actor): plan, train by active
+exploration, export, report; the network beats a black renderer at every fixed configuration and 1-spp
+path tracing of the report's view; the artifact serves `:render` at named variable values through the
+inference service's loader, and bad values are errors naming the field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.support.jobs import run_kind_job
+from tests.support.quality import report_failures
+from workers.models.explore.evaluate import configurations, reference_images
+from workers.models.explore.source import PatchSource, PatchSourceConfig
+from workers.models.registry import RENDER, get_inference, get_kind
+from workers.nn.metrics import dssim, mape
+from workers.runtime.report import Report
+from workers.scene.builtin import get_builtin
+from workers.scene.reference import SceneRef
+
+SEED = 5
+KIND = get_kind("explore")
+SCENE = KIND.example.scene
+CONFIG = KIND.resolve_config("quick", KIND.example.overrides)
+
+
+@pytest.fixture(scope="module")
+def job(tmp_path_factory) -> tuple[Path, object]:
+    folder = tmp_path_factory.mktemp("explore")
+    _, outcome = run_kind_job("explore", get_builtin(SCENE), folder, KIND.example.overrides, seed=SEED)
+    assert outcome.state == "succeeded", outcome.error
+    return folder / "out", outcome
+
+
+def test_the_plan_names_the_variables_what_is_static_and_the_cost():
+    plan = KIND.plan(SceneRef(get_builtin(SCENE)), CONFIG)
+    names = [item.name for item in plan.items]
+    assert {v.name for v in get_builtin(SCENE).variables} <= set(names)
+    assert "static" in names and plan.estimated_seconds > 0
+
+
+def test_the_network_beats_a_black_renderer_at_every_configuration(job):
+    out, _ = job
+    report = Report.read(str(out))
+    assert report_failures(report) == {}
+    source = PatchSource(PatchSourceConfig(SceneRef(get_builtin(SCENE)), CONFIG), SEED)
+    vectors = configurations(source.dimensions, CONFIG.evaluation_configurations, SEED)
+    tracers = [source.tracer.at(v) for v in vectors]
+    size = CONFIG.preview_size
+    references = reference_images(tracers, size, CONFIG.reference_spp, CONFIG.max_depth, SEED + 2)
+    black = [dssim(r, np.zeros_like(r)) for r in references]
+    figures = report.method_metrics
+    for i, black_dssim in enumerate(black):
+        assert figures[f"configuration_{i}.dssim"] < 0.8 * black_dssim, (i, figures, black)
+    assert figures["configurations.mape"] < 0.8 * np.mean([mape(r, np.zeros_like(r)) for r in references])
+    assert 0 < figures["exploration.acceptance_rate"] < 1
+    assert figures["exploration.final_resolution"] > CONFIG.resolution_start
+
+
+def test_the_artifact_renders_named_values_and_refuses_bad_ones(job):
+    out, _ = job
+    inference = get_inference("explore")
+    loaded = inference.load(out, "cpu")
+    params = inference.operations[RENDER].params
+    left = loaded.answer(
+        RENDER, params(values={"light": [-0.5, 0.0, 0.0]}, camera={"width": 20, "height": 12}), {}
+    )
+    image = left.arrays["image"]
+    assert image.shape == (12, 20, 3) and np.isfinite(image).all() and image.max() > 0
+    right = loaded.answer(
+        RENDER, params(values={"light": [0.45, 0.0, 0.0]}, camera={"width": 20, "height": 12}), {}
+    )
+    assert not np.allclose(image, right.arrays["image"])
+    normalised = loaded.answer(
+        RENDER, params(values={"light": [0.0, 0.5]}, normalised=True, camera={"width": 20, "height": 12}), {}
+    )
+    np.testing.assert_allclose(normalised.arrays["image"], image, atol=1e-6)
+    with pytest.raises(ValueError, match=r"^params\.values\.light: "):
+        loaded.answer(RENDER, params(values={"light": [3.0, 0.0, 0.0]}), {})
+    with pytest.raises(ValueError, match=r"^params\.values\.nope: "):
+        loaded.answer(RENDER, params(values={"nope": 1.0}), {})
