@@ -1,7 +1,7 @@
 """The `explore` kind end to end through the job driver's `run_job` (no Ray actor): plan, train by active
-exploration, export, report; the network beats a black renderer at every fixed configuration and 1-spp
-path tracing of the report's view; the artifact serves `:render` at named variable values through the
-inference service's loader, and bad values are errors naming the field."""
+exploration, export, report. A short job's artifact serves `:render` at named variable values through the
+inference service's loader, and bad values are errors naming the field; the example job's network (slow)
+beats a black renderer at every fixed configuration and 1-spp path tracing of the report's view."""
 
 from __future__ import annotations
 
@@ -26,12 +26,18 @@ SCENE = KIND.example.scene
 CONFIG = KIND.resolve_config("quick", KIND.example.overrides)
 
 
-@pytest.fixture(scope="module")
-def job(tmp_path_factory) -> tuple[Path, object]:
-    folder = tmp_path_factory.mktemp("explore")
-    _, outcome = run_kind_job("explore", get_builtin(SCENE), folder, KIND.example.overrides, seed=SEED)
+SHORT = {"bootstrap": 4, "train": {"steps": 30}, "evaluation_configurations": 1}
+
+
+def run(folder: Path, overrides: dict) -> Path:
+    _, outcome = run_kind_job("explore", get_builtin(SCENE), folder, overrides, seed=SEED)
     assert outcome.state == "succeeded", outcome.error
-    return folder / "out", outcome
+    return folder / "out"
+
+
+@pytest.fixture(scope="module")
+def short_job(tmp_path_factory) -> Path:
+    return run(tmp_path_factory.mktemp("explore-short"), SHORT)
 
 
 def test_the_plan_names_the_variables_what_is_static_and_the_cost():
@@ -41,8 +47,9 @@ def test_the_plan_names_the_variables_what_is_static_and_the_cost():
     assert "static" in names and plan.estimated_seconds > 0
 
 
-def test_the_network_beats_a_black_renderer_at_every_configuration(job):
-    out, _ = job
+@pytest.mark.slow
+def test_the_network_beats_a_black_renderer_at_every_configuration(tmp_path):
+    out = run(tmp_path, KIND.example.overrides)
     report = Report.read(str(out))
     assert report_failures(report) == {}
     source = PatchSource(PatchSourceConfig(SceneRef(get_builtin(SCENE)), CONFIG), SEED)
@@ -59,8 +66,8 @@ def test_the_network_beats_a_black_renderer_at_every_configuration(job):
     assert figures["exploration.final_resolution"] > CONFIG.resolution_start
 
 
-def test_the_artifact_renders_named_values_and_refuses_bad_ones(job):
-    out, _ = job
+def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
+    out = short_job
     inference = get_inference("explore")
     loaded = inference.load(out, "cpu")
     params = inference.operations[RENDER].params

@@ -19,7 +19,7 @@ KIND = Kind(
     config_model=ExploreConfig,
     presets=PRESETS,
     plan_function="workers.models.explore.plan:plan",
-    example=Example("cornell_variable"),
+    example=Example("cornell_moving_light"),
     method="workers.models.explore.run:ExploreMethod",
     infer_module="workers.models.explore.infer",
 )

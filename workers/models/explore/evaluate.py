@@ -43,7 +43,7 @@ def network_image(
     features = torch.from_numpy(pixel_features(buffers, box, v)).reshape(-1, 13 + len(v))
     emission = torch.from_numpy(buffers.emission).reshape(-1, 3)
     device = next(model.parameters()).device
-    with torch_threads(torch.get_num_threads()):
+    with torch_threads(1):  # small layers: a second thread busy-waits (`workers.runtime.threads`)
         chunks = [
             model.radiance(
                 features[i : i + PIXELS_PER_CHUNK].to(device), emission[i : i + PIXELS_PER_CHUNK].to(device)

@@ -17,6 +17,7 @@ store and the bootstrap at that iteration's resolution: the exploration state is
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,17 +33,19 @@ from workers.models.explore.source import render_seed, request_for
 from workers.nn.ssim import ssim_map
 from workers.runtime.samplers import Renders
 from workers.runtime.sources import Batch
+from workers.runtime.threads import torch_threads
 
 PATCH_KEYS = ("features", "emission", "target")
 
 
-def patch_losses(model: PixelGenerator, batch: Batch, l1_weight: float) -> Tensor:
-    """Per patch [N]: mean over pixels of w |log1p L - log1p L_ref| + (1 - SSIM) [code]."""
+def patch_losses(model: PixelGenerator, batch: Batch, l1_weight: float, ssim_weight: float = 1.0) -> Tensor:
+    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1)."""
     prediction = model(batch["features"], batch["emission"])
     reference = torch.log1p(batch["target"].clamp_min(0.0))
-    l1 = (prediction - reference).abs().mean(dim=(1, 2, 3))
-    dssim = (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
-    return l1_weight * l1 + dssim
+    loss = l1_weight * (prediction - reference).abs().mean(dim=(1, 2, 3))
+    if ssim_weight:
+        loss = loss + ssim_weight * (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
+    return loss
 
 
 @dataclass
@@ -61,6 +64,7 @@ class Explorer:
         self.seed = seed
         self.adam: torch.optim.Adam | None = None
         self.renders: Renders | None = None
+        self._threads: contextlib.ExitStack | None = None
         self._restart(0)
 
     # ------------------------------------------------------------------ wiring
@@ -70,12 +74,18 @@ class Explorer:
         self.adam = adam
 
     def open(self, renders: Renders) -> Explorer:
-        """This stream over the job's renders (`Trainable.driven`)."""
+        """This stream over the job's renders (`Trainable.driven`); while it is open (the whole training of
+        its model), torch runs `config.torch_threads` intra-op threads."""
         self.renders = renders
+        self._threads = contextlib.ExitStack()
+        self._threads.enter_context(torch_threads(self.config.torch_threads))
         return self
 
     def close(self) -> None:
         self.renders = None
+        if self._threads is not None:
+            self._threads.close()
+            self._threads = None
 
     def __enter__(self) -> Explorer:
         return self
@@ -175,7 +185,7 @@ class Explorer:
         step norm is 1 before the trainer's Adam is attached."""
         device = next(self.model.parameters()).device
         one = {k: patch[k].unsqueeze(0).to(device) for k in PATCH_KEYS}
-        loss = patch_losses(self.model, one, self.config.loss_l1_weight).mean()
+        loss = patch_losses(self.model, one, self.config.loss_l1_weight, self.config.loss_ssim_weight).mean()
         if self.adam is None:
             return float(loss.detach())
         parameters = [p for group in self.adam.param_groups for p in group["params"]]
@@ -185,7 +195,7 @@ class Explorer:
     def loss(self, model: PixelGenerator, batch: Batch) -> Tensor:
         """The training loss (the phase's); it writes each patch's loss back as its reuse weight and feeds
         the large-step patches' mean to the average of fresh or of reused patches."""
-        per_patch = patch_losses(model, batch, self.config.loss_l1_weight)
+        per_patch = patch_losses(model, batch, self.config.loss_l1_weight, self.config.loss_ssim_weight)
         values = per_patch.detach().float().cpu().numpy()
         for patch_id, value in zip(batch["patch_id"].tolist(), values, strict=True):
             self.store.set_weight(patch_id, float(value))
