@@ -47,18 +47,26 @@ SCENES = ("cornell_variable", "mirror_variable")
 SECONDS = float(os.environ.get("EXPLORE_BENCH_SECONDS", "240"))
 EVAL_EVERY = SECONDS / 6
 SIZE = 32
-REFERENCE_SPP = 1024
+REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
 CONFIGURATIONS = 8
 SEED = 11
 PATH_TRACING_SPP = (1, 4, 16, 64, 256)
 CHUNK_STEPS = 10
+# The default preset made lighter so that minutes of training on the shared 2-core CPU are hundreds of
+# steps; a constant rate, since a run is cut by time, not by a step count a decay could end at.
+OVERRIDES = {
+    "mlp": {"width": 64, "depth": 3},
+    "spp": 16,
+    "bootstrap": 10,
+    "train": {"schedule": {"kind": "constant", "lr": 1e-3}},
+}
 
 
 def train_for(
     scene: str, mode: str, references, tracers, vectors, box
 ) -> tuple[list[dict], PixelGenerator, dict]:
     """Train `mode` for SECONDS of training time; the error curve measured every EVAL_EVERY seconds."""
-    config = KIND.resolve_config("default", {"exploration": mode, "train": {"progress_every": CHUNK_STEPS}})
+    config = KIND.resolve_config("default", {**OVERRIDES, "exploration": mode})
     spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin(scene)), config), SEED)
     torch.manual_seed(SEED)
     dimensions = spec.build().dimensions
@@ -96,7 +104,7 @@ def run() -> list[BenchSection]:
     comparison = BenchSection("explore: active exploration against uniform sampling at equal training time")
     frames = BenchSection("explore: the network's frame against path tracing to the same DSSIM")
     for scene in SCENES:
-        config = KIND.resolve_config("default", {})
+        config = KIND.resolve_config("default", OVERRIDES)
         source = PatchSource(PatchSourceConfig(SceneRef(get_builtin(scene)), config), SEED)
         vectors = configurations(source.dimensions, CONFIGURATIONS, SEED)
         tracers = [source.tracer.at(v) for v in vectors]

@@ -2,8 +2,10 @@
 variables change what the camera sees, the sizes for the preset and the estimated cost.
 
 A variable "changes the view" when the camera sees a difference between the scene at its two ends (the
-others at the middle): a 16 x 16 G-buffer and a 4-spp render at each end are compared. A variable that
-moves an object the camera never sees, or lights nothing it sees, is reported as such.
+others at the middle): the 16 x 16 G-buffers differ, or 4-spp renders with the same seed differ by more
+than `SEEN_DIFFERENCE` of their mean (paths that never meet what the variable changes trace the same
+random numbers). A variable that moves an object the camera never sees, or lights nothing it sees, is
+reported as such.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from workers.scene.variables import dimension_labels, variable_slices
 
 PROBE_SIZE = 16
 PROBE_SPP = 4
+SEEN_DIFFERENCE = 0.02  # relative mean absolute difference of the probe renders
 # Seconds per path segment traced on one core, and per network evaluation (pixel x layer of width 128),
 # measured on this CPU with cornell_variable at the default preset.
 SECONDS_PER_PATH_SEGMENT = 1.5e-6
@@ -31,7 +34,7 @@ SECONDS_PER_PIXEL_LAYER = 4e-8
 
 def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: str, where: slice) -> bool:
     """Whether the camera sees a change between the variable at 0 and at 1 (others at the middle)."""
-    images = []
+    buffers_at, images = [], []
     for end in (0.0, 1.0):
         v = np.full(scene.dimensions, 0.5)
         v[where] = end
@@ -42,9 +45,14 @@ def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: s
         settings = RenderSettings(
             spp=PROBE_SPP, width=PROBE_SIZE, height=PROBE_SIZE, max_depth=3, seed=0, threads=1
         )
-        image = render(path_tracer, settings).image
-        images.append(np.concatenate([buffers.position, buffers.albedo, buffers.roughness, image], -1))
-    return not np.allclose(images[0], images[1], atol=1e-4)
+        images.append(render(path_tracer, settings).image)
+        buffers_at.append(
+            np.concatenate([buffers.position, buffers.albedo, buffers.roughness, buffers.emission], -1)
+        )
+    if not np.allclose(buffers_at[0], buffers_at[1], atol=1e-5):
+        return True
+    difference = np.abs(images[0] - images[1]).mean()
+    return bool(difference > SEEN_DIFFERENCE * max(0.5 * (images[0].mean() + images[1].mean()), 1e-12))
 
 
 def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
