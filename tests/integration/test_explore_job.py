@@ -14,8 +14,10 @@ from tests.support.jobs import run_kind_job
 from tests.support.quality import report_failures
 from workers.models.explore.evaluate import configurations, reference_images
 from workers.models.explore.source import PatchSource, PatchSourceConfig
-from workers.models.registry import RENDER, get_inference, get_kind
+from workers.models.registry import QUERY, RENDER, get_inference, get_kind
 from workers.nn.metrics import dssim, mape
+from workers.render.camera import PinholeCamera
+from workers.render.gbuffer import primary_gbuffers
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
@@ -88,3 +90,30 @@ def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
         loaded.answer(RENDER, params(values={"light": [3.0, 0.0, 0.0]}), {})
     with pytest.raises(ValueError, match=r"^params\.values\.nope: "):
         loaded.answer(RENDER, params(values={"nope": 1.0}), {})
+
+
+def test_a_query_of_the_frames_gbuffers_answers_the_frames_pixels(short_job):
+    inference = get_inference("explore")
+    loaded = inference.load(short_job, "cpu")
+    render_params = inference.operations[RENDER].params
+    frame = loaded.answer(RENDER, render_params(values={"light": [0.2, 0.8]}, normalised=True), {})
+    v = np.asarray(frame.meta["v"])
+    state = loaded.scene.at(v)
+    camera = state.compiled.spec.camera
+    buffers = primary_gbuffers(loaded.tracer.state_tracer(state), PinholeCamera(camera))
+    n = buffers.hit.size
+    arrays = {
+        name: getattr(buffers, name).reshape(n, -1).astype(np.float32)
+        for name in ("position", "normal", "wo", "albedo", "roughness", "emission")
+    }
+    arrays["v"] = np.tile(v.astype(np.float32), (n, 1))
+    arrays["hit"] = buffers.hit.reshape(n)
+    answer = loaded.answer(QUERY, inference.operations[QUERY].params(), arrays)
+    np.testing.assert_allclose(
+        answer.arrays["radiance"].reshape(frame.arrays["image"].shape),
+        frame.arrays["image"],
+        rtol=1e-5,
+        atol=1e-6,
+    )
+    with pytest.raises(ValueError, match=r"^arrays\.v: "):
+        loaded.answer(QUERY, inference.operations[QUERY].params(), arrays | {"v": arrays["v"][:, :1]})

@@ -7,7 +7,8 @@ the radiance per pixel. A camera that is itself a variable is set through its va
 `params.camera` overrides the scene camera's fields.
 
 `query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
-albedo, roughness, emission) and a scene vector per row, normalised.
+albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, which the network sees as
+zeros as in a frame) and a scene vector per row, normalised.
 """
 
 from __future__ import annotations
@@ -84,14 +85,14 @@ class ExploreModel:
         v = arrays["v"]
         k = len(self.artifact.dimensions)
         if v.shape[1] != k:
-            raise ValueError(f"inputs.v: the scene has {k} dimension(s), got {v.shape[1]} per row")
+            raise ValueError(f"arrays.v: the scene has {k} dimension(s), got {v.shape[1]} per row")
         if not np.all(np.isfinite(v)) or v.min(initial=0) < 0 or v.max(initial=1) > 1:
-            raise ValueError("inputs.v: every entry must be in [0, 1]")
+            raise ValueError("arrays.v: every entry must be in [0, 1]")
         n = len(v)
         buffers = GBuffers(
             position=arrays["position"][None], normal=arrays["normal"][None], wo=arrays["wo"][None],
             albedo=arrays["albedo"][None], roughness=arrays["roughness"][None],
-            emission=arrays["emission"][None], hit=np.ones((1, n), bool),
+            emission=arrays["emission"][None], hit=arrays.get("hit", np.ones(n, bool)).reshape(1, n),
         )  # fmt: skip
         features = pixel_features(buffers, self.artifact.box, np.zeros(0))[0]
         features = np.concatenate([features, v.astype(np.float32)], axis=-1)
@@ -116,6 +117,7 @@ class ExploreInference:
                 "roughness": ArraySpec("float32", (None, 1)),
                 "emission": ArraySpec("float32", (None, 3)),
                 "v": ArraySpec("float32", (None, None)),
+                "hit": ArraySpec("bool", (None,), required=False),
             },
             batched=True,
         ),
