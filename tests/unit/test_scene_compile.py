@@ -118,6 +118,9 @@ EXPECTED_TRIANGLES = {
     "menger_sponge": (30_000, 40_000),
     "thin_walls": (5_000, 50_000),
     "closed_box": (24, 24),
+    "cornell_variable": (5_000, 6_000),
+    "mirror_variable": (24, 24),
+    "cornell_moving_light": (30, 40),
 }
 
 
