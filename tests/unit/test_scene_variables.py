@@ -212,3 +212,51 @@ def test_values_by_name_in_their_units_or_normalised():
         vector_from_values(scene, {"nope": 1})
     with pytest.raises(ValueError, match=r"^values\.sphere_roughness: outside"):
         vector_from_values(scene, {"sphere_roughness": 0.9})
+
+
+def test_every_variable_type_sets_its_field():
+    data = cornell(
+        [
+            {"type": "rotate", "name": "turn", "object": "small_box", "pivot": [0.3, 0, 0.3],
+             "min_angle": -30, "range_angle": 60},
+            {"type": "light_intensity", "name": "dim", "light": "light", "min": 0.0, "max": 2.0},
+            {"type": "light_color", "name": "lamp", "light": "lights[0]", "min": [1, 1, 1], "max": [3, 1, 1]},
+            {"type": "light_position", "name": "lamp_x", "light": "lights[0]", "max": [0.5, 0, 0]},
+            {"type": "specular", "name": "gold", "material": "metal", "min": [0.5, 0.5, 0.5],
+             "max": [1, 0.8, 0.5]},
+            {"type": "environment_rotation", "name": "sky", "range_angle": 180},
+            {"type": "camera", "name": "view", "position_min": [-0.5, 0, 3], "position_max": [0.5, 0, 4],
+             "target_min": [0, 0, 0], "target_max": [0, 0.5, 0]},
+            {"type": "switch", "name": "which", "objects": ["small_box", "large_box"]},
+        ],
+        lights=[{"type": "point", "position": [0, 0.5, 0], "intensity": [1, 1, 1]}],
+        environment={"type": "envmap", "procedural": "sky"},
+    )  # fmt: skip
+    data["materials"]["metal"] = {"type": "conductor"}
+    scene = scene_from_dict(data)
+    names = dimension_names(scene)
+    assert names == [
+        "turn", "dim", "lamp.r", "lamp_x.x", "gold.r", "gold.g", "sky",
+        "view.position.x", "view.position.z", "view.target.y", "which",
+    ]  # fmt: skip
+    v = np.array([0.75, 0.25, 0.5, 1.0, 1.0, 0.5, 0.5, 0.0, 1.0, 1.0, 0.0])
+    concrete = scene.at(v)
+    box = {o.name: o for o in concrete.objects}["small_box"].transform.to_matrix()
+    base = {o.name: o for o in scene.objects}["small_box"].transform.to_matrix()
+    turn = np.radians(-30 + 0.75 * 60)
+    rotation = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
+    pivot = np.array([0.3, 0, 0.3])
+    np.testing.assert_allclose(box[:3, :3], rotation @ base[:3, :3], atol=1e-12)
+    np.testing.assert_allclose(box[:3, 3], rotation @ (base[:3, 3] - pivot) + pivot, atol=1e-12)
+    light = {o.name: o for o in concrete.objects}["light"]
+    original = {o.name: o for o in scene.objects}["light"].emission
+    assert light.emission == pytest.approx([0.5 * c for c in original])
+    assert concrete.lights[0].intensity == pytest.approx((2.0, 1.0, 1.0))
+    assert concrete.lights[0].position == pytest.approx((0.5, 0.5, 0.0))
+    assert concrete.materials["metal"].specular == pytest.approx((1.0, 0.65, 0.5))
+    assert concrete.environment.rotate == pytest.approx((0.0, 90.0, 0.0))
+    assert concrete.camera.position == pytest.approx((-0.5, 0.0, 4.0))
+    assert concrete.camera.target == pytest.approx((0.0, 0.5, 0.0))
+    assert "large_box" not in {o.name for o in concrete.objects}
+    state = CompiledVariableScene(scene).at(v).compiled
+    np.testing.assert_allclose(state.environment_rotation, compile_scene(concrete).environment_rotation)
