@@ -10,6 +10,7 @@ from workers.models.explore.config import PRESETS, ExploreConfig
 from workers.models.explore.explorer import Explorer, patch_losses
 from workers.models.explore.features import BUFFER_CHANNELS
 from workers.models.explore.network import PixelGenerator
+from workers.models.explore.oracle import adam_step_norm
 from workers.models.explore.source import PatchSource, PatchSourceConfig
 from workers.nn.configs import MLPConfig
 from workers.runtime.samplers import InProcessRenders
@@ -115,3 +116,34 @@ def test_training_stays_finite_on_a_near_mirror_and_fireflies():
     _, losses, model = explore_run(near_mirror, 1, 10, bootstrap=10, spp=1, max_depth=6)
     assert np.all(np.isfinite(losses))
     assert all(torch.isfinite(p).all() for p in model.parameters())
+
+
+def test_the_vectorised_targets_equal_one_patch_at_a_time():
+    model = network()
+    adam = torch.optim.Adam(model.parameters(), lr=1e-3)
+    patches = [
+        {"features": torch.rand(8, 8, BUFFER_CHANNELS + K), "emission": torch.zeros(8, 8, 3),
+         "target": torch.rand(8, 8, 3) * 2}
+        for _ in range(3)
+    ]  # fmt: skip
+    for _ in range(2):  # a warm Adam
+        adam.zero_grad()
+        patch_losses(
+            model, {k: torch.stack([p[k] for p in patches]) for k in patches[0]}, 2.0
+        ).mean().backward()
+        adam.step()
+    adam.zero_grad(set_to_none=True)
+    explorer = Explorer(QUICK.model_copy(update={"loss_ssim_weight": 1.0}), K, model, 0)
+    assert np.allclose(
+        explorer.targets(patches),
+        [float(patch_losses(model, {k: v[None] for k, v in p.items()}, 2.0)[0].detach()) for p in patches],
+        rtol=1e-5,
+    )
+    explorer.attach(adam)
+    expected = []
+    for patch in patches:
+        loss = patch_losses(model, {k: v[None] for k, v in patch.items()}, 2.0)[0]
+        gradients = torch.autograd.grad(loss, list(model.parameters()))
+        expected.append(float(loss.detach()) * adam_step_norm(adam, gradients))
+    np.testing.assert_allclose(explorer.targets(patches), expected, rtol=1e-4)
+    assert all(p.grad is None for p in model.parameters())

@@ -71,6 +71,8 @@ class ExploreConfig(TrainedKindConfig):
             raise ValueError(
                 f"resolution_start: {self.resolution_start} is smaller than a patch ({self.patch})"
             )
+        if self.store_capacity < 2 * self.chains:
+            raise ValueError(f"store_capacity: keep at least two patches per chain ({2 * self.chains})")
         if self.resolution_max < self.resolution_start:
             raise ValueError("resolution_max: must be at least resolution_start")
         return self

@@ -18,11 +18,13 @@ store and the bootstrap at that iteration's resolution: the exploration state is
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import Tensor
+from torch.func import functional_call, grad, vmap
 
 from workers.models.explore.config import UNIFORM, ExploreConfig
 from workers.models.explore.exploration import greedy, large_step, propose
@@ -38,7 +40,9 @@ from workers.runtime.threads import torch_threads
 PATCH_KEYS = ("features", "emission", "target")
 
 
-def patch_losses(model: PixelGenerator, batch: Batch, l1_weight: float, ssim_weight: float = 1.0) -> Tensor:
+def patch_losses(
+    model: Callable[[Tensor, Tensor], Tensor], batch: Batch, l1_weight: float, ssim_weight: float = 1.0
+) -> Tensor:
     """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1)."""
     prediction = model(batch["features"], batch["emission"])
     reference = torch.log1p(batch["target"].clamp_min(0.0))
@@ -149,26 +153,28 @@ class Explorer:
             request_for(state, resolution, c.patch, render_seed(self.seed, self.position, k))
             for k, state in enumerate(states)
         ]
-        members: list[tuple[int, Batch, bool]] = []
         patches = self.renders.map(requests)
-        for chain, state, is_large, patch in zip(self.chains, states, large.tolist(), patches, strict=True):
-            patch_id = self.store.add(patch, is_large)
-            members.append((patch_id, patch, is_large))
-            accept = uniform or chain.patch_id is None
-            if not accept:
-                accept = bool(greedy(self.target(patch), self.target(self.store.patches[chain.patch_id])))
-                self.counts["proposals"] += 1
-                self.counts["accepted"] += int(accept)
-            self.counts["large_steps"] += int(is_large)
-            if accept:
+        ids = [
+            self.store.add(patch, is_large) for patch, is_large in zip(patches, large.tolist(), strict=True)
+        ]
+        judged = [k for k, chain in enumerate(self.chains) if not uniform and chain.patch_id is not None]
+        currents = [self.store.patches[self.chains[k].patch_id] for k in judged]
+        values = self.targets([patches[k] for k in judged] + currents) if judged else np.zeros(0)
+        accepted = {k: bool(greedy(values[i], values[len(judged) + i])) for i, k in enumerate(judged)}
+        self.counts["proposals"] += len(judged)
+        self.counts["accepted"] += sum(accepted.values())
+        self.counts["large_steps"] += int(large.sum())
+        members: list[tuple[int, Batch, bool]] = []
+        for k, chain in enumerate(self.chains):
+            members.append((ids[k], patches[k], bool(large[k])))
+            if accepted.get(k, True):
                 if chain.patch_id is not None:
                     self.store.unpin(chain.patch_id)
-                chain.state, chain.patch_id = state, patch_id
-                self.store.pin(patch_id)
+                chain.state, chain.patch_id = states[k], ids[k]
+                self.store.pin(ids[k])
             else:
-                members.append(
-                    (chain.patch_id, self.store.patches[chain.patch_id], self.store.large[chain.patch_id])
-                )
+                current = chain.patch_id
+                members.append((current, self.store.patches[current], self.store.large[current]))
         self.generations += 1
         self.counts["generated"] += 1
         return _stack(members, reused=False)
@@ -180,17 +186,31 @@ class Explorer:
 
     # ------------------------------------------------------------------ the target and the loss
 
-    def target(self, patch: Batch) -> float:
-        """f(u) = loss(u) x ||Adam step for u's gradient|| with the current weights (Sec. 5.4); the
-        step norm is 1 before the trainer's Adam is attached."""
+    def targets(self, patches: list[Batch]) -> np.ndarray:
+        """f(u) = loss(u) x ||Adam step for u's gradient|| of each patch with the current weights (Sec. 5.4),
+        every patch's gradient in one vectorised pass (`torch.func`); the loss alone before the trainer's
+        Adam is attached."""
         device = next(self.model.parameters()).device
-        one = {k: patch[k].unsqueeze(0).to(device) for k in PATCH_KEYS}
-        loss = patch_losses(self.model, one, self.config.loss_l1_weight, self.config.loss_ssim_weight).mean()
+        stacked = [torch.stack([p[k] for p in patches]).to(device) for k in PATCH_KEYS]
+        weights = {name: p.detach() for name, p in self.model.named_parameters()}
+        c = self.config
+
+        def loss_of(w: dict[str, Tensor], features: Tensor, emission: Tensor, target: Tensor):
+            def network(x: Tensor, e: Tensor) -> Tensor:
+                return functional_call(self.model, w, (x, e))
+
+            one = {"features": features[None], "emission": emission[None], "target": target[None]}
+            value = patch_losses(network, one, c.loss_l1_weight, c.loss_ssim_weight)[0]
+            return value, value
+
+        gradients, losses = vmap(grad(loss_of, has_aux=True), in_dims=(None, 0, 0, 0))(weights, *stacked)
+        losses = losses.detach().double().cpu().numpy()
         if self.adam is None:
-            return float(loss.detach())
-        parameters = [p for group in self.adam.param_groups for p in group["params"]]
-        gradients = torch.autograd.grad(loss, parameters, allow_unused=True)
-        return float(loss.detach()) * adam_step_norm(self.adam, gradients)
+            return losses
+        names = {id(p): name for name, p in self.model.named_parameters()}
+        order = [names[id(p)] for group in self.adam.param_groups for p in group["params"]]
+        norms = [adam_step_norm(self.adam, [gradients[n][i] for n in order]) for i in range(len(patches))]
+        return losses * np.array(norms)
 
     def loss(self, model: PixelGenerator, batch: Batch) -> Tensor:
         """The training loss (the phase's); it writes each patch's loss back as its reuse weight and feeds
