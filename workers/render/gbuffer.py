@@ -26,9 +26,6 @@ class GBuffers:
     emission: np.ndarray  # radiance emitted towards the camera
     hit: np.ndarray  # (H, W) bool
 
-    def pixels(self) -> int:
-        return int(self.hit.size)
-
 
 def primary_gbuffers(
     tracer: PathTracer, camera: PinholeCamera, window: tuple[int, int, int, int] | None = None

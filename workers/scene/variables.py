@@ -33,7 +33,6 @@ VECTOR_RANGES = {
     "light_color": ("min", "max"),
     "light_position": ("min", "max"),
 }
-GEOMETRY_TYPES = ("translate", "rotate", "switch")  # and light_position on an emitting object
 AXES = "xyz"
 CHANNELS = "rgb"
 
