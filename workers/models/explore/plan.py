@@ -26,10 +26,12 @@ from workers.scene.variables import dimension_labels, variable_slices
 PROBE_SIZE = 16
 PROBE_SPP = 4
 SEEN_DIFFERENCE = 0.02  # relative mean absolute difference of the probe renders
-# Seconds per path segment traced on one core, and per network evaluation (pixel x layer of width 128),
-# measured on this CPU with cornell_variable at the default preset.
-SECONDS_PER_PATH_SEGMENT = 1.5e-6
-SECONDS_PER_PIXEL_LAYER = 4e-8
+# Rough costs on the shared, loaded 2-core CPU: 128 `quick` patches (65k paths of depth 3) rendered in 2.7 s;
+# a training step of 8 8^2 patches through 32 x 2 took 15 ms, mostly fixed overhead; the network's
+# share grows with pixels x width x layers (128 x 4 on 16^2 patches: about 60 ms a step).
+SECONDS_PER_PATH_SEGMENT = 1.4e-5
+SECONDS_PER_STEP = 0.015
+SECONDS_PER_PIXEL_LAYER = 2e-8  # per pixel, per layer of width 128, forward and backward
 
 
 def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: str, where: slice) -> bool:
@@ -101,10 +103,12 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
     )
     patches = config.chains * config.patch**2
     render_seconds = patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT
-    # every generation renders the chains' patches and evaluates f twice per chain; reuse costs one step
-    generation_share = 0.05 + config.bootstrap / max(config.train.steps, 1)
+    # a generation renders the chains' patches and evaluates f on two patches per chain; reuse is one
+    # step (p_s is about 0.99 after the bootstrap, App. A.7)
+    generation_share = min(0.02 + config.bootstrap / max(config.train.steps, 1), 1.0)
     network = SECONDS_PER_PIXEL_LAYER * patches * (config.mlp.depth + 1) * config.mlp.width / 128
-    seconds = config.train.steps * (min(generation_share, 1.0) * (render_seconds + 2 * network) + 3 * network)
+    step = SECONDS_PER_STEP + network
+    seconds = config.train.steps * (generation_share * (render_seconds + 2 * network) + step)
     summary = (
         f"{spec.dimensions} dimension(s), {len(spec.variables)} variable(s); {config.exploration} exploration"
     )
