@@ -28,6 +28,7 @@ KIND_MODULES = (
     "workers.models.lod",
     "workers.models.mesogan",
     "workers.models.prt",
+    "workers.models.explore",
 )
 __all__ = ["PRESET_NAMES", "Kind", "UnknownKind", "get_inference", "get_kind", "kind_names"]
 

@@ -41,6 +41,9 @@ class RenderSettings(BaseModel):
     tile_size: int = Field(64, ge=8, le=1024)
     threads: int = Field(2, ge=1, le=256)
     aovs: bool = False
+    window: tuple[int, int, int, int] | None = Field(
+        None, description="render only pixels x0 <= x < x1, y0 <= y < y1 of the image (a crop window)"
+    )
 
 
 @dataclass
@@ -89,6 +92,8 @@ class RenderPlan:
     height: int
     tiles: list[Tile]
     passes: list[int]  # samples per pixel of each pass
+    x0: int = 0  # the crop window's corner: tiles are in image pixels, the image starts here
+    y0: int = 0
 
     @property
     def items(self) -> list[tuple[int, Tile]]:
@@ -104,18 +109,33 @@ class TileResult:
     rays_traced: int
 
 
+def crop_window(camera: PinholeCamera, settings: RenderSettings) -> tuple[int, int, int, int]:
+    """The pixels to render, (x0, y0, x1, y1): the settings' window, checked to lie in the image, or all."""
+    if settings.window is None:
+        return 0, 0, camera.width, camera.height
+    x0, y0, x1, y1 = settings.window
+    if not (0 <= x0 < x1 <= camera.width and 0 <= y0 < y1 <= camera.height):
+        raise ValueError(
+            f"window: {settings.window} is not a non-empty window of the {camera.width}x{camera.height} image"
+        )
+    return x0, y0, x1, y1
+
+
 def plan_render(camera: PinholeCamera, settings: RenderSettings) -> RenderPlan:
-    width, height, size = camera.width, camera.height, settings.tile_size
+    """Tiles over the crop window (the whole image by default); each pixel is sampled as in a full render,
+    so a window's expected value is the crop of the full image's."""
+    x_start, y_start, x_stop, y_stop = crop_window(camera, settings)
+    width, height, size = x_stop - x_start, y_stop - y_start, settings.tile_size
     tiles = []
-    for y0 in range(0, height, size):
-        for x0 in range(0, width, size):
-            tiles.append(Tile(len(tiles), x0, y0, min(x0 + size, width), min(y0 + size, height)))
+    for y0 in range(y_start, y_stop, size):
+        for x0 in range(x_start, x_stop, size):
+            tiles.append(Tile(len(tiles), x0, y0, min(x0 + size, x_stop), min(y0 + size, y_stop)))
     spp_per_pass = int(np.clip(MAX_PATHS_PER_ITEM // size**2, 1, settings.spp))
     passes, done = [], 0
     while done < settings.spp:
         passes.append(min(spp_per_pass, settings.spp - done))
         done += passes[-1]
-    return RenderPlan(width, height, tiles, passes)
+    return RenderPlan(width, height, tiles, passes, x_start, y_start)
 
 
 def render_item(
@@ -166,9 +186,10 @@ class ImageAccumulator:
         self.radiance = np.zeros(shape)
         self.aovs = {name: np.zeros(shape) for name in AOV_NAMES} if aovs else {}
         self.rays_traced = 0
+        self.x0, self.y0 = plan.x0, plan.y0
 
     def add(self, tile: Tile, result: TileResult) -> None:
-        window = (slice(tile.y0, tile.y1), slice(tile.x0, tile.x1))
+        window = (slice(tile.y0 - self.y0, tile.y1 - self.y0), slice(tile.x0 - self.x0, tile.x1 - self.x0))
         self.radiance[window] += result.radiance
         for name, value in result.aovs.items():
             self.aovs[name][window] += value

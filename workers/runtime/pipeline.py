@@ -13,17 +13,18 @@ the `RunOutput`, with a warning when the model is worse than 1-spp path tracing.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 import torch
 
-from workers.runtime.contract import JobContext, RunOutput
+from workers.runtime.contract import JobContext, RunOutput, SamplerSlots
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.report import TimedImage, build_report, parameter_bytes
-from workers.runtime.samplers import open_batches
+from workers.runtime.samplers import BatchStream, Renders, open_batches, open_renders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.threads import torch_threads
 from workers.runtime.training import Phase, Progress, TrainConfig, TrainResult, train_phases
@@ -46,6 +47,10 @@ class Trainable:
     train: TrainConfig
     name: str = ""
     stored_dtype: torch.dtype | None = torch.float16  # the artifact's precision, measured as shipped
+    # A trainer that chooses what to render (active exploration): given the renders of `source` (a
+    # `RequestSource`) by the job's sampler actors, it returns the batch stream to train on, in place of
+    # `source`'s seed-indexed batches.
+    driven: Callable[[Renders], BatchStream] | None = None
 
 
 @dataclass
@@ -155,7 +160,7 @@ def _train_all(ctx: JobContext, trainables: list[Trainable], samplers: int) -> l
                 ctx.raise_if_cancelled()
                 ctx.progress(done + p.step, total, loss=p.loss, samples_per_s=p.samples_per_s, eta_s=p.eta_s)
 
-            with open_batches(trainable.source, slots.count, placement=slots.actor_options) as batches:
+            with _open_stream(trainable, slots) as batches:
                 result = train_phases(
                     trainable.model, trainable.phases, batches, trainable.train, store, progress
                 )
@@ -166,6 +171,20 @@ def _train_all(ctx: JobContext, trainables: list[Trainable], samplers: int) -> l
     for t in trained:
         t.model.eval()
     return trained
+
+
+@contextmanager
+def _open_stream(trainable: Trainable, slots: SamplerSlots) -> Iterator[BatchStream]:
+    """The trainable's batches: seed-indexed from its source, or driven by its trainer over renders."""
+    if trainable.driven is None:
+        with open_batches(trainable.source, slots.count, placement=slots.actor_options) as batches:
+            yield batches
+        return
+    with (
+        open_renders(trainable.source, slots.count, placement=slots.actor_options) as renders,
+        trainable.driven(renders) as batches,
+    ):
+        yield batches
 
 
 def round_to_storage(model: torch.nn.Module, dtype: torch.dtype) -> torch.nn.Module:

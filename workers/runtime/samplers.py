@@ -8,6 +8,7 @@ consumed: a slow trainer stalls the samplers instead of letting results pile up 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -87,6 +88,11 @@ class SamplerActor:
         """The batch as NumPy arrays, which Ray moves without pickling (about half the cost of tensors)."""
         self.batches_made += 1
         return {name: tensor.numpy() for name, tensor in self.source.batch(index).items()}
+
+    def render(self, request: Any) -> dict[str, np.ndarray]:
+        """What a request-driven source (`RequestSource`) renders for `request`, as NumPy arrays."""
+        self.batches_made += 1
+        return {name: tensor.numpy() for name, tensor in self.source.render(request).items()}
 
     def produced(self) -> int:
         return self.batches_made
@@ -219,3 +225,106 @@ def open_batches(
         return InProcessBatches(spec, start=start)
     options = placement or actor_options(resources or ResourceRequest())
     return SamplerPool(spec, actors=samplers, max_in_flight=max_in_flight, actor_options=options, start=start)
+
+
+# ------------------------------------------------------------------ request-driven sources
+
+
+class Renders(Protocol):
+    """Renders a trainer asks for, answered in the order asked (`workers.runtime.sources.RequestSource`)."""
+
+    def map(self, requests: Sequence[Any]) -> list[Batch]: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> Renders: ...
+
+    def __exit__(self, *exc: object) -> None: ...
+
+
+class InProcessRenders:
+    """Requests rendered on the caller's thread: the fallback without sampler actors, and the reference."""
+
+    def __init__(self, spec: SourceSpec) -> None:
+        self.source = spec.build()
+
+    def map(self, requests: Sequence[Any]) -> list[Batch]:
+        return [self.source.render(request) for request in requests]
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> InProcessRenders:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RenderPool:
+    """Sampler actors rendering requests, at most `max_in_flight` outstanding (back-pressure: a trainer that
+    asks for many renders waits instead of filling the object store). A request whose actor died is asked
+    again of a replacement, up to `REPLACEMENTS_PER_BATCH` times, then `InfrastructureFailure`."""
+
+    def __init__(
+        self,
+        spec: SourceSpec,
+        actors: int = 2,
+        max_in_flight: int | None = None,
+        actor_options: dict[str, Any] | None = None,
+    ) -> None:
+        if actors < 1:
+            raise ValueError(f"a render pool needs at least one actor, got {actors}")
+        self.spec = spec
+        self.max_in_flight = max_in_flight or 2 * actors
+        self.actor_options = actor_options or {"num_cpus": 1}
+        self.actors = [SamplerActor.options(**self.actor_options).remote(spec) for _ in range(actors)]
+        self.replacements = 0
+
+    def map(self, requests: Sequence[Any]) -> list[Batch]:
+        results: list[dict[str, np.ndarray] | None] = [None] * len(requests)
+        pending: dict[ray.ObjectRef, tuple[int, int, int]] = {}  # ref -> (request, actor slot, attempts)
+        next_request = 0
+        while next_request < len(requests) or pending:
+            while next_request < len(requests) and len(pending) < self.max_in_flight:
+                slot = next_request % len(self.actors)
+                pending[self.actors[slot].render.remote(requests[next_request])] = (next_request, slot, 0)
+                next_request += 1
+            [ready], _ = ray.wait(list(pending), num_returns=1)
+            index, slot, attempts = pending.pop(ready)
+            try:
+                results[index] = ray.get(ready)
+            except SAMPLER_FAILURES:
+                if attempts >= REPLACEMENTS_PER_BATCH:
+                    raise InfrastructureFailure(
+                        f"sampler actors died {attempts + 1} times rendering one request; "
+                        "check that the sample source can be built and run in a Ray worker"
+                    ) from None
+                ray.kill(self.actors[slot], no_restart=True)
+                self.actors[slot] = SamplerActor.options(**self.actor_options).remote(self.spec)
+                self.replacements += 1
+                pending[self.actors[slot].render.remote(requests[index])] = (index, slot, attempts + 1)
+        # copies: arrays that Ray hands out are read-only views of its object store
+        return [
+            {name: torch.tensor(a) for name, a in result.items()} for result in results if result is not None
+        ]
+
+    def close(self) -> None:
+        for actor in self.actors:
+            ray.kill(actor, no_restart=True)
+        self.actors = []
+
+    def __enter__(self) -> RenderPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_renders(
+    spec: SourceSpec, samplers: int, max_in_flight: int | None = None, placement: dict[str, Any] | None = None
+) -> Renders:
+    """Renders of a request-driven source by a pool of `samplers` actors, or in process when it is 0."""
+    if samplers == 0:
+        return InProcessRenders(spec)
+    return RenderPool(spec, actors=samplers, max_in_flight=max_in_flight, actor_options=placement)

@@ -26,6 +26,17 @@ class SampleSource(Protocol):
     def batch(self, index: int) -> Batch: ...
 
 
+@runtime_checkable
+class RequestSource(Protocol):
+    """Renders what a trainer asks for (a trainer that chooses its samples, such as active exploration):
+    `render(request)` is a pure function of the request, which carries its own seed, so any process
+    renders the same batch for it and a dead sampler's requests can be asked of another."""
+
+    def __init__(self, config: Any, seed: int) -> None: ...
+
+    def render(self, request: Any) -> Batch: ...
+
+
 @dataclass(frozen=True)
 class SourceSpec:
     """Everything a sampler process needs to rebuild a source: an importable class, its config, a seed."""

@@ -111,6 +111,9 @@ class Phase:
     loss: LossFunction
     parameters: ParamsT | None = None
     every: int = 1
+    # called with the phase's Adam once it is built, for a sampler that reads its moments (the size of
+    # the step a sample's gradient would cause, say); it must not change the optimizer
+    on_optimizer: Callable[[torch.optim.Optimizer], None] | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():  # it names the phase's checkpoint files and progress entries
@@ -184,6 +187,8 @@ class _PhaseOptimizer:
             weight_decay=config.weight_decay,
         )
         self.scaler = torch.amp.GradScaler(self.device_type, enabled=amp)
+        if phase.on_optimizer is not None:
+            phase.on_optimizer(self.adam)
         self.parameters = [p for group in self.adam.param_groups for p in group["params"]]
 
     def lr(self, step: int, total_steps: int) -> float:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from workers.scene.envmaps import sun_direction
+from workers.scene.spec import AlbedoVariable as _Albedo
 from workers.scene.spec import (
     BoxShape,
     Camera,
@@ -23,6 +24,9 @@ from workers.scene.spec import (
     SphereShape,
     Transform,
 )
+from workers.scene.spec import LightPositionVariable as _LightPosition
+from workers.scene.spec import RoughnessVariable as _Roughness
+from workers.scene.spec import TranslateVariable as _Translate
 
 BUILTIN_SCENES: dict[str, Callable[[], SceneSpec]] = {}
 
@@ -446,4 +450,73 @@ def glossy_row() -> SceneSpec:
         ],
         environment=EnvironmentMap(builtin="studio"),
         camera=Camera(position=(0.0, 1.2, 3.2), target=(0.0, 0.3, 0.0), fov=40.0, width=256, height=256),
+    )
+
+
+@builtin
+def cornell_variable() -> SceneSpec:
+    """A variable Cornell box of 11 dimensions (thesis Sec. 5.6, SPHERE CAUSTIC-like): both wall colours,
+    the ceiling light's x and z, the small box's x and z and a metal sphere's roughness."""
+    sphere = SceneObject(
+        name="sphere",
+        shape=SphereShape(radius=0.25, subdivisions=4),
+        material="metal",
+        transform=Transform(translate=(-0.35, -0.75, 0.2)),
+    )
+    base = cornell_box()
+    materials = dict(base.materials) | {"metal": Conductor(roughness=0.2, specular=(0.95, 0.9, 0.8))}
+    variables = [
+        _Albedo(name="red_wall", material="red", min=(0.2, 0.02, 0.02), max=(0.9, 0.4, 0.3)),
+        _Albedo(name="green_wall", material="green", min=(0.02, 0.2, 0.02), max=(0.3, 0.8, 0.4)),
+        _LightPosition(name="light", light="light", min=(-0.5, 0.0, -0.5), max=(0.5, 0.0, 0.5)),
+        _Translate(name="box", object="small_box", min=(-0.25, 0.0, -0.3), max=(0.2, 0.0, 0.25)),
+        _Roughness(name="sphere_roughness", material="metal", min=0.02, max=0.5),
+    ]
+    return SceneSpec(
+        name="cornell_variable",
+        materials=materials,
+        objects=[*base.objects, sphere],
+        camera=base.camera,
+        variables=variables,
+    )
+
+
+@builtin
+def mirror_variable() -> SceneSpec:
+    """A box moving in front of a mirror in a Cornell room, seen at an angle (thesis Fig. 5.6): glossy
+    reflections and shadows of a moving object, and the light's x; 3 dimensions."""
+    walls = [o for o in cornell_walls() if o.name != "back"]
+    mirror = SceneObject(
+        name="mirror",
+        shape=RectangleShape(),
+        material="mirror",
+        transform=Transform(translate=(0, 0, -1)),
+    )
+    box = SceneObject(
+        name="box",
+        shape=BoxShape(),
+        material="white",
+        transform=Transform(translate=(0.0, -0.8, -0.2), rotate=(0, 25, 0), scale=0.2),
+    )
+    materials = cornell_materials() | {"mirror": Conductor(roughness=0.01, specular=(0.9, 0.9, 0.9))}
+    return SceneSpec(
+        name="mirror_variable",
+        materials=materials,
+        objects=[*walls, mirror, box],
+        camera=Camera(position=(0.6, 0.1, 3.6), target=(-0.2, -0.3, -1.0), fov=39.3, width=256, height=256),
+        variables=[
+            _Translate(name="box", object="box", min=(-0.6, 0.0, -0.6), max=(0.6, 0.0, 0.4)),
+            _LightPosition(name="light", light="light", min=(-0.5, 0.0, 0.0), max=(0.5, 0.0, 0.0)),
+        ],
+    )
+
+
+@builtin
+def cornell_moving_light() -> SceneSpec:
+    """The Cornell box with its ceiling light moving in x and z: the smallest variable scene (2
+    dimensions), where moving shadows and colour bleeding change with the light."""
+    base = cornell_box()
+    light = _LightPosition(name="light", light="light", min=(-0.5, 0.0, -0.5), max=(0.5, 0.0, 0.5))
+    return SceneSpec.model_validate(
+        base.model_dump() | {"name": "cornell_moving_light", "variables": [light]}
     )

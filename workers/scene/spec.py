@@ -382,6 +382,133 @@ class Camera(Model):
         return self
 
 
+# --------------------------------------------------------------------------- variables
+
+
+class _Variable(Model):
+    """A named variable: one or more dimensions of the scene vector v in [0, 1]^K, each mapped linearly
+    onto its range (`workers.scene.variables` applies them)."""
+
+    name: str = Field(min_length=1, max_length=128, pattern=r"^[A-Za-z_][\w.-]*$")
+
+
+class TranslateVariable(_Variable):
+    """An object's offset from its placement, `min` at 0 to `max` at 1; one dimension per axis that moves."""
+
+    type: Literal["translate"] = "translate"
+    object: str
+    min: Vec3 = (0.0, 0.0, 0.0)
+    max: Vec3
+
+
+class RotateVariable(_Variable):
+    """An object turned about `axis` through `pivot` by `min_angle` + v `range_angle` degrees."""
+
+    type: Literal["rotate"] = "rotate"
+    object: str
+    axis: Vec3 = (0.0, 1.0, 0.0)
+    pivot: Vec3 = (0.0, 0.0, 0.0)
+    min_angle: FiniteFloat = 0.0
+    range_angle: FiniteFloat
+
+
+class SwitchVariable(_Variable):
+    """One of `objects` is present: v in [k/n, (k+1)/n) picks the k-th (v = 1 the last)."""
+
+    type: Literal["switch"] = "switch"
+    objects: list[str] = Field(min_length=2)
+
+
+class AlbedoVariable(_Variable):
+    """A diffuse or plastic material's base colour, per channel that varies."""
+
+    type: Literal["albedo"] = "albedo"
+    material: str
+    min: Albedo
+    max: Albedo
+
+
+class SpecularVariable(_Variable):
+    """A conductor's specular colour, per channel that varies."""
+
+    type: Literal["specular"] = "specular"
+    material: str
+    min: Albedo
+    max: Albedo
+
+
+class RoughnessVariable(_Variable):
+    """A glossy material's GGX alpha."""
+
+    type: Literal["roughness"] = "roughness"
+    material: str
+    min: Roughness
+    max: Roughness
+
+
+class LightIntensityVariable(_Variable):
+    """A light's intensity (or an emitting object's radiance) scaled by a factor from `min` to `max`.
+    `light` names an emitting object or a light as `lights[i]`."""
+
+    type: Literal["light_intensity"] = "light_intensity"
+    light: str
+    min: Annotated[FiniteFloat, Field(ge=0)]
+    max: Annotated[FiniteFloat, Field(ge=0)]
+
+
+class LightColorVariable(_Variable):
+    """A light's RGB intensity (or an emitting object's radiance), per channel that varies."""
+
+    type: Literal["light_color"] = "light_color"
+    light: str
+    min: NonNegRGB
+    max: NonNegRGB
+
+
+class LightPositionVariable(_Variable):
+    """A point light or an emitting object offset from its place, per axis that moves."""
+
+    type: Literal["light_position"] = "light_position"
+    light: str
+    min: Vec3 = (0.0, 0.0, 0.0)
+    max: Vec3
+
+
+class EnvironmentRotationVariable(_Variable):
+    """The environment map turned about the vertical axis by `min_angle` + v `range_angle` degrees."""
+
+    type: Literal["environment_rotation"] = "environment_rotation"
+    min_angle: FiniteFloat = 0.0
+    range_angle: FiniteFloat
+
+
+class CameraVariable(_Variable):
+    """The camera's position in the box [`position_min`, `position_max`] and its target in the box
+    [`target_min`, `target_max`]; one dimension per coordinate that varies."""
+
+    type: Literal["camera"] = "camera"
+    position_min: Vec3
+    position_max: Vec3
+    target_min: Vec3
+    target_max: Vec3
+
+
+Variable = Annotated[
+    TranslateVariable
+    | RotateVariable
+    | SwitchVariable
+    | AlbedoVariable
+    | SpecularVariable
+    | RoughnessVariable
+    | LightIntensityVariable
+    | LightColorVariable
+    | LightPositionVariable
+    | EnvironmentRotationVariable
+    | CameraVariable,
+    Field(discriminator="type"),
+]
+
+
 # --------------------------------------------------------------------------- scene
 
 
@@ -397,6 +524,9 @@ class SceneSpec(Model):
     notes: list[str] = Field(
         default_factory=list, description="what an importer defaulted or ignored; job plans list them"
     )
+    variables: list[Variable] = Field(
+        default_factory=list, description="what may vary: the scene vector v in [0, 1]^K (`at`)"
+    )
 
     @model_validator(mode="after")
     def _references(self):
@@ -409,6 +539,26 @@ class SceneSpec(Model):
                 raise ValueError(f"objects[{i}].name: duplicate object name {obj.name!r}")
             names.add(obj.name)
         return self
+
+    @model_validator(mode="after")
+    def _variables_valid(self):
+        from workers.scene.variables import check_variables
+
+        check_variables(self)
+        return self
+
+    @property
+    def dimensions(self) -> int:
+        """K, the length of the scene vector."""
+        from workers.scene.variables import scene_dimensions
+
+        return scene_dimensions(self)
+
+    def at(self, v) -> SceneSpec:
+        """The concrete scene (no variables) at the scene vector `v` in [0, 1]^K."""
+        from workers.scene.variables import apply_variables
+
+        return apply_variables(self, v)
 
     def emitters_present(self) -> bool:
         return bool(self.lights) or self.environment is not None or any(o.emission for o in self.objects)

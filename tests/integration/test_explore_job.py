@@ -1,0 +1,119 @@
+"""The `explore` kind end to end through the job driver's `run_job` (no Ray actor): plan, train by active
+exploration, export, report. A short job's artifact serves `:render` at named variable values through the
+inference service's loader, and bad values are errors naming the field; the example job's network (slow)
+beats a black renderer at every fixed configuration and 1-spp path tracing of the report's view."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.support.jobs import run_kind_job
+from tests.support.quality import report_failures
+from workers.models.explore.evaluate import configurations, reference_images
+from workers.models.explore.source import PatchSource, PatchSourceConfig
+from workers.models.registry import QUERY, RENDER, get_inference, get_kind
+from workers.nn.metrics import dssim, mape
+from workers.render.camera import PinholeCamera
+from workers.render.gbuffer import primary_gbuffers
+from workers.runtime.report import Report
+from workers.scene.builtin import get_builtin
+from workers.scene.reference import SceneRef
+
+SEED = 5
+KIND = get_kind("explore")
+SCENE = KIND.example.scene
+CONFIG = KIND.resolve_config("quick", KIND.example.overrides)
+
+
+SHORT = {"bootstrap": 4, "train": {"steps": 30}, "evaluation_configurations": 1}
+
+
+def run(folder: Path, overrides: dict) -> Path:
+    _, outcome = run_kind_job("explore", get_builtin(SCENE), folder, overrides, seed=SEED)
+    assert outcome.state == "succeeded", outcome.error
+    return folder / "out"
+
+
+@pytest.fixture(scope="module")
+def short_job(tmp_path_factory) -> Path:
+    return run(tmp_path_factory.mktemp("explore-short"), SHORT)
+
+
+def test_the_plan_names_the_variables_what_is_static_and_the_cost():
+    plan = KIND.plan(SceneRef(get_builtin(SCENE)), CONFIG)
+    names = [item.name for item in plan.items]
+    assert {v.name for v in get_builtin(SCENE).variables} <= set(names)
+    assert "static" in names and plan.estimated_seconds > 0
+
+
+@pytest.mark.slow
+def test_the_network_beats_a_black_renderer_at_every_configuration(tmp_path):
+    out = run(tmp_path, KIND.example.overrides)
+    report = Report.read(str(out))
+    assert report_failures(report) == {}
+    source = PatchSource(PatchSourceConfig(SceneRef(get_builtin(SCENE)), CONFIG), SEED)
+    vectors = configurations(source.dimensions, CONFIG.evaluation_configurations, SEED)
+    tracers = [source.tracer.at(v) for v in vectors]
+    size = CONFIG.preview_size
+    references = reference_images(tracers, size, CONFIG.reference_spp, CONFIG.max_depth, SEED + 2)
+    black = [dssim(r, np.zeros_like(r)) for r in references]
+    figures = report.method_metrics
+    for i, black_dssim in enumerate(black):
+        assert figures[f"configuration_{i}.dssim"] < 0.8 * black_dssim, (i, figures, black)
+    assert figures["configurations.mape"] < 0.8 * np.mean([mape(r, np.zeros_like(r)) for r in references])
+    assert 0 < figures["exploration.acceptance_rate"] < 1
+    assert figures["exploration.final_resolution"] > CONFIG.resolution_start
+
+
+def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
+    out = short_job
+    inference = get_inference("explore")
+    loaded = inference.load(out, "cpu")
+    params = inference.operations[RENDER].params
+    left = loaded.answer(
+        RENDER, params(values={"light": [-0.5, 0.0, 0.0]}, camera={"width": 20, "height": 12}), {}
+    )
+    image = left.arrays["image"]
+    assert image.shape == (12, 20, 3) and np.isfinite(image).all() and image.max() > 0
+    right = loaded.answer(
+        RENDER, params(values={"light": [0.45, 0.0, 0.0]}, camera={"width": 20, "height": 12}), {}
+    )
+    assert not np.allclose(image, right.arrays["image"])
+    normalised = loaded.answer(
+        RENDER, params(values={"light": [0.0, 0.5]}, normalised=True, camera={"width": 20, "height": 12}), {}
+    )
+    np.testing.assert_allclose(normalised.arrays["image"], image, atol=1e-6)
+    with pytest.raises(ValueError, match=r"^params\.values\.light: "):
+        loaded.answer(RENDER, params(values={"light": [3.0, 0.0, 0.0]}), {})
+    with pytest.raises(ValueError, match=r"^params\.values\.nope: "):
+        loaded.answer(RENDER, params(values={"nope": 1.0}), {})
+
+
+def test_a_query_of_the_frames_gbuffers_answers_the_frames_pixels(short_job):
+    inference = get_inference("explore")
+    loaded = inference.load(short_job, "cpu")
+    render_params = inference.operations[RENDER].params
+    frame = loaded.answer(RENDER, render_params(values={"light": [0.2, 0.8]}, normalised=True), {})
+    v = np.asarray(frame.meta["v"])
+    state = loaded.scene.at(v)
+    camera = state.compiled.spec.camera
+    buffers = primary_gbuffers(loaded.tracer.state_tracer(state), PinholeCamera(camera))
+    n = buffers.hit.size
+    arrays = {
+        name: getattr(buffers, name).reshape(n, -1).astype(np.float32)
+        for name in ("position", "normal", "wo", "albedo", "roughness", "emission")
+    }
+    arrays["v"] = np.tile(v.astype(np.float32), (n, 1))
+    arrays["hit"] = buffers.hit.reshape(n)
+    answer = loaded.answer(QUERY, inference.operations[QUERY].params(), arrays)
+    np.testing.assert_allclose(
+        answer.arrays["radiance"].reshape(frame.arrays["image"].shape),
+        frame.arrays["image"],
+        rtol=1e-5,
+        atol=1e-6,
+    )
+    with pytest.raises(ValueError, match=r"^arrays\.v: "):
+        loaded.answer(QUERY, inference.operations[QUERY].params(), arrays | {"v": arrays["v"][:, :1]})

@@ -1,0 +1,149 @@
+"""The explore network and its training loop: position preconditioning, per-pixel independence, the
+emission rule, deterministic exploration for a seed, and finite training on fireflies and mirrors."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from workers.models.explore.config import PRESETS, ExploreConfig
+from workers.models.explore.explorer import Explorer, patch_losses
+from workers.models.explore.features import BUFFER_CHANNELS
+from workers.models.explore.network import PixelGenerator
+from workers.models.explore.oracle import adam_step_norm
+from workers.models.explore.source import PatchSource, PatchSourceConfig
+from workers.nn.configs import MLPConfig
+from workers.runtime.samplers import InProcessRenders
+from workers.runtime.sources import SourceSpec
+from workers.runtime.training import Phase, TrainConfig, train_phases
+from workers.scene.builtin import get_builtin
+from workers.scene.reference import SceneRef
+from workers.scene.spec import SceneSpec
+
+K = 3
+QUICK = ExploreConfig.model_validate(PRESETS["quick"])
+
+
+def network() -> PixelGenerator:
+    torch.manual_seed(0)
+    return PixelGenerator(K, MLPConfig(width=16, depth=2, activation="leaky_relu"))
+
+
+def test_the_first_layer_reads_position_only():
+    model = network()
+    features = torch.rand(5, BUFFER_CHANNELS + K, requires_grad=True)
+    model.first(features[:, :3]).sum().backward()
+    first_only = features.grad.clone()
+    assert first_only[:, 3:].abs().max() == 0 and first_only[:, :3].abs().max() > 0
+    features.grad = None
+    model(features, torch.zeros(5, 3)).sum().backward()
+    assert features.grad[:, 3:].abs().max() > 0  # the hidden layers re-read every buffer and v
+
+
+def test_pixels_are_independent():
+    model = network()
+    features, emission = torch.rand(6, 7, BUFFER_CHANNELS + K), torch.rand(6, 7, 3) * 0.1
+    out = model(features, emission)
+    order = torch.randperm(42)
+    shuffled = model(features.reshape(42, -1)[order], emission.reshape(42, 3)[order])
+    torch.testing.assert_close(shuffled, out.reshape(42, 3)[order])
+
+
+def test_bright_emitters_pass_through_and_dim_ones_add():
+    model = network()
+    features = torch.rand(2, BUFFER_CHANNELS + K)
+    dark = model(features, torch.zeros(2, 3))
+    emission = torch.tensor([[20.0, 15.0, 8.0], [0.3, 0.2, 0.1]])
+    out = model(features, emission)
+    torch.testing.assert_close(out[0], torch.log1p(emission[0]))
+    torch.testing.assert_close(out[1], dark[1] + torch.log1p(emission[1]))
+
+
+def test_the_loss_is_finite_on_fireflies_black_and_huge_targets():
+    model = network()
+    batch = {
+        "features": torch.rand(3, 8, 8, BUFFER_CHANNELS + K),
+        "emission": torch.zeros(3, 8, 8, 3),
+        "target": torch.zeros(3, 8, 8, 3),
+    }
+    batch["target"][0, 3, 3] = 1e30  # a firefly
+    batch["target"][1] = 1e6
+    losses = patch_losses(model, batch, 2.0)
+    losses.mean().backward()
+    assert torch.isfinite(losses).all()
+    assert all(torch.isfinite(p.grad).all() for p in model.parameters())
+
+
+def explore_run(
+    scene: SceneSpec, seed: int, steps: int, **overrides
+) -> tuple[Explorer, list, PixelGenerator]:
+    config = QUICK.model_copy(update=overrides)
+    spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(scene), config), seed)
+    torch.manual_seed(seed)
+    model = PixelGenerator(spec.build().dimensions, config.mlp)
+    explorer = Explorer(config, model.dimensions, model, seed)
+    losses = []
+
+    def loss(m, batch):
+        value = explorer.loss(m, batch)
+        losses.append(float(value.detach()))
+        return value
+
+    with InProcessRenders(spec) as renders, explorer.open(renders) as batches:
+        phase = Phase("main", loss, on_optimizer=explorer.attach)
+        train_phases(model, [phase], batches, TrainConfig(steps=steps, schedule={"lr": 3e-3}, eps=1e-8))
+    return explorer, losses, model
+
+
+def test_exploration_is_deterministic_for_a_seed_and_trains_on_every_rendered_patch():
+    scene = get_builtin("mirror_variable")
+    a, losses_a, model_a = explore_run(scene, 3, 12, bootstrap=3, spp=2)
+    _, losses_b, model_b = explore_run(scene, 3, 12, bootstrap=3, spp=2)
+    assert losses_a == losses_b
+    assert all(torch.equal(p, q) for p, q in zip(model_a.parameters(), model_b.parameters(), strict=True))
+    stats = a.statistics()
+    assert stats["patches_rendered"] >= 3 * QUICK.chains
+    assert 0 < stats["final_reuse_probability"] < 1
+    assert 0 <= stats["acceptance_rate"] <= 1
+    # every rendered patch is trained on at least once: the store saw a loss for each
+    assert all(w != 1.0 for w in a.store.weights.values())
+
+
+def test_training_stays_finite_on_a_near_mirror_and_fireflies():
+    scene = get_builtin("mirror_variable")
+    mirror = scene.materials["mirror"].model_copy(update={"roughness": 1e-4})
+    near_mirror = scene.model_copy(update={"materials": {**scene.materials, "mirror": mirror}})
+    _, losses, model = explore_run(near_mirror, 1, 10, bootstrap=10, spp=1, max_depth=6)
+    assert np.all(np.isfinite(losses))
+    assert all(torch.isfinite(p).all() for p in model.parameters())
+
+
+def test_the_vectorised_targets_equal_one_patch_at_a_time():
+    model = network()
+    adam = torch.optim.Adam(model.parameters(), lr=1e-3)
+    patches = [
+        {"features": torch.rand(8, 8, BUFFER_CHANNELS + K), "emission": torch.zeros(8, 8, 3),
+         "target": torch.rand(8, 8, 3) * 2}
+        for _ in range(3)
+    ]  # fmt: skip
+    for _ in range(2):  # a warm Adam
+        adam.zero_grad()
+        patch_losses(
+            model, {k: torch.stack([p[k] for p in patches]) for k in patches[0]}, 2.0
+        ).mean().backward()
+        adam.step()
+    adam.zero_grad(set_to_none=True)
+    explorer = Explorer(QUICK.model_copy(update={"loss_ssim_weight": 1.0}), K, model, 0)
+    assert np.allclose(
+        explorer.targets(patches),
+        [float(patch_losses(model, {k: v[None] for k, v in p.items()}, 2.0)[0].detach()) for p in patches],
+        rtol=1e-5,
+    )
+    explorer.attach(adam)
+    expected = []
+    for patch in patches:
+        loss = patch_losses(model, {k: v[None] for k, v in patch.items()}, 2.0)[0]
+        gradients = torch.autograd.grad(loss, list(model.parameters()))
+        expected.append(float(loss.detach()) * adam_step_norm(adam, gradients))
+    np.testing.assert_allclose(explorer.targets(patches), expected, rtol=1e-4)
+    assert all(p.grad is None for p in model.parameters())

@@ -1,0 +1,38 @@
+"""`explore`'s plan: the variables and their dimensions, what stays static, and which variables the
+camera never sees change anything."""
+
+from __future__ import annotations
+
+import pytest
+
+from workers.models.explore import KIND
+from workers.scene.builtin import get_builtin
+from workers.scene.errors import SceneError
+from workers.scene.io import scene_from_dict
+from workers.scene.reference import SceneRef
+
+CONFIG = KIND.resolve_config("quick", {})
+
+
+def test_a_variable_that_moves_an_object_out_of_sight_is_reported():
+    data = get_builtin("cornell_moving_light").model_dump(mode="json")
+    data["objects"].append(
+        {"name": "behind", "shape": {"type": "sphere", "radius": 0.2}, "material": "white",
+         "transform": {"translate": [0, 0, 6]}}
+    )  # fmt: skip
+    data["variables"].append({"type": "translate", "name": "behind", "object": "behind", "max": [0.5, 0, 0]})
+    plan = KIND.plan(SceneRef(scene_from_dict(data)), CONFIG)
+    items = {item.name: item for item in plan.items}
+    assert (
+        items["light"].choice == "light_position"
+        and "2 dimension(s): light.x, light.z" in items["light"].reason
+    )
+    assert items["behind"].choice == "unseen" and "sees no change" in items["behind"].reason
+    assert "small_box" in items["static"].reason and "light" not in items["static"].reason.split("moves ")[1]
+    assert plan.estimated_seconds > 0 and "3 dimension(s)" in plan.summary
+
+
+def test_a_scene_without_variables_is_refused_naming_the_field():
+    with pytest.raises(SceneError) as error:
+        KIND.plan(SceneRef(get_builtin("cornell_box")), CONFIG)
+    assert error.value.field == "variables"

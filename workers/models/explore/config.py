@@ -1,0 +1,141 @@
+"""The `explore` kind's config and presets (thesis Ch. 5, App. A; `../shared/notes/explore.md` A9).
+
+`paper` is the authors' README training command: 8 x 512 network, Adam 1e-4, 16 chains of 32^2 patches,
+R from 128 to 600 by 4 every 2000 iterations, p_LS 0.3, small steps in [1/25, 1/20], beta 4.6, EMA 0.9,
+a 100-generation bootstrap and a store of 1e5 patches. `default` and `quick` keep the method and shrink the
+sizes for this 2-core CPU.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from workers.nn.configs import MLPConfig
+from workers.runtime.kind_config import TrainedKindConfig
+from workers.runtime.training import Schedule, TrainConfig
+
+ACTIVE, UNIFORM = "active", "uniform"
+
+
+class ExploreConfig(TrainedKindConfig):
+    # Patches render in the driver by default: on this 2-core CPU a sampler actor competes with the
+    # trainer for the same cores (set samplers >= 1 on a cluster).
+    samplers: int = Field(0, ge=0, le=1024, description="Ray actors rendering the patches the chains ask for")
+    # The network (Sec. 5.3.2, App. A.5): position alone into the first layer, then `depth` layers of
+    # `width` that re-read the G-buffers and v. The thesis shows 128 wide is acceptable (Fig. A.6).
+    mlp: MLPConfig = MLPConfig(width=128, depth=4, activation="leaky_relu")
+    exploration: Literal["active", "uniform"] = Field(
+        ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
+    )
+    patch: int = Field(16, ge=4, le=128, description="side of a training patch, pixels")
+    chains: int = Field(8, ge=1, le=256, description="Markov chains, one patch each per generation")
+    resolution_start: int = Field(64, ge=4, le=8192, description="R at the start (Sec. 5.5.2)")
+    resolution_max: int = Field(128, ge=4, le=8192)
+    resolution_step: int = Field(4, ge=0, le=1024, description="pixels R grows by every `resolution_every`")
+    resolution_every: int = Field(200, ge=1, description="iterations between resolution steps")
+    spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
+    max_depth: int = Field(5, ge=1, le=64, description="path segments of a training patch")
+    large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
+    small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
+    small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
+    reuse_beta: float = Field(4.6, description="beta of Eq. 5.4: p_s = 0.99 for equal losses")
+    reuse_ema: float = Field(0.9, ge=0, lt=1, description="decay of the reuse losses' moving averages")
+    bootstrap: int = Field(20, ge=1, description="generation steps before any reuse (App. A.7)")
+    store_capacity: int = Field(4096, ge=2, description="patches kept for reuse")
+    loss_l1_weight: float = Field(
+        2.0, ge=0, description="w_1 of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM)"
+    )
+    # SSIM needs patches larger than its window: on 8^2 patches it slowed learning (cornell_moving_light,
+    # 1500 steps: FLIP 0.61 with it, 0.42 without), so `quick` leaves it out
+    loss_ssim_weight: float = Field(1.0, ge=0, description="w_s, the weight of 1 - SSIM")
+    # The network is small: one intra-op thread trained 600 steps of `quick` in 9 s on the loaded 2-core
+    # CPU, two busy-waited (`workers.runtime.threads`); set more on an idle many-core machine
+    torch_threads: int = Field(1, ge=1, le=256, description="torch threads while the model trains")
+    # 8 fixed configurations (seeded by the job) measured against `reference_spp` at the view's size
+    evaluation_configurations: int = Field(8, ge=1, le=64)
+    preview_size: int = Field(64, ge=8, le=2048, description="side of the report's frames")
+    # Adam 1e-4 in the paper over 10^5 iterations; minutes on a CPU need a larger step, decayed to the
+    # end (in `quick`, cosine decay is what made the short run beat 1 spp reliably)
+    train: TrainConfig = TrainConfig(
+        steps=2000, schedule=Schedule(lr=5e-4, kind="cosine", final_lr_fraction=0.05), betas=(0.9, 0.999),
+        eps=1e-8, grad_clip_norm=1.0, checkpoint_every=250, progress_every=20,
+    )  # fmt: skip
+
+    @model_validator(mode="after")
+    def _sizes_fit(self) -> ExploreConfig:
+        if self.small_step_min > self.small_step_max:
+            raise ValueError("small_step_min: must not exceed small_step_max")
+        if self.resolution_start < self.patch:
+            raise ValueError(
+                f"resolution_start: {self.resolution_start} is smaller than a patch ({self.patch})"
+            )
+        if self.store_capacity < 2 * self.chains:
+            raise ValueError(f"store_capacity: keep at least two patches per chain ({2 * self.chains})")
+        if self.resolution_max < self.resolution_start:
+            raise ValueError("resolution_max: must be at least resolution_start")
+        return self
+
+    def resolution(self, iteration: int) -> int:
+        """R at an iteration: grows by `resolution_step` every `resolution_every`, up to the maximum; the
+        uniform baseline keeps the start (no schedule, Table 5.3)."""
+        if self.exploration == UNIFORM:
+            return self.resolution_start
+        grown = self.resolution_start + self.resolution_step * (iteration // self.resolution_every)
+        return min(grown, self.resolution_max)
+
+
+PRESETS: dict[str, dict] = {
+    "quick": {
+        # cornell_moving_light, the report's 24^2 view: FLIP 0.42 / 0.43 against 0.46 / 0.52 for 1 spp
+        # (seeds 5 / 6) at 1000 steps with cosine decay; a constant rate gave 0.46-0.75 over seeds and
+        # settings, 100 steps 0.68. About a minute on the loaded 2-core CPU.
+        "mlp": {"width": 32, "depth": 2},
+        "patch": 8,
+        "chains": 4,
+        "resolution_start": 16,
+        "resolution_max": 24,
+        "resolution_step": 4,
+        "resolution_every": 100,
+        "spp": 8,
+        "max_depth": 3,
+        "bootstrap": 50,
+        "store_capacity": 512,
+        "loss_ssim_weight": 0.0,
+        "evaluation_configurations": 2,
+        "preview_size": 24,
+        "train": {
+            "steps": 1000,
+            "schedule": {"lr": 1e-2, "kind": "cosine", "final_lr_fraction": 0.02},
+            "checkpoint_every": 500,
+            "progress_every": 50,
+        },
+        "evaluation_spp": 2,
+        "reference_spp": 128,
+    },
+    "default": {},
+    "paper": {
+        "mlp": {"width": 512, "depth": 8},
+        "patch": 32,
+        "chains": 16,
+        "resolution_start": 128,
+        "resolution_max": 600,
+        "resolution_every": 2000,
+        "spp": 400,
+        "max_depth": 9,
+        "bootstrap": 100,
+        "store_capacity": 100_000,
+        "evaluation_configurations": 10,
+        "preview_size": 512,
+        "train": {
+            "steps": 236_000,
+            "schedule": {"lr": 1e-4, "kind": "constant"},
+            "grad_clip_norm": None,
+            "checkpoint_every": 2000,
+        },
+        "evaluation_spp": 64,
+        "reference_spp": 1024,
+        "num_gpus": 1,
+    },
+}

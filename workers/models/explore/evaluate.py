@@ -1,0 +1,84 @@
+"""The network's frames and their error against path tracing, at fixed configurations of the scene.
+
+A frame is what serving does: Embree G-buffers through pixel centres, then the network per pixel; its time
+covers both. Errors are DSSIM and MAPE (thesis Sec. 5.6: 1 - SSIM over 2 on the sRGB-tonemapped image,
+|t - r| / (r + 0.01)) against path tracing at `reference_spp`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from workers.models.explore.features import pixel_features
+from workers.models.explore.network import PixelGenerator
+from workers.nn.metrics import dssim, mape
+from workers.render.camera import PinholeCamera
+from workers.render.gbuffer import primary_gbuffers
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
+from workers.runtime.threads import torch_threads
+from workers.scene.spec import Camera
+
+PIXELS_PER_CHUNK = 1 << 16
+
+
+def configurations(dimensions: int, count: int, seed: int) -> np.ndarray:
+    """`count` fixed scene vectors: the middle of every range, then seeded uniform draws."""
+    rng = np.random.default_rng([seed, 0x5EED])
+    return np.concatenate([np.full((1, dimensions), 0.5), rng.random((count - 1, dimensions))])[:count]
+
+
+@torch.no_grad()
+def network_image(
+    model: PixelGenerator, tracer: PathTracer, camera: Camera, box: np.ndarray, v: np.ndarray,
+    width: int, height: int,
+) -> tuple[np.ndarray, float]:  # fmt: skip
+    """(H, W, 3) linear radiance of the view at v, and the seconds it took (G-buffers and network)."""
+    started = time.perf_counter()
+    buffers = primary_gbuffers(tracer, PinholeCamera(camera, width, height))
+    features = torch.from_numpy(pixel_features(buffers, box, v)).reshape(-1, 13 + len(v))
+    emission = torch.from_numpy(buffers.emission).reshape(-1, 3)
+    device = next(model.parameters()).device
+    with torch_threads(1):  # small layers: a second thread busy-waits (`workers.runtime.threads`)
+        chunks = [
+            model.radiance(
+                features[i : i + PIXELS_PER_CHUNK].to(device), emission[i : i + PIXELS_PER_CHUNK].to(device)
+            )
+            for i in range(0, len(features), PIXELS_PER_CHUNK)
+        ]
+    image = torch.cat(chunks).float().cpu().numpy().reshape(height, width, 3)
+    return image, time.perf_counter() - started
+
+
+@dataclass
+class ConfigurationErrors:
+    dssim: list[float]
+    mape: list[float]
+
+    def means(self) -> dict[str, float]:
+        return {"dssim": float(np.mean(self.dssim)), "mape": float(np.mean(self.mape))}
+
+
+def reference_images(
+    tracers: list[PathTracer], size: int, spp: int, max_depth: int, seed: int
+) -> list[np.ndarray]:
+    """Path tracing of each configuration's view at `spp` (the converged images errors are taken against)."""
+    settings = RenderSettings(spp=spp, width=size, height=size, max_depth=max_depth, seed=seed, threads=2)
+    return [render(t, settings).image for t in tracers]
+
+
+def configuration_errors(
+    model: PixelGenerator, tracers: list[PathTracer], vectors: np.ndarray, references: list[np.ndarray],
+    box: np.ndarray,
+) -> ConfigurationErrors:  # fmt: skip
+    errors = ConfigurationErrors([], [])
+    for tracer, v, reference in zip(tracers, vectors, references, strict=True):
+        h, w = reference.shape[:2]
+        image, _ = network_image(model, tracer, tracer.scene.spec.camera, box, v, w, h)
+        errors.dssim.append(dssim(reference, image))
+        errors.mape.append(mape(reference, image))
+    return errors

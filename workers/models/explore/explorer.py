@@ -1,0 +1,250 @@
+"""Active exploration as the training loop's batch stream (thesis Sec. 5.4-5.5, App. A.6-A.7).
+
+Each iteration either generates or reuses. Generating (always during the bootstrap, else with probability
+1 - p_s): every chain proposes a state, the proposals are rendered by the job's sampler actors
+(`Renders`), each proposal is judged against its chain's current state by the target f = loss x ||Adam
+step|| evaluated with the current weights (the authors' code runs a forward and backward pass per
+patch; here every patch's gradient comes from one vectorised pass), and the batch holds the accepted
+proposal, or the rejected proposal and the current state [code]: every rendered patch is trained on at
+least once and long-lived states are retrained. Reusing: `chains` stored patches drawn in proportion to
+their last loss.
+
+The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
+baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
+
+Everything random comes from (seed, iteration), and the patches from requests that carry their seeds, so
+a run is reproducible for a seed. Seeking to another iteration (a resumed job) restarts the chains, the
+store and the bootstrap at that iteration's resolution: the exploration state is not checkpointed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.func import functional_call, grad, vmap
+
+from workers.models.explore.config import UNIFORM, ExploreConfig
+from workers.models.explore.exploration import greedy, large_step, propose
+from workers.models.explore.network import PixelGenerator
+from workers.models.explore.oracle import adam_step_norm
+from workers.models.explore.reuse import MovingAverage, PatchStore, reuse_probability
+from workers.models.explore.source import render_seed, request_for
+from workers.nn.ssim import ssim_map
+from workers.runtime.samplers import Renders
+from workers.runtime.sources import Batch
+from workers.runtime.threads import torch_threads
+
+PATCH_KEYS = ("features", "emission", "target")
+
+
+def patch_losses(
+    model: Callable[[Tensor, Tensor], Tensor], batch: Batch, l1_weight: float, ssim_weight: float = 1.0
+) -> Tensor:
+    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1)."""
+    prediction = model(batch["features"], batch["emission"])
+    reference = torch.log1p(batch["target"].clamp_min(0.0))
+    loss = l1_weight * (prediction - reference).abs().mean(dim=(1, 2, 3))
+    if ssim_weight:
+        loss = loss + ssim_weight * (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
+    return loss
+
+
+@dataclass
+class Chain:
+    state: np.ndarray | None = None
+    patch_id: int | None = None  # its current state's patch in the store (pinned there)
+
+
+class Explorer:
+    """The batch stream of active exploration (or of the uniform baseline) for one model."""
+
+    def __init__(self, config: ExploreConfig, dimensions: int, model: PixelGenerator, seed: int) -> None:
+        self.config = config
+        self.state_dimensions = dimensions + 2
+        self.model = model
+        self.seed = seed
+        self.adam: torch.optim.Adam | None = None
+        self.renders: Renders | None = None
+        self._threads: contextlib.ExitStack | None = None
+        self._restart(0)
+
+    # ------------------------------------------------------------------ wiring
+
+    def attach(self, adam: torch.optim.Optimizer) -> None:
+        """The trainer's Adam, whose moments the target's step norm reads (`Phase.on_optimizer`)."""
+        self.adam = adam
+
+    def open(self, renders: Renders) -> Explorer:
+        """This stream over the job's renders (`Trainable.driven`); while it is open (the whole training of
+        its model), torch runs `config.torch_threads` intra-op threads."""
+        self.renders = renders
+        self._threads = contextlib.ExitStack()
+        self._threads.enter_context(torch_threads(self.config.torch_threads))
+        return self
+
+    def close(self) -> None:
+        self.renders = None
+        if self._threads is not None:
+            self._threads.close()
+            self._threads = None
+
+    def __enter__(self) -> Explorer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __iter__(self) -> Explorer:
+        return self
+
+    # ------------------------------------------------------------------ the stream
+
+    def _restart(self, position: int) -> None:
+        c = self.config
+        self.position = position
+        self.store = PatchStore(c.store_capacity)
+        self.chains = [Chain() for _ in range(c.chains)]
+        self.loss_new, self.loss_existing = MovingAverage(c.reuse_ema), MovingAverage(c.reuse_ema)
+        self.generations = 0
+        self.counts = {"proposals": 0, "accepted": 0, "large_steps": 0, "generated": 0, "reused": 0}
+
+    def seek(self, index: int) -> None:
+        if index != self.position:
+            self._restart(index)
+
+    def reuse_probability(self) -> float:
+        """p_s now; both averages start from the fresh patches' one at the end of the bootstrap."""
+        new = self.loss_new.value
+        if new is None:
+            return 0.0
+        existing = self.loss_existing.value if self.loss_existing.value is not None else new
+        return reuse_probability(existing, new, self.config.reuse_beta)
+
+    def __next__(self) -> Batch:
+        rng = np.random.default_rng([self.seed, self.position, 1])
+        bootstrapping = self.generations < self.config.bootstrap or len(self.store) == 0
+        if bootstrapping or rng.random() >= self.reuse_probability():
+            batch = self._generate(rng)
+        else:
+            batch = self._reuse(rng)
+        self.position += 1
+        return batch
+
+    def _generate(self, rng: np.random.Generator) -> Batch:
+        c = self.config
+        if self.renders is None:
+            raise RuntimeError("the explorer renders through `open(renders)` before it is iterated")
+        uniform = c.exploration == UNIFORM
+        current = np.array(
+            [
+                chain.state if chain.state is not None else np.zeros(self.state_dimensions)
+                for chain in self.chains
+            ]
+        )
+        states, large = propose(rng, current, c.large_step_probability, c.small_step_min, c.small_step_max)
+        fresh = np.array([uniform or chain.state is None for chain in self.chains])
+        states = np.where(fresh[:, None], large_step(rng, current.shape), states)
+        large = large | fresh
+        resolution = c.resolution(self.position)
+        requests = [
+            request_for(state, resolution, c.patch, render_seed(self.seed, self.position, k))
+            for k, state in enumerate(states)
+        ]
+        patches = self.renders.map(requests)
+        ids = [
+            self.store.add(patch, is_large) for patch, is_large in zip(patches, large.tolist(), strict=True)
+        ]
+        judged = [k for k, chain in enumerate(self.chains) if not uniform and chain.patch_id is not None]
+        currents = [self.store.patches[self.chains[k].patch_id] for k in judged]
+        values = self.targets([patches[k] for k in judged] + currents) if judged else np.zeros(0)
+        accepted = {k: bool(greedy(values[i], values[len(judged) + i])) for i, k in enumerate(judged)}
+        self.counts["proposals"] += len(judged)
+        self.counts["accepted"] += sum(accepted.values())
+        self.counts["large_steps"] += int(large.sum())
+        members: list[tuple[int, Batch, bool]] = []
+        for k, chain in enumerate(self.chains):
+            members.append((ids[k], patches[k], bool(large[k])))
+            if accepted.get(k, True):
+                if chain.patch_id is not None:
+                    self.store.unpin(chain.patch_id)
+                chain.state, chain.patch_id = states[k], ids[k]
+                self.store.pin(ids[k])
+            else:
+                current = chain.patch_id
+                members.append((current, self.store.patches[current], self.store.large[current]))
+        self.generations += 1
+        self.counts["generated"] += 1
+        return _stack(members, reused=False)
+
+    def _reuse(self, rng: np.random.Generator) -> Batch:
+        ids = self.store.draw(rng, self.config.chains)
+        self.counts["reused"] += 1
+        return _stack([(i, self.store.patches[i], self.store.large[i]) for i in ids], reused=True)
+
+    # ------------------------------------------------------------------ the target and the loss
+
+    def targets(self, patches: list[Batch]) -> np.ndarray:
+        """f(u) = loss(u) x ||Adam step for u's gradient|| of each patch with the current weights (Sec. 5.4),
+        every patch's gradient in one vectorised pass (`torch.func`); the loss alone before the trainer's
+        Adam is attached."""
+        device = next(self.model.parameters()).device
+        stacked = [torch.stack([p[k] for p in patches]).to(device) for k in PATCH_KEYS]
+        weights = {name: p.detach() for name, p in self.model.named_parameters()}
+        c = self.config
+
+        def loss_of(w: dict[str, Tensor], features: Tensor, emission: Tensor, target: Tensor):
+            def network(x: Tensor, e: Tensor) -> Tensor:
+                return functional_call(self.model, w, (x, e))
+
+            one = {"features": features[None], "emission": emission[None], "target": target[None]}
+            value = patch_losses(network, one, c.loss_l1_weight, c.loss_ssim_weight)[0]
+            return value, value
+
+        gradients, losses = vmap(grad(loss_of, has_aux=True), in_dims=(None, 0, 0, 0))(weights, *stacked)
+        losses = losses.detach().double().cpu().numpy()
+        if self.adam is None:
+            return losses
+        names = {id(p): name for name, p in self.model.named_parameters()}
+        order = [names[id(p)] for group in self.adam.param_groups for p in group["params"]]
+        norms = [adam_step_norm(self.adam, [gradients[n][i] for n in order]) for i in range(len(patches))]
+        return losses * np.array(norms)
+
+    def loss(self, model: PixelGenerator, batch: Batch) -> Tensor:
+        """The training loss (the phase's); it writes each patch's loss back as its reuse weight and feeds
+        the large-step patches' mean to the average of fresh or of reused patches."""
+        per_patch = patch_losses(model, batch, self.config.loss_l1_weight, self.config.loss_ssim_weight)
+        values = per_patch.detach().float().cpu().numpy()
+        for patch_id, value in zip(batch["patch_id"].tolist(), values, strict=True):
+            self.store.set_weight(patch_id, float(value))
+        large = batch["large"].cpu().numpy() > 0.5
+        if large.any():
+            average = self.loss_existing if bool(batch["reused"][0]) else self.loss_new
+            average.update(float(values[large].mean()))
+        return per_patch.mean()
+
+    def statistics(self) -> dict[str, float]:
+        proposals = max(self.counts["proposals"], 1)
+        steps = max(self.counts["generated"] + self.counts["reused"], 1)
+        return {
+            "acceptance_rate": self.counts["accepted"] / proposals,
+            "large_step_fraction": self.counts["large_steps"]
+            / max(self.counts["generated"] * len(self.chains), 1),
+            "generated_fraction": self.counts["generated"] / steps,
+            "patches_rendered": float(self.counts["generated"] * len(self.chains)),
+            "final_reuse_probability": self.reuse_probability(),
+            "final_resolution": float(self.config.resolution(self.position)),
+            "stored_patches": float(len(self.store)),
+        }
+
+
+def _stack(members: list[tuple[int, Batch, bool]], reused: bool) -> Batch:
+    batch = {k: torch.stack([patch[k] for _, patch, _ in members]) for k in PATCH_KEYS}
+    batch["patch_id"] = torch.tensor([i for i, _, _ in members], dtype=torch.int64)
+    batch["large"] = torch.tensor([float(large) for _, _, large in members])
+    batch["reused"] = torch.full((len(members),), float(reused))
+    return batch

@@ -1,0 +1,131 @@
+"""Serving an `explore` artifact: the network renders its variable scene at any setting of the variables.
+
+`render`: `params.values` sets the named variables, in their own units (a colour as RGB, an offset as
+xyz, an angle in degrees, a switch by object name) or, with `normalised`, as their entries of v; the
+variables not named sit at the middle of their ranges. Embree gives the G-buffers of the view, the network
+the radiance per pixel. A camera that is itself a variable is set through its values; otherwise
+`params.camera` overrides the scene camera's fields.
+
+`query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
+albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, which the network sees as
+zeros as in a frame) and a scene vector per row, normalised.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import torch
+from pydantic import BaseModel, ConfigDict, Field
+
+from workers.models.explore.artifact import load
+from workers.models.explore.evaluate import network_image
+from workers.models.explore.features import pixel_features
+from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
+from workers.render.gbuffer import GBuffers
+from workers.render.variable_tracer import VariableTracer
+from workers.runtime.view_render import CameraParams, scene_bytes
+from workers.scene.variable_scene import CompiledVariableScene
+from workers.scene.variables import vector_from_values
+
+
+class ExploreRender(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    camera: CameraParams = Field(default_factory=CameraParams)
+    values: dict[str, float | list[float] | str] = Field(
+        default_factory=dict, description="variable name -> value (own units, or v entries with `normalised`)"
+    )
+    normalised: bool = Field(False, description="values are entries of v in [0, 1]")
+
+
+class PixelQuery(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ExploreModel:
+    def __init__(self, folder: Path, device: str) -> None:
+        self.artifact = load(folder, device)
+        self.scene = CompiledVariableScene(self.artifact.scene)
+        self.tracer = VariableTracer(self.scene)
+        weights = sum(p.numel() * p.element_size() for p in self.artifact.model.parameters())
+        self.nbytes = weights + scene_bytes(self.scene.base)
+
+    def answer(self, operation: str, params: BaseModel, arrays: dict[str, np.ndarray]) -> Answer:
+        if operation == RENDER:
+            return self._render(params)
+        return self._query(arrays)
+
+    def _render(self, params: ExploreRender) -> Answer:
+        spec = self.artifact.scene
+        try:
+            v = vector_from_values(spec, params.values, params.normalised)
+        except ValueError as error:
+            raise ValueError(f"params.{error}") from None
+        cameras = [variable.name for variable in spec.variables if variable.type == "camera"]
+        if cameras and (params.camera.position is not None or params.camera.target is not None):
+            raise ValueError(
+                f"params.camera: the camera is the variable {cameras[0]!r}; set it in params.values"
+            )
+        state = self.scene.at(v)
+        camera = params.camera.over(state.compiled.spec.camera)
+        with torch.inference_mode():
+            image, seconds = network_image(
+                self.artifact.model, self.tracer.state_tracer(state), camera, self.artifact.box, v,
+                camera.width, camera.height,
+            )  # fmt: skip
+        return Answer(
+            {"image": image}, {"v": v.tolist(), "dimensions": self.artifact.dimensions, "seconds": seconds}
+        )
+
+    def _query(self, arrays: dict[str, np.ndarray]) -> Answer:
+        v = arrays["v"]
+        k = len(self.artifact.dimensions)
+        if v.shape[1] != k:
+            raise ValueError(f"arrays.v: the scene has {k} dimension(s), got {v.shape[1]} per row")
+        if not np.all(np.isfinite(v)) or v.min(initial=0) < 0 or v.max(initial=1) > 1:
+            raise ValueError("arrays.v: every entry must be in [0, 1]")
+        n = len(v)
+        buffers = GBuffers(
+            position=arrays["position"][None], normal=arrays["normal"][None], wo=arrays["wo"][None],
+            albedo=arrays["albedo"][None], roughness=arrays["roughness"][None],
+            emission=arrays["emission"][None], hit=arrays.get("hit", np.ones(n, bool)).reshape(1, n),
+        )  # fmt: skip
+        features = pixel_features(buffers, self.artifact.box, np.zeros(0))[0]
+        features = np.concatenate([features, v.astype(np.float32)], axis=-1)
+        model = self.artifact.model
+        device = next(model.parameters()).device
+        with torch.inference_mode():
+            radiance = model.radiance(
+                torch.from_numpy(features).to(device), torch.from_numpy(arrays["emission"]).to(device)
+            )
+        return Answer({"radiance": radiance.float().cpu().numpy()}, {"dimensions": self.artifact.dimensions})
+
+
+class ExploreInference:
+    operations: ClassVar[Mapping[str, Operation]] = {
+        QUERY: Operation(
+            params=PixelQuery,
+            inputs={
+                "position": ArraySpec("float32", (None, 3)),
+                "normal": ArraySpec("float32", (None, 3)),
+                "wo": ArraySpec("float32", (None, 3)),
+                "albedo": ArraySpec("float32", (None, 3)),
+                "roughness": ArraySpec("float32", (None, 1)),
+                "emission": ArraySpec("float32", (None, 3)),
+                "v": ArraySpec("float32", (None, None)),
+                "hit": ArraySpec("bool", (None,), required=False),
+            },
+            batched=True,
+        ),
+        RENDER: Operation(params=ExploreRender),
+    }
+
+    def load(self, folder: Path, device: str) -> ExploreModel:
+        return ExploreModel(Path(folder), device)
+
+
+INFERENCE = ExploreInference()

@@ -1,0 +1,115 @@
+"""What a variable scene needs from `explore`: its variables and dimensions, what stays static, which
+variables change what the camera sees, the sizes for the preset and the estimated cost.
+
+A variable "changes the view" when the camera sees a difference between the scene at its two ends (the
+others at the middle): the 16 x 16 G-buffers differ, or 4-spp renders with the same seed differ by more
+than `SEEN_DIFFERENCE` of their mean (paths that never meet what the variable changes trace the same
+random numbers). A variable that moves an object the camera never sees, or lights nothing it sees, is
+reported as such.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workers.models.explore.config import ExploreConfig
+from workers.render.camera import PinholeCamera
+from workers.render.gbuffer import primary_gbuffers
+from workers.render.render import RenderSettings, render
+from workers.render.variable_tracer import VariableTracer
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.errors import SceneError
+from workers.scene.reference import SceneRef
+from workers.scene.variable_scene import CompiledVariableScene
+from workers.scene.variables import dimension_labels, variable_slices
+
+PROBE_SIZE = 16
+PROBE_SPP = 4
+SEEN_DIFFERENCE = 0.02  # relative mean absolute difference of the probe renders
+# Rough costs on the shared, loaded 2-core CPU: 128 `quick` patches (65k paths of depth 3) rendered in 2.7 s;
+# a training step of 8 8^2 patches through 32 x 2 took 15 ms, mostly fixed overhead; the network's
+# share grows with pixels x width x layers (128 x 4 on 16^2 patches: about 60 ms a step).
+SECONDS_PER_PATH_SEGMENT = 1.4e-5
+SECONDS_PER_STEP = 0.015
+SECONDS_PER_PIXEL_LAYER = 2e-8  # per pixel, per layer of width 128, forward and backward
+
+
+def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: str, where: slice) -> bool:
+    """Whether the camera sees a change between the variable at 0 and at 1 (others at the middle)."""
+    buffers_at, images = [], []
+    for end in (0.0, 1.0):
+        v = np.full(scene.dimensions, 0.5)
+        v[where] = end
+        state = scene.at(v)
+        path_tracer = tracer.state_tracer(state)
+        camera = state.compiled.spec.camera
+        buffers = primary_gbuffers(path_tracer, PinholeCamera(camera, PROBE_SIZE, PROBE_SIZE))
+        settings = RenderSettings(
+            spp=PROBE_SPP, width=PROBE_SIZE, height=PROBE_SIZE, max_depth=3, seed=0, threads=1
+        )
+        images.append(render(path_tracer, settings).image)
+        buffers_at.append(
+            np.concatenate([buffers.position, buffers.albedo, buffers.roughness, buffers.emission], -1)
+        )
+    if not np.allclose(buffers_at[0], buffers_at[1], atol=1e-5):
+        return True
+    difference = np.abs(images[0] - images[1]).mean()
+    return bool(difference > SEEN_DIFFERENCE * max(0.5 * (images[0].mean() + images[1].mean()), 1e-12))
+
+
+def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
+    spec = scene.spec
+    if not spec.variables:
+        raise SceneError(
+            "variables", "explore trains a renderer for a variable scene: name at least one variable"
+        )
+    compiled = CompiledVariableScene(spec, scene.folder)
+    tracer = VariableTracer(compiled)
+    slices = variable_slices(spec)
+    items = []
+    for variable in spec.variables:
+        labels = dimension_labels(variable)
+        seen = visible_effect(tracer, compiled, variable.name, slices[variable.name])
+        reason = f"{len(labels)} dimension(s): {', '.join(labels)}"
+        if not seen:
+            reason += "; the camera sees no change over its range (it moves or lights nothing in view)"
+        items.append(PlanItem(name=variable.name, choice=variable.type if seen else "unseen", reason=reason))
+    static = [
+        compiled.base.objects[i].name for i in range(len(compiled.base.objects)) if i not in compiled.moved
+    ]
+    items.append(
+        PlanItem(
+            name="static",
+            choice=f"{len(compiled.static_triangles)} triangles in one BVH",
+            reason=f"no variable moves {', '.join(static)}",
+        )
+    )
+    schedule = (
+        f"R {config.resolution_start} -> {config.resolution_max} by {config.resolution_step} every "
+        f"{config.resolution_every} iterations"
+        if config.exploration != "uniform"
+        else f"R {config.resolution_start} fixed (uniform baseline)"
+    )
+    items.append(
+        PlanItem(
+            name="exploration",
+            choice=f"{config.exploration}: {config.chains} chains of {config.patch}^2 patches",
+            reason=f"{schedule}; {config.spp} spp, depth {config.max_depth}; "
+            f"p_LS {config.large_step_probability}, beta {config.reuse_beta}, bootstrap {config.bootstrap}",
+        )
+    )
+    items.append(
+        PlanItem(name="network", choice=config.mlp.describe(), reason="position preconditioning, skips")
+    )
+    patches = config.chains * config.patch**2
+    render_seconds = patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT
+    # a generation renders the chains' patches and evaluates f on two patches per chain; reuse is one
+    # step (p_s is about 0.99 after the bootstrap, App. A.7)
+    generation_share = min(0.02 + config.bootstrap / max(config.train.steps, 1), 1.0)
+    network = SECONDS_PER_PIXEL_LAYER * patches * (config.mlp.depth + 1) * config.mlp.width / 128
+    step = SECONDS_PER_STEP + network
+    seconds = config.train.steps * (generation_share * (render_seconds + 2 * network) + step)
+    summary = (
+        f"{spec.dimensions} dimension(s), {len(spec.variables)} variable(s); {config.exploration} exploration"
+    )
+    return Plan(items=items, estimated_seconds=float(seconds), summary=summary)
