@@ -6,7 +6,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 
-.PHONY: venv run test test-all bench lint clean proto browser
+.PHONY: venv run test test-all bench lint clean proto test-packages
 
 venv: $(STAMP)
 
@@ -23,16 +23,19 @@ $(STAMP): pyproject.toml clients/python/pyproject.toml constraints.txt
 run: venv
 	$(PY) -m services.cli.run_job --scene cornell_box --preset default --config '{"spp": 64}' --out out/run
 
-## Debian's Chromium for the dashboard's browser test (Playwright drives it; it never downloads a browser).
-browser:
-	test -x /usr/bin/chromium || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium)
+## Debian packages the tests use: Chromium for the dashboard's browser test (Playwright drives it; it never
+## downloads a browser) and assimp's BSD sample models for the glTF importer's real-file test.
+TEST_PACKAGES := chromium assimp-testmodels
+test-packages:
+	dpkg -s $(TEST_PACKAGES) >/dev/null 2>&1 || (apt-get update -q && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q $(TEST_PACKAGES))
 
 ## The default test suite (what CI runs).
-test: venv browser
+test: venv test-packages
 	$(VENV)/bin/pytest -q
 
 ## Including slow accuracy checks.
-test-all: venv browser
+test-all: venv test-packages
 	$(VENV)/bin/pytest -q -m ''
 
 bench: venv
