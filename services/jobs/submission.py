@@ -5,8 +5,11 @@ naming its field), the work's idempotency key computed, and an existing job reus
 from __future__ import annotations
 
 import hashlib
+import json
+import threading
 import uuid
-from typing import Any
+from collections import OrderedDict
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -17,11 +20,17 @@ from services.jobs.scenes import SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
 from workers.models.registry import UnknownKind, get_kind
+from workers.runtime.contract import Plan
+from workers.scene.budget import scene_triangles
 from workers.scene.errors import SceneError
 from workers.scene.io import dotted_path
 from workers.scene.reference import SceneRef
 
+if TYPE_CHECKING:
+    from services.geometry import GeometryProcesses
+
 MAX_IDEMPOTENCY_HEADER = 255
+PLAN_CACHE_SIZE = 1024  # plans are a few KB; repeated submissions of the same work skip the planning
 
 
 class JobRequest(BaseModel):
@@ -42,8 +51,19 @@ class JobRequest(BaseModel):
 
 
 class Submitter:
-    def __init__(self, jobs: JobRepository, scenes: SceneResolver, max_attempts: int):
-        self.jobs, self.scenes, self.max_attempts = jobs, scenes, max_attempts
+    """Plans run in `geometry`'s child processes when given (a server: plans may build meshes), and are
+    cached per kind, scene content and resolved config."""
+
+    def __init__(
+        self,
+        jobs: JobRepository,
+        scenes: SceneResolver,
+        max_attempts: int,
+        geometry: GeometryProcesses | None = None,
+    ):
+        self.jobs, self.scenes, self.max_attempts, self.geometry = jobs, scenes, max_attempts, geometry
+        self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
+        self._plans_lock = threading.Lock()
 
     def submit(self, request: JobRequest, header_key: str | None = None) -> tuple[Job, bool]:
         """(job, created): created is False when an idempotency key named an existing job."""
@@ -64,7 +84,8 @@ class Submitter:
             raise InvalidInput(str(error), "config") from None
         scene = self.scenes.resolve(request.scene)
         try:
-            plan = kind.plan(SceneRef(scene.spec, self.scenes.scene_dir(scene.ref)), config)
+            scene_triangles(scene.spec)  # before anything is built, here or in a child
+            plan = self._plan(kind.name, scene, config)
         except SceneError as error:
             raise InvalidInput(error.problem, scene_field(error)) from None
         except ValueError as error:
@@ -94,6 +115,28 @@ class Submitter:
         )
         content_key = None if request.force else f"content:{key}"
         return self.jobs.create(job, content_key, _header_key(header_key))
+
+    def _plan(self, kind_name: str, scene, config) -> Plan:
+        key = (kind_name, scene.content_hash, json.dumps(config.model_dump(mode="json"), sort_keys=True))
+        with self._plans_lock:
+            if key in self._plans:
+                self._plans.move_to_end(key)
+                return self._plans[key]
+        ref = SceneRef(scene.spec, self.scenes.scene_dir(scene.ref))
+        if self.geometry is None:
+            plan = make_plan(kind_name, ref, config)
+        else:
+            plan = self.geometry.run("scene", make_plan, kind_name, ref, config)
+        with self._plans_lock:
+            self._plans[key] = plan
+            while len(self._plans) > PLAN_CACHE_SIZE:
+                self._plans.popitem(last=False)
+        return plan
+
+
+def make_plan(kind_name: str, scene: SceneRef, config) -> Plan:
+    """The kind's plan (a module-level function, so a child process can run it)."""
+    return get_kind(kind_name).plan(scene, config)
 
 
 def _header_key(value: str | None) -> str | None:
