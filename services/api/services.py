@@ -53,7 +53,7 @@ class Services:
         )
         scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
         geometry = GeometryProcesses()
-        submitter = Submitter(jobs, scenes, settings.max_attempts, geometry)
+        submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
         return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry)
 
     def start(self) -> None:

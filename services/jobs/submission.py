@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import threading
 import uuid
 from collections import OrderedDict
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -39,7 +40,7 @@ class JobRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     kind: str = Field(max_length=64, description="The model kind, e.g. `render`.", examples=["render"])
-    scene: str | dict[str, Any] = Field(
+    scene: Annotated[str, Field(min_length=1, max_length=256)] | dict[str, Any] = Field(
         description="An uploaded asset id (`sha256:...`), a built-in scene name, or an inline SceneSpec.",
         examples=["cornell_box"],
     )
@@ -60,8 +61,10 @@ class Submitter:
         scenes: SceneResolver,
         max_attempts: int,
         geometry: GeometryProcesses | None = None,
+        max_job_seconds: float = math.inf,
     ):
         self.jobs, self.scenes, self.max_attempts, self.geometry = jobs, scenes, max_attempts, geometry
+        self.max_job_seconds = max_job_seconds
         self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
         self._plans_lock = threading.Lock()
 
@@ -74,6 +77,7 @@ class Submitter:
         if request.preset not in kind.presets:
             known = ", ".join(kind.presets)
             raise InvalidInput(f"unknown preset {request.preset!r}; known presets: {known}", "preset")
+        check_finite(request.config, "config")
         try:
             config = kind.resolve_config(request.preset, request.config)
         except ValidationError as error:
@@ -90,6 +94,12 @@ class Submitter:
             raise InvalidInput(error.problem, scene_field(error)) from None
         except ValueError as error:
             raise InvalidInput(str(error), "config") from None
+        if plan.estimated_seconds > self.max_job_seconds:
+            raise InvalidInput(
+                f"the plan estimates {plan.estimated_seconds:.3g} s ({plan.summary}), over the limit of "
+                f"{self.max_job_seconds:g} s (max_job_seconds): lower the config's sizes",
+                "config",
+            )
         resolved = config.model_dump(mode="json")
         code = code_version()
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
@@ -132,6 +142,20 @@ class Submitter:
             while len(self._plans) > PLAN_CACHE_SIZE:
                 self._plans.popitem(last=False)
         return plan
+
+
+def check_finite(data: Any, field: str) -> None:
+    """InvalidInput naming the first infinite or NaN number (JSON's `1e309` parses to infinity); walked
+    without recursion, however deep the body nests."""
+    stack = [(data, field)]
+    while stack:
+        value, where = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InvalidInput("must be a finite number", where)
+        if isinstance(value, dict):
+            stack.extend((child, f"{where}.{key}") for key, child in reversed(value.items()))
+        elif isinstance(value, list):
+            stack.extend((child, f"{where}[{i}]") for i, child in reversed(list(enumerate(value))))
 
 
 def make_plan(kind_name: str, scene: SceneRef, config) -> Plan:

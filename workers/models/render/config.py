@@ -15,12 +15,12 @@ class RenderConfig(KindConfig):
     width: int = Field(256, ge=1, le=16384)
     height: int = Field(256, ge=1, le=16384)
     max_depth: int = Field(8, ge=1, le=1024)
-    rr_depth: int = Field(5, ge=1)
+    rr_depth: int = Field(5, ge=1, le=1024)
     tile_size: int = Field(64, ge=8, le=1024)
     aovs: bool = Field(True, description="also write the G-buffers (position, normal, albedo, ...)")
     samplers: int = Field(2, ge=0, le=1024, description="Ray sampler actors; 0 renders inside the driver")
     # Checkpoint after a pass once this many seconds have passed since the last one; 0: after every pass.
-    checkpoint_interval_s: float = Field(10.0, ge=0)
+    checkpoint_interval_s: float = Field(10.0, ge=0, le=86_400)
 
     def settings(self, seed: int) -> RenderSettings:
         """The renderer's settings: the same ones a direct render must use to give the same image."""
