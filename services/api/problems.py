@@ -90,14 +90,19 @@ def install(app: FastAPI) -> None:
     app.add_middleware(BugsAsProblems)
 
 
+HTTP_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+
+
 def allowed_methods(app: FastAPI, request: Request) -> list[str]:
     """Every method some route serves at the request's path (Starlette's 405 names only the first
-    route's): a route whose path matches but whose method does not matches partially."""
-    methods: set[str] = set()
-    for route in app.router.routes:
-        if route.matches(request.scope)[0] != Match.NONE:
-            methods |= getattr(route, "methods", None) or set()
-    return sorted(methods)
+    route's), found by asking the routes (nested routers included) whether each method would match."""
+    return [
+        method
+        for method in HTTP_METHODS
+        if any(
+            route.matches({**request.scope, "method": method})[0] == Match.FULL for route in app.router.routes
+        )
+    ]
 
 
 class BugsAsProblems:

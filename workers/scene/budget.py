@@ -64,9 +64,9 @@ def scene_triangles(scene: spec.SceneSpec, limit: int | None = None) -> int:
 
 
 def placement_field(obj: spec.SceneObject, index: int) -> str:
-    """The field to blame: an object's instances when it has several, else its shape."""
-    return (
-        f"objects[{index}].instances"
-        if obj.instances and len(obj.instances) > 1
-        else f"objects[{index}].shape"
-    )
+    """The field to blame: an object's instances when it has several, else a generator's parameters or
+    the shape."""
+    if obj.instances and len(obj.instances) > 1:
+        return f"objects[{index}].instances"
+    params = ".params" if isinstance(obj.shape, spec.ProceduralShape) else ""
+    return f"objects[{index}].shape{params}"
