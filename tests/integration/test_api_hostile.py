@@ -107,7 +107,8 @@ def test_a_tar_member_with_a_non_utf8_name_is_400_naming_it(client):
 @pytest.mark.parametrize(
     ("config", "field", "detail_part"),
     [
-        ('{"width": 16384, "height": 16384, "spp": 1048576}', "config", "max_job_seconds"),
+        ('{"width": 16384, "height": 16384, "spp": 1048576}', "config", "over the limit of 67,108,864"),
+        ('{"width": 4096, "height": 4096, "spp": 65536}', "config", "samples, over the limit"),
         ('{"checkpoint_interval_s": 1e309}', "config.checkpoint_interval_s", "finite"),
         ('{"num_gpus": 1e309}', "config.num_gpus", "finite"),
         ('{"spp": "256"}', "config.spp", "integer"),
@@ -119,6 +120,19 @@ def test_costly_non_finite_and_loosely_typed_configs_are_422(client, config, fie
     response = client.post("/v1/jobs", content=text, headers={"content-type": "application/json"})
     body = problem_of(response, 422)
     assert body["field"] == field and detail_part in body["detail"]
+
+
+def test_a_plan_over_the_cost_ceiling_is_422_naming_it(client):
+    sphere = {"type": "procedural", "generator": "displaced_sphere", "params": {"resolution": 40}}
+    scene = {
+        "materials": {"m": {"type": "diffuse"}},
+        "objects": [{"name": "ball", "shape": sphere, "material": "m"}],
+        "lights": [{"type": "point", "position": [0, 5, 0], "intensity": [1, 1, 1]}],
+    }
+    config = {"batch_size": 1 << 22, "train": {"steps": 10_000_000}}
+    request = {"kind": "lsnif", "scene": scene, "preset": "quick", "config": config}
+    body = problem_of(client.post("/v1/jobs", json=request), 422)
+    assert body["field"] == "config" and "max_job_seconds" in body["detail"]
 
 
 @pytest.mark.parametrize(
