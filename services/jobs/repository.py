@@ -207,12 +207,20 @@ class JobRepository:
             return set(session.scalars(query))
 
     def append_events(self, job_id: str, events: Sequence[tuple[str, dict[str, Any]]]) -> None:
-        """Persist driver events (type, data) in order; the latest progress is also kept on the job."""
+        """Persist driver events (type, data) in order; the latest progress is also kept on the job.
+
+        Progress behind the latest one means the job resumed from a checkpoint (a new attempt after a
+        crash): a `resume` event (from which step, back to which, in which attempt) comes before it, so a
+        follower reads a resume, not a regression.
+        """
         if not events:
             return
         with self.db.writing() as session:
             job = self._job(session, job_id, lock=True)
             for kind, data in events:
+                if kind == "progress" and _steps_back(job.progress, data):
+                    resumed = {"from_step": job.progress["step"], "to_step": data["step"]}
+                    self._append(session, job, "resume", resumed | {"attempt": job.attempts})
                 self._append(session, job, kind, data)
                 if kind == "progress":
                     job.progress = data
@@ -245,6 +253,11 @@ class JobRepository:
     def _append(session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
         job.last_event_seq += 1
         session.add(Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow()))
+
+
+def _steps_back(latest: dict[str, Any] | None, progress: dict[str, Any]) -> bool:
+    step, before = progress.get("step"), (latest or {}).get("step")
+    return isinstance(step, int) and isinstance(before, int) and step < before
 
 
 def _locked_key(session: Session, key: str) -> IdempotencyKey | None:
