@@ -12,6 +12,7 @@ import resource
 import threading
 from collections.abc import Callable
 from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
 from pebble import ProcessExpired, ProcessPool
@@ -52,6 +53,9 @@ class GeometryProcesses:
             raise SceneError(field, self._too_large("was killed (out of memory)")) from None
         except FutureTimeout:
             raise SceneError(field, f"building the scene took longer than {self.deadline_s:g} s") from None
+        except BrokenProcessPool:
+            self.stop()  # children that cannot start: a fresh pool next time, and this request is a 500
+            raise
 
     def _too_large(self, what: str) -> str:
         return f"building the scene {what}: it needs more than {self.memory_bytes >> 20} MiB"
