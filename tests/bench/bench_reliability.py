@@ -32,7 +32,7 @@ HEADERS = {"Authorization": f"Bearer {TOKENS['admin']}"}
 def run() -> list[BenchSection]:
     with (
         tempfile.TemporaryDirectory(prefix="nbake-bench-rel-", dir="/tmp") as root,
-        PrivatePostgres(Path(root) / "pg") as postgres,
+        PrivatePostgres() as postgres,
     ):
         return [submissions(Path(root), postgres.url)]
 

@@ -8,6 +8,7 @@ import os
 import pwd
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 from tests.integration.test_api_server import free_port
@@ -16,9 +17,13 @@ SERVER_USER = "postgres"
 
 
 class PrivatePostgres:
-    def __init__(self, root: Path):
-        self.root = root
-        self.data = root / "data"
+    """Lives in a folder of its own under /tmp (every folder above the data must be open to the server's
+    user, which pytest's and mkdtemp's private folders are not), removed by `__exit__`."""
+
+    def __init__(self):
+        self.root = Path(tempfile.mkdtemp(prefix="nbake-pg-", dir="/tmp"))
+        self.root.chmod(0o755)
+        self.data = self.root / "data"
         self.port = free_port()
 
     @property
@@ -33,12 +38,9 @@ class PrivatePostgres:
 
     def start(self) -> PrivatePostgres:
         if not self.data.exists():
-            self.root.mkdir(parents=True, exist_ok=True)
             if os.geteuid() == 0:
                 user = pwd.getpwnam(SERVER_USER)
                 os.chown(self.root, user.pw_uid, user.pw_gid)
-                parent = self.root.parent  # a private temporary folder (0700): the server user must enter it
-                parent.chmod(parent.stat().st_mode | 0o711)
             self._run(
                 shutil.which("initdb") or "initdb",
                 "-D",
@@ -70,5 +72,8 @@ class PrivatePostgres:
         return self.start()
 
     def __exit__(self, *exc) -> None:
-        if (self.data / "postmaster.pid").exists():
-            self.stop("immediate")
+        try:
+            if (self.data / "postmaster.pid").exists():
+                self.stop("immediate")
+        finally:
+            shutil.rmtree(self.root, ignore_errors=True)
