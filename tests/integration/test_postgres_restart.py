@@ -13,6 +13,7 @@ from tests.integration.test_api_server import (
     QUICK_RENDER,
     DatabaseChoice,
     ServerThread,
+    events,
     problem_of,
     settings_for,
     submit,
@@ -49,19 +50,7 @@ def test_a_database_restart_mid_job_is_503_then_nothing_is_lost(ray_cluster, pos
         assert done["state"] == "SUCCEEDED", done["error"]
         listed = client.get("/v1/jobs").json()["items"]
         assert [j["id"] for j in listed] == [job["id"]]  # the refused submission made nothing
-        events = []
-        after = 0
-        while batch := _events_after(client, job["id"], after):
-            events += batch
-            after = batch[-1]["seq"]
-        assert [e["seq"] for e in events] == list(range(1, len(events) + 1))
-        states = [e["data"]["state"] for e in events if e["type"] == "state"]
+        stored = events(client, job["id"])  # every stored event, through the SSE stream
+        assert [e["seq"] for e in stored] == list(range(1, len(stored) + 1))
+        states = [e["data"]["state"] for e in stored if e["type"] == "state"]
         assert states[0] == "QUEUED" and states[-1] == "SUCCEEDED"
-
-
-def _events_after(client, job_id: str, after: int) -> list[dict]:
-    """The stored events after `after`, read back through the SSE endpoint's `after` (the stream ends after
-    the final state)."""
-    from tests.integration.test_api_server import events
-
-    return [] if after else events(client, job_id)
