@@ -57,8 +57,9 @@ class Services:
         return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry)
 
     def start(self) -> None:
-        """Migrate the database, install the tokens, start scheduling (Ray must be initialised)."""
-        if not ray.is_initialized():
+        """Migrate the database, install the tokens, start scheduling (Ray must be initialised for that;
+        an API-only replica does not use Ray)."""
+        if self.settings.scheduling and not ray.is_initialized():
             raise RuntimeError("ray.init() first: the scheduler runs jobs on Ray")
         self.db.migrate()
         tokens = configured_tokens(self.settings.tokens, self.settings.tokens_file)

@@ -7,10 +7,8 @@ database and one store, as replicas behind a load balancer would.
 from __future__ import annotations
 
 import sys
-import tempfile
 from pathlib import Path
 
-import ray
 import uvicorn
 
 from services.api.app import create_app
@@ -21,20 +19,15 @@ from tests.integration.test_api_server import TOKENS_ENV
 
 def main(port: str, data_dir: str, store: str, database_url: str, schema: str) -> None:
     die_with_parent()
-    with tempfile.TemporaryDirectory(prefix="nbake-api-ray-", dir="/tmp") as ray_dir:
-        ray.init(num_cpus=1, include_dashboard=False, _temp_dir=ray_dir, log_to_driver=False)
-        settings = ServiceSettings(
-            data_dir=Path(data_dir),
-            store_url=store,
-            database_url=database_url,
-            database_schema=schema,
-            tokens=TOKENS_ENV,
-            scheduling=False,
-        )
-        try:
-            uvicorn.run(create_app(settings), host="127.0.0.1", port=int(port), log_level="warning")
-        finally:
-            ray.shutdown()
+    settings = ServiceSettings(
+        data_dir=Path(data_dir),
+        store_url=store,
+        database_url=database_url,
+        database_schema=schema,
+        tokens=TOKENS_ENV,
+        scheduling=False,  # an API-only replica: no scheduler, no Ray
+    )
+    uvicorn.run(create_app(settings), host="127.0.0.1", port=int(port), log_level="warning")
 
 
 if __name__ == "__main__":
