@@ -178,3 +178,24 @@ def test_progress_going_back_after_a_resume_is_a_resume_event(db):
     assert [t for t, _ in progress_and_resume] == ["progress", "progress", "resume", "progress", "progress"]
     assert progress_and_resume[2][1] == {"from_step": 20, "to_step": 12, "attempt": 0}
     assert jobs.get(job.id).progress == {"step": 16, "total": 40}
+
+
+def test_replicas_starting_together_migrate_one_after_another():
+    url = os.environ.get(POSTGRES_ENV)
+    if not url:
+        pytest.skip(f"{POSTGRES_ENV} is not set, so the PostgreSQL variant cannot run (.ci/run sets it)")
+    schema = f"nbt_{uuid.uuid4().hex[:12]}"
+
+    def start_replica(_: int) -> None:
+        database = Database(url, schema)
+        database.migrate()  # without the advisory lock: "duplicate key ... pg_namespace_nspname_index"
+        database.dispose()
+
+    try:
+        with ThreadPoolExecutor(4) as pool:
+            list(pool.map(start_replica, range(4)))
+    finally:
+        engine = create_engine(normalize_url(url))
+        with engine.begin() as connection:
+            connection.execute(text(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE'))
+        engine.dispose()
