@@ -8,6 +8,7 @@ percentiles and throughput; the figures are the issue's targets (p99 < 250 ms, >
 from __future__ import annotations
 
 import asyncio
+import collections
 import os
 import subprocess
 import sys
@@ -74,6 +75,7 @@ def submissions(root: Path, database_url: str) -> BenchSection:
     section.add(
         requests=len(latencies) + result["errors"],
         errors=result["errors"],
+        error_kinds=",".join(f"{k}:{v}" for k, v in sorted(result["error_kinds"].items())) or "-",
         jobs_lost=result["lost"],
         distinct_jobs=result["jobs"],
         p50_ms=1e3 * _percentile(latencies, 0.50),
@@ -115,6 +117,7 @@ async def _load(urls: list[str]) -> dict:
         queue.put_nowait((index, seed))
     latencies, jobs, errors = [], {}, 0
     lost = 0
+    kinds: collections.Counter[str] = collections.Counter()
     limits = httpx.Limits(max_connections=CLIENTS, max_keepalive_connections=CLIENTS)
     clients = [httpx.AsyncClient(base_url=u, headers=HEADERS, limits=limits, timeout=120) for u in urls]
 
@@ -127,11 +130,13 @@ async def _load(urls: list[str]) -> dict:
             start = time.perf_counter()
             try:
                 response = await http.post("/v1/jobs", json=body)
-            except httpx.HTTPError:
+            except httpx.HTTPError as error:
                 errors += 1
+                kinds[type(error).__name__] += 1
                 continue
             if response.status_code not in (200, 201):
                 errors += 1
+                kinds[str(response.status_code)] += 1
                 continue
             latencies.append(time.perf_counter() - start)
             job_id = response.json()["id"]
@@ -147,6 +152,7 @@ async def _load(urls: list[str]) -> dict:
     return {
         "latencies": latencies,
         "errors": errors,
+        "error_kinds": dict(kinds),
         "lost": lost,
         "jobs": len(set(jobs.values())),
         "wall": time.perf_counter() - start,
