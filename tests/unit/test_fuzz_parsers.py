@@ -1,4 +1,4 @@
-"""Bounded atheris runs of the parsers an attacker reaches (a few seconds each, side by side): any
+"""Bounded atheris runs of the parsers an attacker reaches (two seconds each, side by side): any
 exception other than the parser's own 4xx error is a crash and fails the test with atheris's report.
 Longer runs: `python -m tests.fuzz.targets <target> -max_total_time=600`."""
 
@@ -21,7 +21,7 @@ def test_parsers_survive_bounded_fuzzing():
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     runs = {
         name: subprocess.Popen(
-            [sys.executable, "-m", "tests.fuzz.targets", name, "-max_total_time=3", "-rss_limit_mb=2048"],
+            [sys.executable, "-m", "tests.fuzz.targets", name, "-max_total_time=2", "-rss_limit_mb=2048"],
             cwd=ROOT,
             env=env,
             stdout=subprocess.PIPE,
