@@ -9,6 +9,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from sqlalchemy.exc import InterfaceError, OperationalError
+
 from services.artifacts.artifacts import ArtifactNotFound, FileNotFoundInArtifact
 from services.artifacts.assets import AssetNotFound
 from services.artifacts.staging import UploadError
@@ -30,6 +32,20 @@ def _not_found(error: LookupError) -> ProblemInfo:
     return ProblemInfo(404, "Not found", str(error))
 
 
+DATABASE_RETRY_AFTER_S = 5  # PostgreSQL restarts in seconds; SQLite's "database is locked" clears sooner
+
+
+def _database_unavailable(_: Exception) -> ProblemInfo:
+    """The database cannot be reached (restarting, failing over, or locked): nothing was changed, and the
+    same request will work once it is back."""
+    return ProblemInfo(
+        503,
+        "Database unavailable",
+        "the job database cannot be reached right now; nothing was changed: retry",
+        headers={"Retry-After": str(DATABASE_RETRY_AFTER_S)},
+    )
+
+
 def _upload(error: UploadError) -> ProblemInfo:
     title = "Upload too large" if error.status == 413 else "Unusable upload"
     return ProblemInfo(error.status, title, error.problem, error.field)
@@ -43,6 +59,8 @@ _TABLE: dict[type[Exception], Callable[[Any], ProblemInfo]] = {
     AssetNotFound: _not_found,
     ArtifactNotFound: _not_found,
     FileNotFoundInArtifact: _not_found,
+    OperationalError: _database_unavailable,
+    InterfaceError: _database_unavailable,
 }
 ACTIONABLE = tuple(_TABLE)  # REST registers a handler for each: Starlette dispatches on the class
 

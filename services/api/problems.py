@@ -13,6 +13,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from services.api.errors import ACTIONABLE, ProblemInfo, internal_problem, problem_for
 from workers.scene.io import dotted_path
@@ -73,19 +75,63 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, error: StarletteHTTPException):
         title = {404: "Not found", 405: "Method not allowed", 413: "Request body too large"}
+        headers = getattr(error, "headers", None)
+        if error.status_code == 405:
+            headers = {**(headers or {}), "Allow": ", ".join(allowed_methods(app, request))}
         return problem(
             request,
             error.status_code,
             title.get(error.status_code, "Error"),
             str(error.detail),
             None,
-            headers=getattr(error, "headers", None),
+            headers,
         )
 
-    @app.exception_handler(Exception)
-    async def _bug(request: Request, error: Exception):
-        log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return _document(request, internal_problem(error))
+    app.add_middleware(BugsAsProblems)
+
+
+HTTP_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+
+
+def allowed_methods(app: FastAPI, request: Request) -> list[str]:
+    """Every method some route serves at the request's path (Starlette's 405 names only the first
+    route's), found by asking the routes (nested routers included) whether each method would match."""
+    return [
+        method
+        for method in HTTP_METHODS
+        if any(
+            route.matches({**request.scope, "method": method})[0] == Match.FULL for route in app.router.routes
+        )
+    ]
+
+
+class BugsAsProblems:
+    """ASGI middleware: a bug becomes a 500 problem document here. Starlette's own last-resort handler
+    re-raises after answering, and uvicorn then closes the connection, so the client's next request on
+    that keep-alive connection was reset."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def tracked(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracked)
+        except Exception as error:
+            if started:  # half an answer is out: only closing the connection can tell the client
+                raise
+            request = Request(scope)
+            log.exception("unhandled error on %s %s", request.method, request.url.path)
+            await _document(request, internal_problem(error))(scope, receive, send)
 
 
 def validation_problem(request: Request, error: RequestValidationError) -> JSONResponse:

@@ -54,6 +54,9 @@ class EventView(BaseModel):
 
     job_id: str
     seq: int
-    type: str = Field(description="state, progress or log")
+    type: str = Field(
+        description="state, progress, log, or resume (progress went back to a checkpoint's step after a "
+        "restart: `from_step`, `to_step`, `attempt`)"
+    )
     time: datetime
     data: dict[str, Any]

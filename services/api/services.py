@@ -11,6 +11,7 @@ from services.api.auth import configured_tokens, generated_admin_token, store_to
 from services.api.settings import ServiceSettings
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
+from services.geometry import GeometryProcesses
 from services.jobs.db import Database
 from services.jobs.metrics import ServiceMetrics
 from services.jobs.repository import JobRepository
@@ -31,6 +32,7 @@ class Services:
     submitter: Submitter
     metrics: ServiceMetrics
     scheduler: Scheduler
+    geometry: GeometryProcesses
     admin_token_file: Path | None = None
 
     @classmethod
@@ -50,12 +52,14 @@ class Services:
             lease_s=settings.lease_s,
         )
         scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
-        submitter = Submitter(jobs, scenes, settings.max_attempts)
-        return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler)
+        geometry = GeometryProcesses()
+        submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
+        return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry)
 
     def start(self) -> None:
-        """Migrate the database, install the tokens, start scheduling (Ray must be initialised)."""
-        if not ray.is_initialized():
+        """Migrate the database, install the tokens, start scheduling (Ray must be initialised for that;
+        an API-only replica does not use Ray)."""
+        if self.settings.scheduling and not ray.is_initialized():
             raise RuntimeError("ray.init() first: the scheduler runs jobs on Ray")
         self.db.migrate()
         tokens = configured_tokens(self.settings.tokens, self.settings.tokens_file)
@@ -68,6 +72,7 @@ class Services:
 
     def stop(self) -> None:
         self.scheduler.stop()
+        self.geometry.stop()
         self.db.dispose()
 
     def submit(self, request: JobRequest, idempotency_key: str | None = None) -> tuple[Job, bool]:

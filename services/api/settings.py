@@ -27,6 +27,9 @@ class ServiceSettings(BaseModel):
     scheduler_owner: str | None = Field(None, description="default: host name and data dir")
     lease_s: float = Field(30.0, gt=0, description="a RUNNING job whose owner is silent this long is adopted")
     scheduling: bool = Field(True, description="run the scheduler here; False for API-only replicas")
+    max_job_seconds: float = Field(
+        7 * 86_400.0, gt=0, description="refuse a job whose plan estimates more (the cost ceiling)"
+    )
 
     @classmethod
     def from_env(cls, data_dir: Path, **overrides) -> ServiceSettings:

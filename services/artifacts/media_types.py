@@ -27,6 +27,9 @@ _BY_SUFFIX = {
 }
 
 
+MEDIA_TYPES = sorted({DEFAULT_MEDIA_TYPE, *_BY_SUFFIX.values()})  # what a file download may answer with
+
+
 def media_type_for(name: str) -> str:
     """The media type for a file name (case-insensitive suffix); unknown suffixes are octet streams."""
     return _BY_SUFFIX.get(PurePosixPath(name).suffix.lower(), DEFAULT_MEDIA_TYPE)

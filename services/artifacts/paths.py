@@ -24,10 +24,18 @@ class UnsafePath(ValueError):
         super().__init__(f"{name!r}: {problem}")
 
 
+def printable(name: str) -> str:
+    """`name` with what UTF-8 cannot carry (bytes an archive decoded as lone surrogates) escaped as
+    `\\udcNN`, so an error can name it in JSON."""
+    return name.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def safe_relative_path(name: str) -> str:
     """`name` normalised (`./a//b` -> `a/b`), or UnsafePath."""
     if not name:
         raise UnsafePath(name, "empty file name")
+    if printable(name) != name:
+        raise UnsafePath(name, "the file name is not valid UTF-8")
     if len(name) > MAX_PATH_CHARS:
         raise UnsafePath(name, f"file name longer than {MAX_PATH_CHARS} characters")
     if "\\" in name:

@@ -11,7 +11,7 @@ from pathlib import Path, PurePosixPath
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from services.artifacts.paths import UnsafePath, safe_relative_path
+from services.artifacts.paths import UnsafePath, printable, safe_relative_path
 from workers.scene.meshio import SUPPORTED_EXTENSIONS as MESH_SUFFIXES
 
 PAYLOAD_TOO_LARGE = 413
@@ -69,7 +69,7 @@ class Staging:
         try:
             name = safe_relative_path(raw_name)
         except UnsafePath as error:
-            raise UploadError(raw_name or "files", error.problem) from None
+            raise UploadError(printable(raw_name) or "files", error.problem) from None
         if len(self.files) >= self.limits.max_files:
             raise UploadError(
                 name, f"too many files: at most {self.limits.max_files} per upload", PAYLOAD_TOO_LARGE

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path, PurePosixPath
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 from services.artifacts.archives import extract_archive, is_archive
 from services.artifacts.assets import Asset, AssetNotFound, load_asset, materialize, save_asset
@@ -17,6 +17,9 @@ from services.artifacts.staging import PAYLOAD_TOO_LARGE, Staging, UploadError, 
 from services.artifacts.store import BlobStore, read_chunks
 from services.artifacts.validation import validate_scene
 from workers.scene.io import IMPORTED_SCENE_SUFFIXES, SCENE_FILE_SUFFIXES
+
+if TYPE_CHECKING:
+    from services.geometry import GeometryProcesses
 
 __all__ = [
     "Asset",
@@ -38,8 +41,10 @@ def ingest_upload(
     blobs: BlobStore,
     limits: UploadLimits,
     work_dir: Path | None = None,
+    geometry: GeometryProcesses | None = None,
 ) -> Asset:
     """Stage, check and store `parts` ((file name, stream) pairs); UploadError or SceneError if unusable.
+    The scene's geometry is built in `geometry`'s child processes when given.
 
     The Asset is not saved: call `save_asset` to make it findable by id.
     """
@@ -60,7 +65,7 @@ def ingest_upload(
         if not staging.files:
             raise UploadError("files", "the upload holds no files")
         scene_file = find_scene_file(list(staging.files))
-        spec = validate_scene(staging.root, scene_file, set(staging.files))
+        spec = validate_scene(staging.root, scene_file, set(staging.files), geometry)
         entries = [store_file(blobs, name, path) for name, path in sorted(staging.files.items())]
     return Asset.from_files(scene_file, spec.name, entries)
 

@@ -11,24 +11,40 @@ import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.io import load_scene
 from workers.scene.spec import SceneSpec
 
+if TYPE_CHECKING:
+    from services.geometry import GeometryProcesses
+
 _ABSOLUTE = re.compile(r"^(/|[A-Za-z]:)")
 _OPAQUE_KEYS = {"params"}  # generator parameters: free-form, never file references
 
 
-def validate_scene(root: Path, scene_file: str, names: set[str]) -> SceneSpec:
-    """The scene in `root / scene_file`, where `names` are the upload's files; SceneError if unusable."""
+def validate_scene(
+    root: Path, scene_file: str, names: set[str], geometry: GeometryProcesses | None = None
+) -> SceneSpec:
+    """The scene in `root / scene_file`, where `names` are the upload's files; SceneError if unusable.
+
+    Parsing is bounded here; the geometry is built in `geometry`'s child processes when given (a server),
+    in this process otherwise (a command line)."""
     with _names_inside_upload(root):
         spec, base_dir = load_scene(root / scene_file)
         check_references(spec, scene_file, names)
-        compile_scene(spec, base_dir)
+        if geometry is None:
+            check_geometry(spec, base_dir)
+        else:
+            geometry.run("scene", check_geometry, spec, base_dir)
     return spec
+
+
+def check_geometry(spec: SceneSpec, base_dir: Path | None) -> None:
+    """What only the built geometry shows (triangle limit, degenerate meshes, emitters without area)."""
+    compile_scene(spec, base_dir)
 
 
 def check_references(spec: SceneSpec, scene_file: str, names: set[str]) -> None:

@@ -23,6 +23,7 @@ from services.api.auth import configured_tokens, generated_admin_token
 from services.api.grpc.server import with_grpc
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
+from services.cli.lifetime import die_with_parent
 
 RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
 
@@ -56,6 +57,13 @@ def serve_command(
     inference_grpc_port: Annotated[
         int, typer.Option(min=0, max=65535, help="gRPC port of that inference process.")
     ] = 50052,
+    outlive_parent: Annotated[
+        bool,
+        typer.Option(
+            "--outlive-parent/--die-with-parent",
+            help="Keep running when the program that started this one exits (by default the server stops).",
+        ),
+    ] = False,
 ) -> None:
     """Serve the REST API (OpenAPI at /docs) and run submitted jobs on Ray.
 
@@ -63,6 +71,8 @@ def serve_command(
     an admin token is generated into DATA_DIR/admin-token. Database: NBAKE_DATABASE_URL (default SQLite
     in DATA_DIR); store: NBAKE_STORE_URL (default DATA_DIR/store).
     """
+    if not outlive_parent:
+        die_with_parent()
     try:
         settings = ServiceSettings.from_env(data_dir, max_running=max_running)
         tokens = configured_tokens(settings.tokens, settings.tokens_file)

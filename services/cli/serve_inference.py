@@ -10,6 +10,7 @@ import typer
 import uvicorn
 
 from services.cli.errors import fail
+from services.cli.lifetime import die_with_parent
 from services.inference.app import create_inference_app
 from services.inference.settings import InferenceSettings
 
@@ -37,11 +38,20 @@ def serve_inference_command(
         str | None, typer.Option(help="auto (CUDA when present), cpu or cuda[:n] (NBAKE_INFERENCE_DEVICE).")
     ] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    outlive_parent: Annotated[
+        bool,
+        typer.Option(
+            "--outlive-parent/--die-with-parent",
+            help="Keep running when the program that started this one exits (by default the server stops).",
+        ),
+    ] = False,
 ) -> None:
     """Serve trained artifacts for queries and renders, over REST and gRPC.
 
     REST: GET /v1/models, POST /v1/artifacts/{id}:query and :render (OpenAPI at /docs); gRPC: the
     InferenceService. Tokens are the job server's (start `nbake serve` once)."""
+    if not outlive_parent:
+        die_with_parent()
     try:
         settings = InferenceSettings.from_env(
             data_dir,

@@ -12,6 +12,7 @@ from google.protobuf import json_format, struct_pb2
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
+from pydantic import ValidationError
 
 from services.api.grpc.auth import TokenAuth
 from services.api.grpc.errors import ErrorMapping
@@ -47,7 +48,10 @@ def _arrays(messages) -> dict[str, np.ndarray]:
     for message in messages:
         if message.name in arrays:
             raise MalformedBody("named twice", f"arrays.{message.name}")
-        header = ArrayHeader(dtype=message.dtype, shape=list(message.shape))
+        try:
+            header = ArrayHeader(dtype=message.dtype, shape=list(message.shape))
+        except ValidationError as error:  # a dimension past int32: refused like the REST header
+            raise MalformedBody(error.errors()[0]["msg"], f"arrays.{message.name}.shape") from None
         arrays[message.name] = decode_array(f"arrays.{message.name}", header, message.data)
     return arrays
 

@@ -15,7 +15,7 @@ import base64
 import binascii
 import json
 import math
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import BaseModel, Field
@@ -29,9 +29,14 @@ DTYPES = frozenset(
 )
 
 
+MAX_DIMENSIONS = 8
+# strict: `1e30` is not a length; a dimension is counted in an int32 (no array of this service is larger)
+Dimension = Annotated[int, Field(ge=0, le=2**31 - 1, strict=True)]
+
+
 class ArrayHeader(BaseModel):
     dtype: str = Field(description=f"one of {', '.join(sorted(DTYPES))}; little-endian")
-    shape: list[int] = Field(description="dimensions, C order")
+    shape: list[Dimension] = Field(max_length=MAX_DIMENSIONS, description="dimensions, C order")
 
 
 class EncodedArray(ArrayHeader):
@@ -52,6 +57,22 @@ class QueryResult(BaseModel):
     kind: str
     meta: dict[str, Any] = Field(default_factory=dict)
     arrays: dict[str, EncodedArray]
+
+
+def self_contained_schema(model: type[BaseModel]) -> dict[str, Any]:
+    """`model`'s JSON schema with its `$defs` inlined: inside an OpenAPI document, `#/$defs/...` would
+    resolve from the document's root, where there are none."""
+    schema = model.model_json_schema()
+    definitions = schema.pop("$defs", {})
+
+    def inline(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return inline(definitions[node["$ref"].rsplit("/", 1)[1]])
+            return {key: inline(value) for key, value in node.items()}
+        return [inline(item) for item in node] if isinstance(node, list) else node
+
+    return inline(schema)
 
 
 def _nbytes(name: str, header: ArrayHeader) -> int:

@@ -19,6 +19,7 @@ from sqlalchemy.engine import URL, Engine, make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 MIGRATIONS = Path(__file__).with_name("migrations")
+MIGRATION_LOCK = 0x6E62616B65  # "nbake": the PostgreSQL advisory lock key that serialises migrations
 _SCHEMA_NAME = re.compile(r"^[a-z_][a-z0-9_]{0,62}$")
 
 
@@ -71,6 +72,8 @@ class Database:
     def migrate(self) -> None:
         """Bring the schema to the newest Alembic revision (run at every start; a no-op when current)."""
         with self.engine.begin() as connection:
+            if not self.is_sqlite:  # replicas starting together migrate one after another
+                connection.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK})
             if self.schema:
                 connection.execute(text(f'CREATE SCHEMA IF NOT EXISTS "{self.schema}"'))
             config = Config()

@@ -56,3 +56,8 @@ class ServiceMetrics:
             ["job_id", "kind"],
             registry=self.registry,
         )
+        self.sse_streams = Gauge(
+            "nbake_sse_active_streams",
+            "Server-Sent Event streams currently following a job (back to zero once their clients leave).",
+            registry=self.registry,
+        )

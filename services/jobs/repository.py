@@ -47,7 +47,12 @@ class JobRepository:
         `header_key` reuses whatever job that key named and refuses a different request under it. Keys are
         inserted, never overwritten blindly: of concurrent identical submissions one inserts, the others
         hit the primary key, roll back, retry and find it.
+
+        A repeat of existing work without a header key is answered from a read alone, before any write
+        transaction (on SQLite, before waiting for the single writer): most of a burst of retries.
         """
+        if header_key is None and content_key is not None and (existing := self._reusable(content_key)):
+            return existing, False
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
@@ -57,6 +62,14 @@ class JobRepository:
                     raise
                 job = _fresh_copy(job)
         raise AssertionError("unreachable")
+
+    def _reusable(self, content_key: str) -> Job | None:
+        with self.db.reading() as session:
+            key = session.get(IdempotencyKey, content_key)
+            if key is None:
+                return None
+            job = session.scalars(select(Job).where(Job.id == key.job_id)).one_or_none()
+            return job if job is not None and job.state in REUSABLE else None
 
     def _create(
         self, session: Session, job: Job, content_key: str | None, header_key: str | None
@@ -207,12 +220,20 @@ class JobRepository:
             return set(session.scalars(query))
 
     def append_events(self, job_id: str, events: Sequence[tuple[str, dict[str, Any]]]) -> None:
-        """Persist driver events (type, data) in order; the latest progress is also kept on the job."""
+        """Persist driver events (type, data) in order; the latest progress is also kept on the job.
+
+        Progress behind the latest one means the job resumed from a checkpoint (a new attempt after a
+        crash): a `resume` event (from which step, back to which, in which attempt) comes before it, so a
+        follower reads a resume, not a regression.
+        """
         if not events:
             return
         with self.db.writing() as session:
             job = self._job(session, job_id, lock=True)
             for kind, data in events:
+                if kind == "progress" and _steps_back(job.progress, data):
+                    resumed = {"from_step": job.progress["step"], "to_step": data["step"]}
+                    self._append(session, job, "resume", resumed | {"attempt": job.attempts})
                 self._append(session, job, kind, data)
                 if kind == "progress":
                     job.progress = data
@@ -245,6 +266,11 @@ class JobRepository:
     def _append(session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
         job.last_event_seq += 1
         session.add(Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow()))
+
+
+def _steps_back(latest: dict[str, Any] | None, progress: dict[str, Any]) -> bool:
+    step, before = progress.get("step"), (latest or {}).get("step")
+    return isinstance(step, int) and isinstance(before, int) and step < before
 
 
 def _locked_key(session: Session, key: str) -> IdempotencyKey | None:

@@ -5,8 +5,12 @@ naming its field), the work's idempotency key computed, and an existing job reus
 from __future__ import annotations
 
 import hashlib
+import json
+import math
+import threading
 import uuid
-from typing import Any
+from collections import OrderedDict
+from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -17,12 +21,22 @@ from services.jobs.scenes import SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
 from workers.models.registry import UnknownKind, get_kind
-from workers.runtime.contract import PlanItem
+from workers.runtime.contract import Plan, PlanItem
+from workers.scene.budget import scene_triangles
 from workers.scene.errors import SceneError
 from workers.scene.io import dotted_path
 from workers.scene.reference import SceneRef
+from workers.scene.spec import MeshShape, SceneSpec
+
+if TYPE_CHECKING:
+    from services.geometry import GeometryProcesses
 
 MAX_IDEMPOTENCY_HEADER = 255
+# A scene without mesh files and at most this many triangles is planned in the API process: building it
+# takes little (the 85k-triangle default `fractal_tree`: 0.6 s and 26 MB at peak on the busy machine), a child
+# process 10 s to start there (and more to import a kind). Larger scenes and any mesh file go to a child.
+IN_PROCESS_TRIANGLES = 200_000
+PLAN_CACHE_SIZE = 1024  # plans are a few KB; repeated submissions of the same work skip the planning
 
 
 class JobRequest(BaseModel):
@@ -31,7 +45,7 @@ class JobRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     kind: str = Field(max_length=64, description="The model kind, e.g. `render`.", examples=["render"])
-    scene: str | dict[str, Any] = Field(
+    scene: Annotated[str, Field(min_length=1, max_length=256)] | dict[str, Any] = Field(
         description="An uploaded asset id (`sha256:...`), a built-in scene name, or an inline SceneSpec.",
         examples=["cornell_box"],
     )
@@ -43,8 +57,21 @@ class JobRequest(BaseModel):
 
 
 class Submitter:
-    def __init__(self, jobs: JobRepository, scenes: SceneResolver, max_attempts: int):
-        self.jobs, self.scenes, self.max_attempts = jobs, scenes, max_attempts
+    """Plans run in `geometry`'s child processes when given (a server: plans may build meshes), and are
+    cached per kind, scene content and resolved config."""
+
+    def __init__(
+        self,
+        jobs: JobRepository,
+        scenes: SceneResolver,
+        max_attempts: int,
+        geometry: GeometryProcesses | None = None,
+        max_job_seconds: float = math.inf,
+    ):
+        self.jobs, self.scenes, self.max_attempts, self.geometry = jobs, scenes, max_attempts, geometry
+        self.max_job_seconds = max_job_seconds
+        self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
+        self._plans_lock = threading.Lock()
 
     def submit(self, request: JobRequest, header_key: str | None = None) -> tuple[Job, bool]:
         """(job, created): created is False when an idempotency key named an existing job."""
@@ -55,6 +82,7 @@ class Submitter:
         if request.preset not in kind.presets:
             known = ", ".join(kind.presets)
             raise InvalidInput(f"unknown preset {request.preset!r}; known presets: {known}", "preset")
+        check_finite(request.config, "config")
         try:
             config = kind.resolve_config(request.preset, request.config)
         except ValidationError as error:
@@ -65,7 +93,8 @@ class Submitter:
             raise InvalidInput(str(error), "config") from None
         scene = self.scenes.resolve(request.scene)
         try:
-            plan = kind.plan(SceneRef(scene.spec, self.scenes.scene_dir(scene.ref)), config)
+            triangles = scene_triangles(scene.spec)  # before anything is built, here or in a child
+            plan = self._plan(kind.name, scene, config, in_process=_small(scene.spec, triangles))
         except SceneError as error:
             raise InvalidInput(error.problem, scene_field(error)) from None
         except ValueError as error:
@@ -76,6 +105,12 @@ class Submitter:
             )
             for note in scene.spec.notes
         )
+        if plan.estimated_seconds > self.max_job_seconds:
+            raise InvalidInput(
+                f"the plan estimates {plan.estimated_seconds:.3g} s ({plan.summary}), over the limit of "
+                f"{self.max_job_seconds:g} s (max_job_seconds): lower the config's sizes",
+                "config",
+            )
         resolved = config.model_dump(mode="json")
         code = code_version()
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
@@ -101,6 +136,46 @@ class Submitter:
         )
         content_key = None if request.force else f"content:{key}"
         return self.jobs.create(job, content_key, _header_key(header_key))
+
+    def _plan(self, kind_name: str, scene, config, in_process: bool) -> Plan:
+        key = (kind_name, scene.content_hash, json.dumps(config.model_dump(mode="json"), sort_keys=True))
+        with self._plans_lock:
+            if key in self._plans:
+                self._plans.move_to_end(key)
+                return self._plans[key]
+        ref = SceneRef(scene.spec, self.scenes.scene_dir(scene.ref))
+        if self.geometry is None or in_process:
+            plan = make_plan(kind_name, ref, config)
+        else:
+            plan = self.geometry.run("scene", make_plan, kind_name, ref, config)
+        with self._plans_lock:
+            self._plans[key] = plan
+            while len(self._plans) > PLAN_CACHE_SIZE:
+                self._plans.popitem(last=False)
+        return plan
+
+
+def check_finite(data: Any, field: str) -> None:
+    """InvalidInput naming the first infinite or NaN number (JSON's `1e309` parses to infinity); walked
+    without recursion, however deep the body nests."""
+    stack = [(data, field)]
+    while stack:
+        value, where = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InvalidInput("must be a finite number", where)
+        if isinstance(value, dict):
+            stack.extend((child, f"{where}.{key}") for key, child in reversed(value.items()))
+        elif isinstance(value, list):
+            stack.extend((child, f"{where}[{i}]") for i, child in reversed(list(enumerate(value))))
+
+
+def _small(spec: SceneSpec, triangles: int) -> bool:
+    return triangles <= IN_PROCESS_TRIANGLES and not any(isinstance(o.shape, MeshShape) for o in spec.objects)
+
+
+def make_plan(kind_name: str, scene: SceneRef, config) -> Plan:
+    """The kind's plan (a module-level function, so a child process can run it)."""
+    return get_kind(kind_name).plan(scene, config)
 
 
 def _header_key(value: str | None) -> str | None:

@@ -100,3 +100,15 @@ def test_gpu_request_falls_back_on_a_cluster_without_gpus(ray_cluster):
 def test_a_pool_needs_an_actor(ray_cluster, actors):
     with pytest.raises(ValueError, match="at least one actor"):
         SamplerPool(SPEC, actors=actors)
+
+
+def test_a_hanging_sampler_is_timed_out_replaced_and_the_sequence_is_unchanged(ray_cluster, tmp_path):
+    from tests.support.hanging_source import HangingSource, HangingSourceConfig
+
+    config = HangingSourceConfig(batch_size=128, samples_per_point=8, hang_at=3, flag=str(tmp_path / "hung"))
+    spec = SourceSpec(HangingSource, config, seed=5)
+    with SamplerPool(spec, actors=2, max_in_flight=4, batch_deadline_s=2.0) as pool:
+        batches = [next(pool) for _ in range(8)]
+        assert pool.replacements == 1  # the hung actor, killed: it never died on its own
+    assert (tmp_path / "hung").exists()
+    assert_same_sequence(batches, reference_batches(8))

@@ -162,3 +162,40 @@ def test_claims_and_leases(db):
     final = jobs.transition(job.id, JobState.SUCCEEDED, message="done", artifact_id="sha256:a")
     assert final.lease_owner is None and final.finished_at is not None
     assert jobs.events_after(job.id, 0)[-1].data["artifact_id"] == "sha256:a"
+
+
+def test_progress_going_back_after_a_resume_is_a_resume_event(db):
+    jobs = JobRepository(db)
+    job, _ = jobs.create(new_job("sha256:resume"), None, None)
+    jobs.append_events(
+        job.id, [("progress", {"step": 10, "total": 40}), ("progress", {"step": 20, "total": 40})]
+    )
+    jobs.append_events(
+        job.id, [("progress", {"step": 12, "total": 40}), ("progress", {"step": 16, "total": 40})]
+    )
+    events = [(e.type, e.data) for e in jobs.events_after(job.id, 0)]
+    progress_and_resume = [(t, d) for t, d in events if t in ("progress", "resume")]
+    assert [t for t, _ in progress_and_resume] == ["progress", "progress", "resume", "progress", "progress"]
+    assert progress_and_resume[2][1] == {"from_step": 20, "to_step": 12, "attempt": 0}
+    assert jobs.get(job.id).progress == {"step": 16, "total": 40}
+
+
+def test_replicas_starting_together_migrate_one_after_another():
+    url = os.environ.get(POSTGRES_ENV)
+    if not url:
+        pytest.skip(f"{POSTGRES_ENV} is not set, so the PostgreSQL variant cannot run (.ci/run sets it)")
+    schema = f"nbt_{uuid.uuid4().hex[:12]}"
+
+    def start_replica(_: int) -> None:
+        database = Database(url, schema)
+        database.migrate()  # without the advisory lock: "duplicate key ... pg_namespace_nspname_index"
+        database.dispose()
+
+    try:
+        with ThreadPoolExecutor(4) as pool:
+            list(pool.map(start_replica, range(4)))
+    finally:
+        engine = create_engine(normalize_url(url))
+        with engine.begin() as connection:
+            connection.execute(text(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE'))
+        engine.dispose()

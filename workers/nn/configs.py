@@ -65,7 +65,9 @@ class HashGridConfig(HashTableConfig):
     type: Literal["hash_grid"] = "hash_grid"
     levels: int = Field(16, ge=1, le=32, description="L: grid levels")
     base_resolution: int = Field(16, ge=2, le=1 << 16, description="N_min: resolution of the coarsest level")
-    per_level_scale: float = Field(2.0, ge=1.0, description="b: resolution growth from one level to the next")
+    per_level_scale: float = Field(
+        2.0, ge=1.0, le=8.0, description="b: resolution growth from one level to the next"
+    )
 
     def geometry(self, n_input_dims: int) -> GridGeometry:
         return GridGeometry(n_input_dims, self.levels, self.base_resolution, self.per_level_scale)

@@ -121,7 +121,8 @@ def resolve_preset(
     """
     if preset not in presets:
         raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(presets)}")
-    return config_model.model_validate(merge_nested(presets[preset], overrides or {}))
+    # strict: `"256"` or `true` for a count is a mistake to name, not a value to convert
+    return config_model.model_validate(merge_nested(presets[preset], overrides or {}), strict=True)
 
 
 def merge_nested(base: dict, overrides: dict) -> dict:

@@ -21,7 +21,9 @@ class KindConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     samplers: int = Field(1, ge=0, le=1024, description="Ray sampler actors; 0 makes batches in the driver")
-    num_gpus: float = Field(0, ge=0, description="GPUs for the driver (used when the cluster has them)")
+    num_gpus: float = Field(
+        0, ge=0, le=64, description="GPUs for the driver (used when the cluster has them)"
+    )
 
     @model_validator(mode="before")
     @classmethod

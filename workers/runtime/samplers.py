@@ -7,6 +7,7 @@ consumed: a slow trainer stalls the samplers instead of letting results pile up 
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Sequence
 from typing import Any, Protocol
@@ -14,7 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 import ray
 import torch
-from ray.exceptions import ObjectLostError, RayActorError
+from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError
 from ray.util.placement_group import placement_group_table
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
@@ -22,7 +23,7 @@ from workers.runtime.contract import InfrastructureFailure
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.runtime.sources import Batch, SourceSpec
 
-SAMPLER_FAILURES = (RayActorError, ObjectLostError)
+SAMPLER_FAILURES = (RayActorError, ObjectLostError, GetTimeoutError)
 # Samplers that keep dying on one batch (killed, out of memory, a lost node) fail the job as the cluster's
 # fault: InfrastructureFailure, which the service retries up to the job's attempts.
 REPLACEMENTS_PER_BATCH = 3
@@ -30,6 +31,12 @@ REPLACEMENTS_PER_BATCH = 3
 # within this time never will be on the nodes left, so the job restarts (from its checkpoint) on them.
 RESERVATION_REPLACE_S = 15.0
 RESERVATION_POLL_S = 0.25
+# A sampler that neither answers nor dies (a deadlock, a stuck file system) is replaced after waiting this
+# long on one batch once it has started, or this long for it to start (import torch, build the source,
+# which compiles the scene). Generous: a `paper` batch takes seconds. `NBAKE_BATCH_DEADLINE_S` and
+# `NBAKE_SAMPLER_START_DEADLINE_S` override them.
+BATCH_DEADLINE_S = float(os.environ.get("NBAKE_BATCH_DEADLINE_S", 300.0))
+START_DEADLINE_S = float(os.environ.get("NBAKE_SAMPLER_START_DEADLINE_S", 900.0))
 
 
 class BatchStream(Protocol):
@@ -102,7 +109,9 @@ class SamplerPool:
     """A fixed number of sampler actors feeding batches in index order with a bounded read-ahead.
 
     Requests go to the actor with the fewest outstanding ones. When fetching a batch reports its actor dead,
-    that actor is replaced by a fresh one and every index it still owed is requested again from the new one.
+    that actor is replaced by a fresh one and every index it still owed is requested again from the new one;
+    so is an actor that has not started within START_DEADLINE_S or, once started, has not delivered the
+    batch waited on within `batch_deadline_s`.
     """
 
     def __init__(
@@ -112,15 +121,20 @@ class SamplerPool:
         max_in_flight: int | None = None,
         actor_options: dict[str, Any] | None = None,
         start: int = 0,
+        batch_deadline_s: float = BATCH_DEADLINE_S,
     ) -> None:
         if actors < 1:
             raise ValueError(f"a sampler pool needs at least one actor, got {actors}")
         self.spec = spec
+        self.batch_deadline_s = batch_deadline_s
         self.max_in_flight = max_in_flight or 2 * actors
         if self.max_in_flight < 1:
             raise ValueError(f"max_in_flight must be at least 1, got {self.max_in_flight}")
         self.actor_options = actor_options or {"num_cpus": 1}
-        self.actors = [self._start_actor() for _ in range(actors)]
+        self.actors: list[ray.actor.ActorHandle] = []
+        self.started: list[ray.ObjectRef] = []  # per slot: resolves once the actor's source is built
+        for _ in range(actors):
+            self._start_actor(len(self.actors))
         self.replacements = 0
         self.pending: dict[int, tuple[ray.ObjectRef, int]] = {}  # index -> (result, actor slot)
         self.position = start
@@ -131,8 +145,10 @@ class SamplerPool:
         """Batches requested from actors and not yet handed to the consumer."""
         return len(self.pending)
 
-    def _start_actor(self) -> ray.actor.ActorHandle:
-        return SamplerActor.options(**self.actor_options).remote(self.spec)
+    def _start_actor(self, slot: int) -> None:
+        actor = SamplerActor.options(**self.actor_options).remote(self.spec)
+        self.actors[slot : slot + 1] = [actor]
+        self.started[slot : slot + 1] = [actor.produced.remote()]
 
     def _request(self, index: int, slot: int) -> None:
         self.pending[index] = (self.actors[slot].batch.remote(index), slot)
@@ -151,7 +167,7 @@ class SamplerPool:
     def _replace(self, slot: int) -> None:
         self._check_reservation()
         ray.kill(self.actors[slot], no_restart=True)
-        self.actors[slot] = self._start_actor()
+        self._start_actor(slot)
         self.replacements += 1
         for index in sorted(i for i, (_, s) in self.pending.items() if s == slot):
             self._request(index, slot)
@@ -183,13 +199,15 @@ class SamplerPool:
         for _ in range(REPLACEMENTS_PER_BATCH + 1):
             ref, slot = self.pending[self.position]
             try:
-                arrays = ray.get(ref)
+                ray.get(self.started[slot], timeout=START_DEADLINE_S)
+                arrays = ray.get(ref, timeout=self.batch_deadline_s)
                 break
             except SAMPLER_FAILURES:
                 self._replace(slot)
         else:
             raise InfrastructureFailure(
-                f"sampler actors died {REPLACEMENTS_PER_BATCH + 1} times making batch {self.position}; "
+                f"sampler actors died or hung {REPLACEMENTS_PER_BATCH + 1} times making batch "
+                f"{self.position}; "
                 "check that the sample source can be built and run in a Ray worker"
             )
         del self.pending[self.position]
@@ -201,7 +219,7 @@ class SamplerPool:
     def close(self) -> None:
         for actor in self.actors:
             ray.kill(actor, no_restart=True)
-        self.actors = []
+        self.actors, self.started = [], []
         self.pending.clear()
 
     def __enter__(self) -> SamplerPool:

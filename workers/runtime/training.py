@@ -46,9 +46,9 @@ class Schedule(BaseModel):
 
     lr: float = Field(1e-3, gt=0)
     kind: Literal["constant", "exponential", "cosine"] = "constant"
-    warmup_steps: int = Field(0, ge=0)
+    warmup_steps: int = Field(0, ge=0, le=10_000_000)
     decay_rate: float = Field(0.1, gt=0, le=1)  # exponential: factor reached after `decay_steps`
-    decay_steps: int = Field(10_000, ge=1)
+    decay_steps: int = Field(10_000, ge=1, le=10_000_000)
     final_lr_fraction: float = Field(0.0, ge=0, le=1)  # cosine: the floor, as a fraction of `lr`
 
     def at(self, step: int, total_steps: int) -> float:
@@ -81,11 +81,11 @@ class TrainConfig(OptimizerConfig):
     one network sets them directly, a GAN sets `optimizers["generator"]` and `["discriminator"]`.
     """
 
-    steps: int = Field(1000, ge=1)
+    steps: int = Field(1000, ge=1, le=10_000_000)
     optimizers: dict[str, OptimizerConfig] = {}
     mixed_precision: bool = True  # honoured on CUDA only; CPU runs stay in float32
-    checkpoint_every: int = Field(500, ge=1)
-    progress_every: int = Field(10, ge=1)
+    checkpoint_every: int = Field(500, ge=1, le=10_000_000)
+    progress_every: int = Field(10, ge=1, le=10_000_000)
 
     def optimizer(self, phase: str) -> OptimizerConfig:
         """The settings of the named phase's optimizer: its entry in `optimizers`, else the loop's own."""

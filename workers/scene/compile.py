@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from workers.scene import spec
+from workers.scene.budget import check_triangles, max_scene_triangles, placement_field, shape_triangles
 from workers.scene.errors import SceneError
 from workers.scene.shapes import MeshData, shape_mesh
 
@@ -66,9 +67,16 @@ class CompiledScene:
         return [self.spec.materials[n] for n in self.material_names]
 
 
-def compile_scene(scene: spec.SceneSpec, base_dir: Path | str | None = None) -> CompiledScene:
-    """Load every shape, place every instance, and check what can only be checked on the geometry."""
+def compile_scene(
+    scene: spec.SceneSpec, base_dir: Path | str | None = None, max_triangles: int | None = None
+) -> CompiledScene:
+    """Load every shape, place every instance, and check what can only be checked on the geometry.
+
+    A scene over `max_triangles` (default: the configured limit, `budget.max_scene_triangles`) is
+    refused naming the object that crosses it, before that object is built (after reading, for a file).
+    """
     base = Path(base_dir) if base_dir is not None else None
+    limit = max_scene_triangles() if max_triangles is None else max_triangles
     material_names = list(scene.materials)
     material_index = {n: i for i, n in enumerate(material_names)}
     chunks: dict[str, list[np.ndarray]] = {
@@ -80,8 +88,12 @@ def compile_scene(scene: spec.SceneSpec, base_dir: Path | str | None = None) -> 
     instance_counter = 0
     for i, obj in enumerate(scene.objects):
         field_name = f"objects[{i}]"
-        mesh = shape_mesh(obj.shape, f"{field_name}.shape", base)
         matrices = obj.instance_matrices()
+        known = shape_triangles(obj.shape, f"{field_name}.shape")
+        if known is not None:
+            check_triangles(start + known * len(matrices), placement_field(obj, i), limit)
+        mesh = shape_mesh(obj.shape, f"{field_name}.shape", base)
+        check_triangles(start + mesh.num_triangles * len(matrices), placement_field(obj, i), limit)
         ranges = []
         for m in matrices:
             pos, nrm, faces = _place(mesh, m)

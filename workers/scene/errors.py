@@ -8,3 +8,6 @@ class SceneError(ValueError):
         self.field = field
         self.problem = problem
         super().__init__(f"{field}: {problem}")
+
+    def __reduce__(self):  # pickled whole across processes (Ray, the API's geometry processes)
+        return (SceneError, (self.field, self.problem))

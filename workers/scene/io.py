@@ -28,6 +28,10 @@ from workers.scene.usd import USD_SUFFIXES, import_usd
 
 SCENE_FILE_SUFFIXES = (".yaml", ".yml", ".json")
 IMPORTED_SCENE_SUFFIXES = GLTF_SUFFIXES + USD_SUFFIXES
+# A scene file's values once YAML aliases are expanded, and how deep they nest. The largest built-in
+# scene has about 700 values and nests 7 deep; a 700-byte alias bomb expands to 10^8 values.
+MAX_SCENE_VALUES = 200_000
+MAX_SCENE_DEPTH = 64
 _FIELD_PREFIX = re.compile(r"^(?P<field>[A-Za-z_][\w\[\]\.]*): (?P<problem>.+)$", re.DOTALL)
 
 
@@ -95,6 +99,7 @@ def with_import(data: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 def scene_from_dict(data: dict[str, Any]) -> SceneSpec:
     """Validate `data`; the first problem becomes a SceneError on its dotted field path."""
+    check_nesting(data, "scene")
     try:
         return SceneSpec.model_validate(data)
     except ValidationError as error:
@@ -140,6 +145,63 @@ def dotted_path(loc: tuple[str | int, ...], data: Any) -> str:
     return path
 
 
+def check_nesting(data: Any, field: str) -> None:
+    """SceneError if `data` nests deeper than MAX_SCENE_DEPTH; walked without recursion."""
+    stack = [(data, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > MAX_SCENE_DEPTH:
+            raise SceneError(field, f"values nest more than {MAX_SCENE_DEPTH} levels deep")
+        children = node.values() if isinstance(node, dict) else node if isinstance(node, list | tuple) else ()
+        stack.extend((child, depth + 1) for child in children if isinstance(child, dict | list | tuple))
+
+
+class _Unbounded(yaml.YAMLError):
+    """A document whose values, once aliases are expanded, are too many or endless."""
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """SafeLoader that refuses, once a document is composed and before any value is built, a node graph
+    whose aliases expand past MAX_SCENE_VALUES values or that refers to itself (a "billion laughs" bomb
+    costs a few hundred bytes of YAML and the whole memory of whoever walks it)."""
+
+    def compose_document(self):
+        node = super().compose_document()
+        _expanded_size(node)
+        return node
+
+
+def _expanded_size(root: yaml.Node) -> int:
+    """Values under `root` with every alias expanded, memoised per node (aliases share their node)."""
+    sizes: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        key = id(node)
+        children = _children(node)
+        if children_done:
+            on_path.discard(key)
+            sizes[key] = 1 + sum(sizes[id(child)] for child in children)
+            if sizes[key] > MAX_SCENE_VALUES:
+                raise _Unbounded(f"aliases expand to more than {MAX_SCENE_VALUES} values")
+            continue
+        if key in sizes:
+            continue
+        if key in on_path:
+            raise _Unbounded("an alias refers to a value that contains it")
+        on_path.add(key)
+        stack.append((node, True))
+        stack.extend((child, False) for child in children if id(child) not in sizes)
+    return sizes[id(root)]
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    return list(node.value) if isinstance(node, yaml.SequenceNode) else []
+
+
 def _parse_file(path: Path) -> dict[str, Any]:
     """YAML or JSON text -> a mapping; syntax errors name the file and line."""
     try:
@@ -147,7 +209,11 @@ def _parse_file(path: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(str(path), f"cannot read scene file: {error}") from error
     try:
-        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.load(text, _BoundedLoader)
+    except RecursionError:
+        raise SceneError(str(path), f"values nest more than {MAX_SCENE_DEPTH} levels deep") from None
+    except _Unbounded as error:
+        raise SceneError(str(path), f"refused YAML: {error}") from None
     except json.JSONDecodeError as error:
         raise SceneError(
             str(path), f"malformed JSON at line {error.lineno}, column {error.colno}: {error.msg}"
@@ -159,6 +225,7 @@ def _parse_file(path: Path) -> dict[str, Any]:
         raise SceneError(str(path), f"malformed YAML{where}: {problem}") from None
     if not isinstance(data, dict):
         raise SceneError(str(path), f"a scene file must hold a mapping, not {type(data).__name__}")
+    check_nesting(data, str(path))
     return data
 
 

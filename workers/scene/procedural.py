@@ -8,6 +8,7 @@ without shipping mesh files, keeping a SceneSpec small and hashable.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
@@ -36,6 +37,11 @@ class Params(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    @abstractmethod
+    def triangles(self) -> int:
+        """How many triangles the generator makes (an upper bound where it is random), from the
+        parameters alone: what a budget checks before anything is built."""
+
 
 GENERATORS: dict[str, tuple[type[Params], Callable[[Any], MeshData]]] = {}
 
@@ -50,15 +56,35 @@ def generator(params_model: type[Params]):
     return register
 
 
-def generate(name: str, params: dict[str, Any], field: str) -> MeshData:
-    """The mesh of generator `name` with `params`; errors name `field.generator` or `field.params.<key>`."""
+def generate(name: str, params: dict[str, Any], field: str, max_triangles: int | None = None) -> MeshData:
+    """The mesh of generator `name` with `params`; errors name `field.generator` or `field.params.<key>`.
+
+    A generator that would make more than `max_triangles` is refused before it runs.
+    """
+    params_model, fn = GENERATORS[_known(name, field)]
+    parsed = parse_params(params_model, params, f"{field}.params")
+    if max_triangles is not None and parsed.triangles() > max_triangles:
+        raise SceneError(
+            f"{field}.params",
+            f"{name} makes {parsed.triangles():,} triangles with these parameters, "
+            f"over the limit of {max_triangles:,}",
+        )
+    return fn(parsed)
+
+
+def generated_triangles(name: str, params: dict[str, Any], field: str) -> int:
+    """What `generate(name, params, field)` would make, without making it."""
+    params_model, _ = GENERATORS[_known(name, field)]
+    return parse_params(params_model, params, f"{field}.params").triangles()
+
+
+def _known(name: str, field: str) -> str:
     if name not in GENERATORS:
         raise SceneError(
             f"{field}.generator",
             f"unknown procedural generator {name!r}; known: {', '.join(sorted(GENERATORS))}",
         )
-    params_model, fn = GENERATORS[name]
-    return fn(parse_params(params_model, params, f"{field}.params"))
+    return name
 
 
 def parse_params(model: type[BaseModel], params: dict[str, Any], field: str):
@@ -250,6 +276,9 @@ class GroundPlaneParams(Params):
     size: PositiveFloat = 10.0
     uv_tiles: PositiveFloat = Field(default=1.0, description="how many times UVs repeat across the plane")
 
+    def triangles(self) -> int:
+        return 2
+
 
 @generator(GroundPlaneParams)
 def ground_plane(p: GroundPlaneParams) -> MeshData:
@@ -281,6 +310,13 @@ class FractalTreeParams(Params):
         if self.parts == "leaves" and self.leaves_per_tip == 0:
             raise ValueError("parts='leaves' needs leaves_per_tip > 0")
         return self
+
+    def triangles(self) -> int:
+        branches = sum(self.branching**level for level in range(self.depth + 1))  # one 2-ring tube each
+        leaves = self.branching**self.depth * self.leaves_per_tip  # one quad each
+        return (2 * self.sides * branches if self.parts != "leaves" else 0) + (
+            2 * leaves if self.parts != "branches" else 0
+        )
 
 
 @generator(FractalTreeParams)
@@ -343,6 +379,9 @@ class DisplacedSphereParams(Params):
     gain: Annotated[FiniteFloat, Field(gt=0, le=1)] = 0.5
     lacunarity: Annotated[FiniteFloat, Field(ge=1, le=4)] = 2.0
 
+    def triangles(self) -> int:
+        return 4 * self.resolution * (self.resolution - 1)  # 2r columns: a fan at each pole, quads between
+
 
 @generator(DisplacedSphereParams)
 def displaced_sphere(p: DisplacedSphereParams) -> MeshData:
@@ -398,6 +437,9 @@ class FurParams(Params):
         25.0
     )
 
+    def triangles(self) -> int:
+        return 2 + 2 * self.strands * self.segments * self.sides  # the base, then each strand's quads
+
 
 @generator(FurParams)
 def fur(p: FurParams) -> MeshData:
@@ -433,6 +475,12 @@ class MengerSpongeParams(Params):
     size: PositiveFloat = Field(default=1.0, description="edge length")
     center: Vec3 | None = Field(default=None, description="default (0, size / 2, 0): resting on y = 0")
 
+    def triangles(self) -> int:
+        squares = 6
+        for n in range(self.level):
+            squares = 20 * squares - 48 * 8**n
+        return 2 * squares
+
 
 @generator(MengerSpongeParams)
 def menger_sponge(p: MengerSpongeParams) -> MeshData:
@@ -466,6 +514,9 @@ class HollowBoxParams(Params):
         if size is not None and thickness >= size / 2.0:
             raise ValueError(f"must be less than size / 2 = {size / 2.0:g} to leave a cavity")
         return thickness
+
+    def triangles(self) -> int:
+        return 24
 
 
 @generator(HollowBoxParams)
@@ -518,6 +569,14 @@ class ThinWallRoomsParams(Params):
             if thickness > limit:
                 raise ValueError(f"must be at most a tenth of a room or storey ({limit:g})")
         return thickness
+
+    def triangles(self) -> int:
+        """At most two triangles per face of the grid `thin_wall_rooms` lays out (which faces bound the
+        shell depends on the seed): per axis, two slab faces per wall and four window and door edges per
+        room (x, z); two per floor and three window and door heights per storey (y)."""
+        x, z = 6 * self.cells_x + 2, 6 * self.cells_z + 2
+        y = 5 * self.cells_y + 2
+        return 2 * (x * (y - 1) * (z - 1) + (x - 1) * y * (z - 1) + (x - 1) * (y - 1) * z)
 
 
 WINDOW_WIDTH, WINDOW_SILL, WINDOW_TOP = 0.5, 0.3, 0.75  # of the room width; of the storey height

@@ -15,8 +15,10 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
+from workers.scene.budget import shape_triangles
 from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.io import scene_from_dict
+from workers.scene.shapes import shape_mesh
 from workers.scene.spec import SceneSpec
 from workers.scene.stored import StoredScene
 
@@ -54,6 +56,19 @@ class SceneRef:
     def content_key(self) -> str:
         """What identifies the compiled scene: the spec's JSON (the folder is part of the cache key)."""
         return hashlib.sha256(self.spec.model_dump_json().encode()).hexdigest()
+
+    def object_triangles(self) -> list[int]:
+        """Each object's triangles per placement, counted from its description without building it (a
+        mesh file is read and checked): what a plan needs, cheap enough for the API process."""
+        counts = []
+        for i, obj in enumerate(self.spec.objects):
+            known = shape_triangles(obj.shape, f"objects[{i}].shape")
+            counts.append(
+                known
+                if known is not None
+                else shape_mesh(obj.shape, f"objects[{i}].shape", self.folder).num_triangles
+            )
+        return counts
 
     def compiled(self) -> CompiledScene:
         """The scene's triangles, compiled at most once per process for equal content and files."""

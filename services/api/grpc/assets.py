@@ -42,7 +42,7 @@ class AssetServicer(assets_pb2_grpc.AssetServiceServicer):
                 parts[-1][1].write(chunk.data)
             for _, spool in parts:
                 spool.seek(0)
-            asset = ingest_upload(parts, self.svc.blobs, limits, work_dir=work)
+            asset = ingest_upload(parts, self.svc.blobs, limits, work_dir=work, geometry=self.svc.geometry)
         save_asset(asset, self.svc.blobs, self.svc.settings.store)
         return assets_pb2.UploadAssetResponse(asset=asset_message(asset))
 

@@ -29,7 +29,19 @@ def struct(data: dict[str, Any] | None) -> struct_pb2.Struct | None:
 
 
 def plain(message: struct_pb2.Struct) -> dict[str, Any]:
-    return json_format.MessageToDict(message)
+    """The Struct as JSON values. A Struct holds every number as a double, so whole numbers come back as
+    ints, as a JSON body gives them: counts validate strictly (`spp: 64.0` would not) and both APIs agree."""
+    return _whole_numbers_as_ints(json_format.MessageToDict(message))
+
+
+def _whole_numbers_as_ints(value: Any) -> Any:
+    if isinstance(value, float) and value.is_integer() and abs(value) <= 2**53:
+        return int(value)
+    if isinstance(value, dict):
+        return {key: _whole_numbers_as_ints(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_whole_numbers_as_ints(item) for item in value]
+    return value
 
 
 def timestamp(value: datetime | None) -> timestamp_pb2.Timestamp | None:

@@ -12,6 +12,7 @@ from services.api.problems import PROBLEM_RESPONSES
 from services.artifacts.artifacts import ArtifactNotFound
 from services.artifacts.digests import known_digest
 from services.artifacts.manifest import Manifest
+from services.artifacts.media_types import MEDIA_TYPES
 
 router = APIRouter(
     prefix="/v1/artifacts",
@@ -31,7 +32,10 @@ def get_manifest(artifact_id: str, svc: ServicesDep) -> Manifest:
     "/{artifact_id}/files/{name:path}",
     response_class=Response,
     responses={
-        200: {"description": "The file", "content": {"application/octet-stream": {}}},
+        200: {
+            "description": "The file, with the media type of its manifest entry",
+            "content": {media_type: {} for media_type in MEDIA_TYPES},
+        },
         206: {"description": "The requested byte range"},
         304: {"description": "Not modified (If-None-Match)"},
         416: {"description": "Range not satisfiable"},

@@ -32,7 +32,9 @@ def upload_asset(
 ) -> Asset:
     """Store the files content-addressed (sha256); the scene is validated now (errors name the field)."""
     parts = [(upload.filename or "", upload.file) for upload in files]
-    asset = ingest_upload(parts, svc.blobs, svc.settings.upload_limits, work_dir=svc.settings.data_dir)
+    asset = ingest_upload(
+        parts, svc.blobs, svc.settings.upload_limits, work_dir=svc.settings.data_dir, geometry=svc.geometry
+    )
     save_asset(asset, svc.blobs, svc.settings.store)
     response.headers["Location"] = f"/v1/assets/{asset.asset_id}"
     return asset

@@ -21,8 +21,10 @@ def healthz() -> dict[str, str]:
 
 @router.get("/readyz", responses={503: {"description": "A dependency is unreachable"}})
 def readyz(svc: ServicesDep) -> JSONResponse:
-    """The database, the artifact store and Ray are all reachable."""
-    checks = {"database": svc.db.ping, "store": lambda: svc.blobs.exists(PROBE), "ray": ray.cluster_resources}
+    """The database, the artifact store and (where jobs are scheduled) Ray are all reachable."""
+    checks = {"database": svc.db.ping, "store": lambda: svc.blobs.exists(PROBE)}
+    if svc.settings.scheduling:
+        checks["ray"] = ray.cluster_resources
     return readiness(checks)
 
 

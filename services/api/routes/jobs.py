@@ -110,7 +110,7 @@ def job_events(
     svc.jobs.get(job_id)  # 404 before the stream starts
     start = max(last_event_id or 0, after or 0)
     return StreamingResponse(
-        event_stream(request, svc.jobs, job_id, start),
+        event_stream(request, svc.jobs, job_id, start, svc.metrics.sse_streams),
         media_type="text/event-stream",
         headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
     )

@@ -55,7 +55,7 @@ async def _parse(request: Request) -> tuple[dict[str, Any], dict[str, np.ndarray
         200: {
             "description": "The output arrays, in the request's format (or `Accept`)",
             "content": {
-                "application/json": {"schema": wire.QueryResult.model_json_schema()},
+                "application/json": {"schema": wire.self_contained_schema(wire.QueryResult)},
                 wire.OCTET_STREAM: {
                     "schema": {"type": "string", "format": "binary", "description": BINARY_DOC}
                 },
@@ -69,7 +69,7 @@ async def _parse(request: Request) -> tuple[dict[str, Any], dict[str, np.ndarray
             "description": "Kind-specific: `lsnif` takes `origins` and `directions` (N, 3) world-space rays; "
             "`render` takes optional `pixels` (N, 2) as (x, y) and `params.layers`.",
             "content": {
-                "application/json": {"schema": wire.QueryBody.model_json_schema()},
+                "application/json": {"schema": wire.self_contained_schema(wire.QueryBody)},
                 wire.OCTET_STREAM: {
                     "schema": {"type": "string", "format": "binary", "description": BINARY_DOC}
                 },

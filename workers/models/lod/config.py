@@ -49,6 +49,7 @@ class LodConfig(TrainedKindConfig):
     coarsest_resolution: int = Field(8, ge=1, le=512, description="voxels per side at the coarsest LoD")
     view_distances: list[float] = Field(
         [],
+        max_length=64,
         description="camera distances the asset will be seen from (scene camera's fov and width); the plan "
         "builds only the LoDs whose voxels match a pixel at one of them. Empty: every LoD.",
     )
@@ -71,7 +72,9 @@ class LodConfig(TrainedKindConfig):
     appearance_output: Literal["linear", "log"] = Field(
         "log", description="log: phi = exp(output) (always positive); linear: phi = network output"
     )
-    batch_size: int = Field(1 << 13, ge=64, description="voxel samples per step (pairs of boundary points)")
+    batch_size: int = Field(
+        1 << 13, ge=64, le=1 << 22, description="voxel samples per step (pairs of boundary points)"
+    )
     domain_extrusion: float = Field(0.005, ge=0, le=0.1, description="learned domain grown by this x voxel")
     max_voxel_bounces: int = Field(64, ge=1, le=1024, description="cap on a training path inside a voxel")
     train: TrainConfig = TrainConfig(

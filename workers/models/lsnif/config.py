@@ -28,7 +28,7 @@ class LsnifConfig(TrainedKindConfig):
     )
     mlp: MLPConfig = MLPConfig(width=128, depth=2, activation="leaky_relu")
     batch_size: int = Field(
-        1 << 13, ge=64, description="rays drawn per step; those meeting no voxel are dropped"
+        1 << 13, ge=64, le=1 << 22, description="rays drawn per step; those meeting no voxel are dropped"
     )
     # 8M rays: held-out occlusion accuracy on high_poly went from 97.0% at 150 steps to 98.9% at 1000
     # (normal error 33 -> 17 degrees), about two and a half minutes on an idle 2-core CPU.
@@ -38,7 +38,9 @@ class LsnifConfig(TrainedKindConfig):
     min_triangles: int = Field(
         5000, ge=0, description="objects with fewer triangles stay on Embree (LSNIF pays off on complex ones)"
     )
-    evaluation_rays: int = Field(1 << 15, ge=256, description="held-out rays per object for the report")
+    evaluation_rays: int = Field(
+        1 << 15, ge=256, le=1 << 22, description="held-out rays per object for the report"
+    )
     preview_size: int = Field(96, ge=8, le=2048, description="side of the report's comparison image")
 
 

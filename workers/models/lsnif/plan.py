@@ -30,11 +30,10 @@ class ObjectChoice:
 
 
 def choose_objects(scene: SceneRef, config: LsnifConfig) -> list[ObjectChoice]:
-    """Every object's choice, from the compiled scene (its meshes read from the scene's folder)."""
+    """Every object's choice, from triangles counted without building the scene (mesh files are read)."""
     choices = []
-    for index, (obj, geometry) in enumerate(zip(scene.spec.objects, scene.compiled().objects, strict=True)):
-        instances = len(geometry.instance_matrices)
-        triangles = geometry.mesh.num_triangles
+    for index, (obj, triangles) in enumerate(zip(scene.spec.objects, scene.object_triangles(), strict=True)):
+        instances = len(obj.instances or [None])
         if obj.emission is not None:
             choice, reason = EMBREE, "emits light: light sampling needs its triangles"
         elif triangles < config.min_triangles:

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from workers.render.render import RenderSettings
 from workers.runtime.kind_config import KindConfig
+
+# Refused before planning (a plan of a 16384^2 image at 2^20 spp took seconds to enumerate): the film of
+# 8192^2 pixels with its AOVs is about 3.5 GB of float32; 2^36 samples is 16 times the `paper` preset.
+MAX_PIXELS = 1 << 26
+MAX_SAMPLES = 1 << 36
 
 
 class RenderConfig(KindConfig):
@@ -15,12 +20,23 @@ class RenderConfig(KindConfig):
     width: int = Field(256, ge=1, le=16384)
     height: int = Field(256, ge=1, le=16384)
     max_depth: int = Field(8, ge=1, le=1024)
-    rr_depth: int = Field(5, ge=1)
+    rr_depth: int = Field(5, ge=1, le=1024)
     tile_size: int = Field(64, ge=8, le=1024)
     aovs: bool = Field(True, description="also write the G-buffers (position, normal, albedo, ...)")
     samplers: int = Field(2, ge=0, le=1024, description="Ray sampler actors; 0 renders inside the driver")
     # Checkpoint after a pass once this many seconds have passed since the last one; 0: after every pass.
-    checkpoint_interval_s: float = Field(10.0, ge=0)
+    checkpoint_interval_s: float = Field(10.0, ge=0, le=86_400)
+
+    @model_validator(mode="after")
+    def _bounded(self) -> RenderConfig:
+        pixels = self.width * self.height
+        if pixels > MAX_PIXELS:
+            raise ValueError(f"width x height is {pixels:,} pixels, over the limit of {MAX_PIXELS:,}")
+        if pixels * self.spp > MAX_SAMPLES:
+            raise ValueError(
+                f"width x height x spp is {pixels * self.spp:,} samples, over the limit of {MAX_SAMPLES:,}"
+            )
+        return self
 
     def settings(self, seed: int) -> RenderSettings:
         """The renderer's settings: the same ones a direct render must use to give the same image."""

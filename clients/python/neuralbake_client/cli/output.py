@@ -62,6 +62,11 @@ class Output:
                     bar.update(task, completed=p.step, total=p.total, rate=rate)
                 elif event.state is not None:
                     bar.update(task, description=f"{event.job_id} {event.state}")
+                elif event.type == "resume":  # progress going back is a restart from a checkpoint
+                    step, attempt = event.data.get("to_step"), event.data.get("attempt")
+                    bar.console.print(
+                        f"[dim]resumed from the checkpoint at step {step} (attempt {attempt})[/dim]"
+                    )
                 elif event.type == "log":
                     message = event.data.get("message", "")
                     style = "bold yellow" if message.startswith("warning:") else "dim"

@@ -1,0 +1,37 @@
+"""Bounded atheris runs of the parsers an attacker reaches (two seconds each, side by side): any
+exception other than the parser's own 4xx error is a crash and fails the test with atheris's report.
+Longer runs: `python -m tests.fuzz.targets <target> -max_total_time=600`."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TARGETS = ("scene", "archive", "wire")  # the targets of tests/fuzz/targets.py
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_parsers_survive_bounded_fuzzing():
+    pytest.importorskip("atheris")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    runs = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", "tests.fuzz.targets", name, "-max_total_time=2", "-rss_limit_mb=2048"],
+            cwd=ROOT,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for name in TARGETS
+    }
+    for name, run in runs.items():
+        output, _ = run.communicate(timeout=300)
+        report = "\n".join(line for line in output.splitlines() if not line.startswith("INFO: Instrumenting"))
+        assert run.returncode == 0, f"{name}: {report[-3000:]}"
+        assert "Done" in report, f"{name} did not run: {report[-3000:]}"

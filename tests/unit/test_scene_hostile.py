@@ -1,0 +1,87 @@
+"""Scene files written by an attacker: refused while parsing, before anything is built, naming the file."""
+
+import json
+import time
+
+import pytest
+
+from workers.scene.errors import SceneError
+from workers.scene.io import MAX_SCENE_DEPTH, MAX_SCENE_VALUES, load_scene, scene_from_dict
+
+# ~700 bytes whose aliases expand to 10^8 leaves under `params`
+ALIAS_BOMB = """\
+materials: {grey: {type: diffuse}}
+objects:
+  - name: bomb
+    material: grey
+    shape:
+      type: procedural
+      generator: ground_plane
+      params:
+        a: &a [x, x, x, x, x, x, x, x, x, x]
+        b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
+        c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
+        d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
+        e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
+        f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]
+        g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]
+        h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]
+lights: [{type: point, position: [0, 5, 0], intensity: [1, 1, 1]}]
+"""
+
+
+def refusal(tmp_path, name: str, text: str) -> SceneError:
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(SceneError) as caught:
+        load_scene(path)
+    assert caught.value.field == str(path)
+    return caught.value
+
+
+def test_alias_bomb_is_refused_while_parsing(tmp_path):
+    started = time.process_time()
+    error = refusal(tmp_path, "scene.yaml", ALIAS_BOMB)
+    assert f"more than {MAX_SCENE_VALUES} values" in error.problem
+    # building the 10^8 leaves takes many seconds; refusing takes milliseconds (a relative bound)
+    assert time.process_time() - started < 1.0
+
+
+def test_a_few_shared_aliases_still_load(tmp_path):
+    text = ALIAS_BOMB.split("      params:")[0] + "      params: {size: 4.0}\n"
+    text += "lights: [&l {type: point, position: [0, 5, 0], intensity: [1, 1, 1]}, *l]\n"
+    scene, _ = load_scene(_write(tmp_path, "scene.yaml", text))
+    assert len(scene.lights) == 2
+
+
+def test_self_referencing_alias_is_refused(tmp_path):
+    error = refusal(tmp_path, "scene.yaml", "materials: &m {x: *m}\n")
+    assert "contains it" in error.problem
+
+
+@pytest.mark.parametrize("depth", [MAX_SCENE_DEPTH + 1, 100_000])
+def test_deep_yaml_is_refused(tmp_path, depth):
+    error = refusal(tmp_path, "scene.yaml", "materials: " + "[" * depth + "]" * depth + "\n")
+    assert f"more than {MAX_SCENE_DEPTH} levels" in error.problem
+
+
+@pytest.mark.parametrize("depth", [MAX_SCENE_DEPTH + 1, 100_000])
+def test_deep_json_is_refused(tmp_path, depth):
+    error = refusal(tmp_path, "scene.json", '{"materials": ' + "[" * depth + "]" * depth + "}")
+    assert f"more than {MAX_SCENE_DEPTH} levels" in error.problem
+
+
+def test_deep_dict_is_refused_naming_the_scene():
+    data = json.loads(
+        '{"materials": {}, "objects": [{"name": "x", "shape": {"type": "procedural", '
+        '"generator": "ground_plane", "params": {"a": ' + "[" * 200 + "]" * 200 + "}}}]}"
+    )
+    with pytest.raises(SceneError) as caught:
+        scene_from_dict(data)
+    assert caught.value.field == "scene"
+
+
+def _write(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
