@@ -24,6 +24,8 @@ EXACT = {
     "fur": [{"strands": 50, "segments": 3, "sides": 4}],
     "menger_sponge": [{"level": level} for level in range(4)],
     "hollow_box": [{}],
+    "mesoscale_slab": [{}, {"material": "carpet", "tiles": 1, "structure": {"density": 5.0}}],
+    "mesoscale_base": [{}],
 }
 BOUNDED = {"thin_wall_rooms": [{}, {"cells_x": 1, "cells_y": 1, "cells_z": 1, "windows": 1.0, "doors": 1.0}]}
 # the validators' maxima, each far over any sensible limit: refused in milliseconds, never built
@@ -32,6 +34,7 @@ MAXIMA = {
     "displaced_sphere": {"resolution": 2000},
     "fur": {"strands": 200_000, "segments": 16, "sides": 8},
     "menger_sponge": {"level": 5},
+    "mesoscale_slab": {"structure": {"density": 400}, "tile": 1000.0, "tiles": 9},
 }
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field, FiniteFloat
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
 
 from workers.scene.procedural import (
     GroundPlaneParams,
@@ -32,10 +32,13 @@ MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]
 Unit = Annotated[FiniteFloat, Field(ge=0, le=1)]
 SEGMENTS = 5  # polyline points per strand minus one: enough for a curl of half a turn
+SIDES = 3  # a strand is a triangular prism
 
 
-class Structure(Params):
+class Structure(BaseModel):
     """The geometric parameters a generated instance is drawn from (what the mapping network sees)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     length: Annotated[FiniteFloat, Field(gt=0, le=1, description="strand length / slab height")] = 0.8
     density: Annotated[FiniteFloat, Field(gt=0, le=400, description="strands per squared slab height")] = 40.0
@@ -70,8 +73,10 @@ def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> 
     return centers, np.array(radius)
 
 
-class Appearance(Params):
+class Appearance(BaseModel):
     """The strands' colour (what only the decoder's radiance head sees)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     hue: Unit = 0.02
     saturation: Unit = 0.8
@@ -91,6 +96,12 @@ class MesoscaleSlabParams(Params):
     tiles: Annotated[int, Field(ge=1, le=9, description="tiles per side around and including the centre")] = 3
     height: PositiveFloat = Field(default=1.0, description="slab height: geometry above it is cropped")
 
+    def strands_per_tile(self) -> int:
+        return max(1, round(self.structure.density * self.tile * self.tile))
+
+    def triangles(self) -> int:
+        return self.strands_per_tile() * self.tiles**2 * SEGMENTS * SIDES * 2
+
 
 @generator(MesoscaleSlabParams)
 def mesoscale_slab(p: MesoscaleSlabParams) -> MeshData:
@@ -98,7 +109,7 @@ def mesoscale_slab(p: MesoscaleSlabParams) -> MeshData:
     (y = 0, facing +y, scene axes) and cropped at y = `height`; the strands only (the base is
     `mesoscale_base`, a separate object so that it can carry its own material)."""
     rng = np.random.default_rng(p.seed)
-    n = max(1, round(p.structure.density * p.tile * p.tile))
+    n = p.strands_per_tile()
     roots = rng.uniform(0.0, p.tile, size=(n, 2))
     centers, radius = local_strands(rng, n, p.material, p.structure)
     offsets = (np.arange(p.tiles) - (p.tiles - 1) / 2) * p.tile - p.tile / 2
@@ -108,13 +119,16 @@ def mesoscale_slab(p: MesoscaleSlabParams) -> MeshData:
     local[..., :2] += placed[:, None]
     local[..., 2] = np.minimum(local[..., 2], p.height)
     scene_axes = local[..., [0, 2, 1]] * np.array([1.0, 1.0, -1.0])  # local z up -> scene y up
-    return tubes(scene_axes, np.tile(radius, (len(shifts), 1)) * p.height, 3)
+    return tubes(scene_axes, np.tile(radius, (len(shifts), 1)) * p.height, SIDES)
 
 
 class MesoscaleBaseParams(Params):
     tile: PositiveFloat = 2.0
     tiles: Annotated[int, Field(ge=1, le=9)] = 3
     height: PositiveFloat = 1.0
+
+    def triangles(self) -> int:
+        return GroundPlaneParams(size=self.tile * self.tiles).triangles()
 
 
 @generator(MesoscaleBaseParams)
@@ -153,4 +167,4 @@ def grow_on_triangles(
         + centers[..., 1:2] * bitangent[:, None]
         + centers[..., 2:] * normal[:, None]
     )
-    return tubes(world, radius * height, 3)
+    return tubes(world, radius * height, SIDES)
