@@ -15,6 +15,8 @@ SMALL = {
     "menger_sponge": {"level": 2},
     "hollow_box": {},
     "thin_wall_rooms": {"cells_x": 2, "cells_y": 1, "cells_z": 2},
+    "mesoscale_slab": {"tiles": 1, "structure": {"density": 5.0}},
+    "mesoscale_base": {"tiles": 1},
 }
 
 
