@@ -32,7 +32,7 @@ test-packages:
 
 ## The default test suite (what CI runs).
 test: venv test-packages
-	$(VENV)/bin/pytest -q
+	$(VENV)/bin/pytest -q --durations=30
 
 ## Including slow accuracy checks.
 test-all: venv test-packages

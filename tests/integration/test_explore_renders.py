@@ -3,6 +3,7 @@ with at most `max_in_flight` outstanding, and a killed actor is replaced without
 
 from __future__ import annotations
 
+import pytest
 import ray
 import torch
 
@@ -24,6 +25,7 @@ def assert_same(actual, expected) -> None:
         assert all(torch.equal(a[k], b[k]) for k in b)
 
 
+@pytest.mark.slow  # a Ray cluster of its own; the explore job tests cover the in-process renders
 def test_actors_render_the_in_process_patches_and_survive_a_kill(ray_cluster):
     expected = InProcessRenders(SPEC).map(REQUESTS)
     with RenderPool(SPEC, actors=2, max_in_flight=2) as pool:

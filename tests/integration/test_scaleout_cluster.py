@@ -40,7 +40,9 @@ from tests.support.cluster import LocalCluster, RayNode, ServeReplica
 from tests.support.s3 import S3Server, moto_s3
 
 REPO = Path(__file__).resolve().parents[2]
-pytestmark = pytest.mark.timeout(1200)
+# A two-node cluster, PostgreSQL and an S3 server cost about two minutes before any job: the whole module
+# runs with `make test-all`; the default suite keeps the store-only data path (test_store_data_path.py).
+pytestmark = [pytest.mark.timeout(1200), pytest.mark.slow]
 TEARDOWN_GRACE_S = 5.0  # a server stopped for good needs no graceful drain
 
 
