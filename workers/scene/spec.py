@@ -174,7 +174,10 @@ class PbrMaterial(Model):
     Textures multiply their factors, as in glTF: `base_color_texture` (sRGB), `metallic_roughness_texture`
     (linear; roughness in G, metallic in B), `transmission_texture` (R), `normal_texture` (tangent space,
     linear, +Y up as glTF's), and `emission_texture` (sRGB) scaling the emission of the objects using it.
-    `roughness` is glTF's perceptual roughness (GGX alpha = roughness^2).
+    `roughness` is glTF's perceptual roughness (GGX alpha = roughness^2). `diffuse` is the non-metal base's
+    diffuse lobe: `energy_conserving` (albedo scaling under the specular lobe: a white non-metal reflects
+    exactly what arrives) or `burley` (Burley's, as Mitsuba's and Blender's `principled`: up to ~1.4x at
+    grazing angles); the metal and transmission lobes are the same in both.
     """
 
     type: Literal["pbr"] = "pbr"
@@ -189,6 +192,7 @@ class PbrMaterial(Model):
     normal_texture: Texture | None = None
     normal_scale: FiniteFloat = 1.0
     emission_texture: Texture | None = None
+    diffuse: Literal["energy_conserving", "burley"] = "energy_conserving"
 
 
 Material = Annotated[Diffuse | Conductor | Plastic | Dielectric | PbrMaterial, Field(discriminator="type")]

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, register_material
+from workers.render.bsdfs.dielectric_albedo import specular_albedo, specular_albedo_over_roughness
 from workers.render.microfacet import (
     fresnel_dielectric,
     ggx_d,
@@ -40,7 +41,11 @@ from workers.render.sampling import INV_PI, dot, normalize, safe_sqrt, square_to
 from workers.scene import spec
 
 ALPHA_FLOOR = 0.001  # Mitsuba's calc_dist_params: roughness 0 is a very sharp lobe, never a delta
-METALLIC, TRANSMISSION, ROUGHNESS = 0, 1, 2
+METALLIC, TRANSMISSION, ROUGHNESS, DIFFUSE = 0, 1, 2, 3
+# the DIFFUSE column: Burley's lobe, or albedo scaling with E_s tabulated at the row's alpha (constant
+# roughness) or over roughness (textured roughness)
+BURLEY, ALBEDO_SCALED, ALBEDO_SCALED_TEXTURED = 0.0, 1.0, 2.0
+DIFFUSE_MODES = {"burley": BURLEY, "energy_conserving": ALBEDO_SCALED}
 
 
 def gltf_alpha(roughness: np.ndarray | float) -> np.ndarray:
@@ -66,6 +71,33 @@ def _weights(s: SurfaceBatch):
     return (1.0 - metallic) * (1.0 - transmission), (1.0 - metallic) * transmission
 
 
+def _specular_albedo(s: SurfaceBatch, *cosines: np.ndarray):
+    """Per row: E_s of the dielectric reflection lobe at each of `cosines`, and E_avg (0 on Burley rows);
+    one table per (alpha, ior) of constant roughness, one per ior for textured roughness."""
+    albedos = [np.zeros(len(s.alpha)) for _ in cosines]
+    average = np.zeros(len(s.alpha))
+    mode = s.extra[:, DIFFUSE]
+    todo = mode != BURLEY
+    while todo.any():
+        first = int(np.argmax(todo))
+        rows = todo & (mode == mode[first]) & (s.ior == s.ior[first])
+        if mode[first] == ALBEDO_SCALED:
+            rows &= s.alpha == s.alpha[first]
+            table, roughness = specular_albedo(float(s.alpha[first]), float(s.ior[first])), None
+        else:
+            table = specular_albedo_over_roughness(float(s.ior[first]), ALPHA_FLOOR)
+            roughness = s.extra[rows, ROUGHNESS]
+        todo &= ~rows
+        for albedo, cos in zip(albedos, cosines, strict=True):
+            albedo[rows], average[rows] = table.at(cos[rows], roughness)
+    return albedos, average
+
+
+def _diffuse_weight(s: SurfaceBatch, brdf: np.ndarray, albedo_v: np.ndarray) -> np.ndarray:
+    """The diffuse lobe's selection weight: its albedo over base, brdf (1 - E_s(cos_v)) when albedo-scaled."""
+    return brdf * np.where(s.extra[:, DIFFUSE] == BURLEY, 1.0, 1.0 - albedo_v)
+
+
 def _mirror(s: SurfaceBatch, wo: np.ndarray) -> np.ndarray:
     """-1 on opaque rows seen from the back (mirrored onto the front), else 1."""
     _, bsdf = _weights(s)
@@ -88,7 +120,7 @@ class MetallicRoughness(BSDF):
             alpha=float(gltf_alpha(material.roughness)),
             ior=material.ior,
             roughness=float(gltf_alpha(material.roughness)),  # the AOV reports GGX alpha, as for the others
-            extra=(material.metallic, material.transmission, material.roughness),
+            extra=(material.metallic, material.transmission, material.roughness, DIFFUSE_MODES[material.diffuse]),
         )
 
     def textures(self, material: spec.PbrMaterial) -> dict:
@@ -110,6 +142,7 @@ class MetallicRoughness(BSDF):
             s.extra[:, ROUGHNESS] = material.roughness * texel[:, 1]
             s.extra[:, METALLIC] = material.metallic * texel[:, 2]
             s.alpha = gltf_alpha(s.extra[:, ROUGHNESS])
+            s.extra[s.extra[:, DIFFUSE] == ALBEDO_SCALED, DIFFUSE] = ALBEDO_SCALED_TEXTURED
         if "transmission" in lookups:
             s.extra[:, TRANSMISSION] = material.transmission * lookups["transmission"][:, 0]
 
@@ -152,7 +185,10 @@ class MetallicRoughness(BSDF):
 
         fo, fi = schlick_weight(np.abs(cos_l)), schlick_weight(np.abs(cos_v))
         retro = 2.0 * roughness * l_h**2
-        lobe = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + retro * (fo + fi + fo * fi * (retro - 1.0))
+        burley = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + retro * (fo + fi + fo * fi * (retro - 1.0))
+        (albedo_v, albedo_l), average = _specular_albedo(s, cos_v, cos_l)
+        scaled = (1.0 - albedo_v) * (1.0 - albedo_l) / (1.0 - average)
+        lobe = np.where(s.extra[:, DIFFUSE] == BURLEY, burley, scaled)
         diffuse = np.where(
             active & (brdf > 0) & reflection & front, brdf * np.abs(cos_l) * INV_PI * lobe, 0.0
         )
@@ -160,7 +196,7 @@ class MetallicRoughness(BSDF):
 
         p_reflect = np.where(front, 1.0 - bsdf * (1.0 - f_d), f_d)
         p_transmit = np.where(transmissive, np.where(front, bsdf * (1.0 - f_d), 1.0 - f_d), 0.0)
-        p_diffuse = np.where(front, brdf, 0.0)
+        p_diffuse = np.where(front, _diffuse_weight(s, brdf, albedo_v), 0.0)
         total = np.maximum(p_reflect + p_transmit + p_diffuse, 1e-300)
         jacobian = np.abs(
             np.where(reflection, 1.0 / np.where(l_h == 0, 1e-300, 4.0 * l_h), eta_path**2 * l_h / denom)
@@ -184,7 +220,8 @@ class MetallicRoughness(BSDF):
         v_m = dot(v, m)
         f_d, cos_t, eta_ti = fresnel_dielectric(v_m, s.ior)
         p_transmit = np.where(transmissive, np.where(front, bsdf * (1.0 - f_d), 1.0 - f_d), 0.0)
-        p_diffuse = np.where(front, brdf, 0.0)
+        (albedo_v,), _ = _specular_albedo(s, cos_v)
+        p_diffuse = np.where(front, _diffuse_weight(s, brdf, albedo_v), 0.0)
         total = np.where(front, 1.0 - bsdf * (1.0 - f_d), f_d) + p_transmit + p_diffuse
         p_diffuse, p_transmit = p_diffuse / total, p_transmit / total
         choose_diffuse = uc < p_diffuse
