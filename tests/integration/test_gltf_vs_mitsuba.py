@@ -79,6 +79,16 @@ def textured_gltf_scene(folder) -> object:
 
 
 def test_textured_gltf_scene_agrees_with_mitsuba_principled(tmp_path):
+    """The importer gives the energy-conserving diffuse; principled's is Burley's, so the materials with a
+    diffuse lobe (floor, blend, lamp) are switched to `diffuse: burley`. Gold (metallic 1) and glass
+    (transmission 1) keep the default: their lobes are the same in both modes, and must match principled."""
     scene, folder = textured_gltf_scene(tmp_path / "gltf")
     assert {m.type for m in scene.materials.values()} == {"pbr"} and not scene.notes
+    assert {m.diffuse for m in scene.materials.values()} == {"energy_conserving"}
+    materials = {
+        name: m if m.metallic == 1 or m.transmission == 1 else m.model_copy(update={"diffuse": "burley"})
+        for name, m in scene.materials.items()
+    }
+    assert sorted(m.diffuse for m in materials.values()) == ["burley"] * 3 + ["energy_conserving"] * 2
+    scene = scene.model_copy(update={"materials": materials})
     compare(scene, spp=32, max_depth=8, tmp_path=tmp_path, base_dir=folder)

@@ -103,7 +103,8 @@ def mitsuba_bsdf(material: spec.Material, base_dir: Path | None = None) -> dict:
 
 def mitsuba_principled(material: spec.PbrMaterial, base_dir: Path | None = None) -> dict:
     """`principled` with the parameters our `pbr` family has (workers/render/bsdfs/pbr.py); opaque ones
-    (no transmission lobe) wrapped in `twosided`, as ours are. A base colour texture must have factor 1."""
+    (no transmission lobe) wrapped in `twosided`, as ours are. A base colour texture must have factor 1,
+    and a diffuse lobe must be Burley's (`diffuse: burley`): metals and glass have none."""
     unsupported = [
         name
         for name in (
@@ -116,6 +117,8 @@ def mitsuba_principled(material: spec.PbrMaterial, base_dir: Path | None = None)
     ]
     if unsupported or (material.base_color_texture is not None and material.base_color != (1.0, 1.0, 1.0)):
         raise TypeError(f"no Mitsuba export for a pbr material with {unsupported or 'a scaled texture'}")
+    if material.diffuse != "burley" and material.metallic < 1 and material.transmission < 1:
+        raise TypeError("no Mitsuba export for an energy-conserving diffuse lobe (principled's is Burley's)")
     base = material.base_color_texture if material.base_color_texture is not None else material.base_color
     principled = {
         "type": "principled",
