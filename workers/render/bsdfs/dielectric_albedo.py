@@ -2,13 +2,14 @@
 dielectric Fresnel F of an IOR and single scattering: what the `pbr` family's energy-conserving diffuse
 (Kulla & Conty 2017, albedo scaling) leaves to the diffuse base, 1 - E_s.
 
-E_s at a cosine is the visible-normal quadrature `plastic` tabulates its coat with: E over the visible normals
-m of F(v.m) G1(l, m), l the mirrored v, which is what the lobe's f cos / pdf averages to. Tables hold E_s at
-cosines spaced evenly in sqrt(mu) (interpolated linearly in mu) and E_avg = 2 int E_s(mu) mu dmu of that interpolant, computed
+E_s at a cosine is the visible-normal quadrature `plastic` tabulates its coat with: E over the visible
+normals m of F(v.m) G1(l, m), l the mirrored v, which is what the lobe's f cos / pdf averages to. Tables
+hold E_s at cosines spaced evenly in sqrt(mu) (dense at grazing, where a smooth lobe's shadowing varies
+fastest), interpolated linearly in mu, and E_avg = 2 int E_s(mu) mu dmu of that interpolant, computed
 exactly (2-point Gauss-Legendre per interval integrates the quadratic exactly), so a white diffuse base
-under the lobe reflects E_s + (1 - E_s) = 1 whatever the table's own error. A constant roughness gets a
-table at its alpha; textured roughness a 2-D table over perceptual roughness (alpha = max(0.001, r^2)),
-interpolated linearly in r, E_avg with it (linear in the table, so still exact).
+under the lobe reflects E_s + (1 - E_s) = 1 up to the table's error at cos_v alone. A constant roughness
+gets a table at its alpha; textured roughness a 2-D table over perceptual roughness (alpha =
+max(0.001, r^2)), interpolated linearly in r, E_avg with it (linear in the table, so still exact).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from workers.render.bsdfs.plastic import _visible_normal_average
 
-COSINES = np.linspace(0.0, 1.0, 65) ** 2  # dense at grazing, where a smooth lobe's shadowing varies fastest
+COSINES = np.linspace(0.0, 1.0, 65) ** 2
 ROUGHNESSES = np.linspace(0.0, 1.0, 33)  # 2-D table nodes, perceptual roughness
 QUADRATURE_NODES = 24  # Gauss-Legendre per axis of the visible-normal sampler's square
 
