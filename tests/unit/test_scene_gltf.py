@@ -118,7 +118,7 @@ def test_materials_map_factors_extensions_textures_and_samplers(tmp_path, extern
     builder.node(mesh=quad(builder, textured_material(builder, external)))
     scene, folder = load_scene(builder.save(tmp_path / "m.gltf"))
     material = scene.materials["Glassy"]
-    assert material.type == "pbr"
+    assert material.type == "pbr" and material.diffuse == "energy_conserving"
     assert (material.metallic, material.roughness, material.ior, material.transmission) == (
         0.25,
         0.8,

@@ -122,6 +122,7 @@ def test_the_same_textured_scene_as_gltf_and_as_usd_renders_the_same_image(tmp_p
     gltf_scene, gltf_image = rendered(write_gltf(tmp_path / "gltf"))
     usd_scene, usd_image = rendered(write_usd(tmp_path / "usd"))
     assert sorted(m.type for m in usd_scene.materials.values()) == ["pbr"] * 4
+    assert {m.diffuse for m in usd_scene.materials.values()} == {"energy_conserving"}
     assert usd_scene.materials["Floor"].base_color_texture.path == "checker.png"
     assert usd_scene.lights == gltf_scene.lights and not usd_scene.notes
     assert usd_scene.camera.fov == pytest.approx(FOV, rel=1e-5)

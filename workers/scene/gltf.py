@@ -3,8 +3,10 @@
 `import_gltf` turns the default scene's node hierarchy into objects: one per (mesh, primitive), a
 `GltfShape` that `primitive_mesh` reads back at compile time, placed once per node using the mesh
 (instancing). Materials become `pbr` materials (`workers.render.bsdfs.pbr`) with the extensions
-KHR_materials_ior, KHR_materials_transmission and KHR_materials_emissive_strength; emission goes on the
-objects as area lights (one-sided unless the material is double-sided). KHR_lights_punctual point and
+KHR_materials_ior, KHR_materials_transmission and KHR_materials_emissive_strength, and the default
+energy-conserving diffuse (glTF leaves the diffuse model to the renderer; a scene file overriding a
+material by name can ask for principled's, `diffuse: burley`); emission goes on the objects as area
+lights (one-sided unless the material is double-sided). KHR_lights_punctual point and
 directional lights, and spot lights as point lights with glTF's smooth cone falloff, keep their intensity
 numbers (candela and lux read as W/sr and W/m^2: one photometric unit per radiometric one, as renderers
 without a photometric scale do). The first perspective camera in node order is the view.

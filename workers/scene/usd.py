@@ -3,13 +3,14 @@
 `import_usd` walks the stage's default predicate (instance proxies included): each UsdGeom.Mesh becomes an
 object (a `UsdShape` that `prim_mesh` triangulates at compile time), placed once per instance of it (native
 instancing, and UsdGeom.PointInstancer prototypes per instance). A Z-up stage is turned Y-up.
-UsdPreviewSurface materials become `pbr` materials: diffuseColor, metallic, roughness, ior, emissiveColor
-(on the objects, as area lights), with UsdUVTexture inputs for diffuseColor, emissiveColor and normal
-(scale 2, bias -1, as UsdPreviewSurface asks), and metallic/roughness read from the B/G channels of one
-texture (glTF's packing). UsdLux lights map onto ours: distant -> directional, sphere -> point (radius 0
-or treatAsPoint) or an emitting sphere, rect -> an emitting rectangle, dome -> environment (its
-latlong texture, or its colour). Intensities are colour x intensity x 2^exposure, read as our units.
-The first camera in traversal order is the view. Defaults (camera, environment) and ignored features
+UsdPreviewSurface materials become `pbr` materials (with the default energy-conserving diffuse, as for
+glTF): diffuseColor, metallic, roughness, ior, emissiveColor (on the objects, as area lights), with
+UsdUVTexture inputs for diffuseColor, emissiveColor and normal (scale 2, bias -1, as UsdPreviewSurface
+asks), and metallic/roughness read from the B/G channels of one texture (glTF's packing). UsdLux
+lights map onto ours: distant -> directional, sphere -> point (radius 0 or treatAsPoint) or an emitting
+sphere, rect -> an emitting rectangle, dome -> environment (its latlong texture, or its colour).
+Intensities are colour x intensity x 2^exposure, read as our units. The first camera in traversal order
+is the view. Defaults (camera, environment) and ignored features
 are listed in `SceneSpec.notes`, as for glTF (`workers.scene.gltf`). A layer, reference or texture outside
 the root file's folder is a SceneError naming it.
 """
