@@ -86,6 +86,17 @@ def test_pbr_evaluates_like_mitsuba_principled(params, diffuse):
     assert np.abs(pdf - theirs_pdf).max() <= 1e-5 * theirs_pdf.max()
 
 
+def test_mitsuba_export_refuses_an_energy_conserving_diffuse_lobe():
+    """principled's diffuse is Burley's: exporting the default mode with a diffuse lobe would compare two
+    different materials; metal and glass (no diffuse lobe) export in either mode."""
+    from tests.support.mitsuba_scene import mitsuba_principled
+
+    with pytest.raises(TypeError, match="energy-conserving"):
+        mitsuba_principled(material(*MATERIALS[0]))
+    assert mitsuba_principled(material(*MATERIALS[0], diffuse="burley"))["bsdf"]["type"] == "principled"
+    assert mitsuba_principled(material(*MATERIALS[3]))["type"] == "principled"
+
+
 SAMPLES = 200_000
 CHI_CASES = [
     (p, theta, inside, diffuse)
