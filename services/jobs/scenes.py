@@ -16,6 +16,7 @@ from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
 from services.jobs.errors import InvalidInput
 from services.jobs.identity import scene_hash
+from services.jobs.tenants import Principal, Tenancy
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
 from workers.scene.io import load_scene, scene_from_dict
@@ -38,13 +39,16 @@ def scene_field(error: SceneError) -> str:
 
 
 class SceneResolver:
-    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused."""
+    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused.
+    With `tenancy`, an asset resolves only for a caller whose tenant sees it."""
 
-    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path):
+    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path, tenancy: Tenancy | None = None):
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
+        self.tenancy = tenancy
 
-    def resolve(self, scene: str | dict[str, Any]) -> ResolvedScene:
-        """InvalidInput naming the field for an unknown name or asset and for any problem in the scene."""
+    def resolve(self, scene: str | dict[str, Any], principal: Principal | None = None) -> ResolvedScene:
+        """InvalidInput naming the field for an unknown name or asset (another tenant's included) and for
+        any problem in the scene."""
         try:
             if isinstance(scene, dict):
                 spec = scene_from_dict(scene)
@@ -54,7 +58,7 @@ class SceneResolver:
                     )
                 return ResolvedScene(spec, {"source": "inline", "name": spec.name}, self._hash(spec, {}))
             if scene.startswith(ASSET_PREFIX):
-                return self._asset(scene)
+                return self._asset(scene, principal)
             if scene not in BUILTIN_SCENES:
                 known = ", ".join(sorted(BUILTIN_SCENES))
                 raise InvalidInput(
@@ -82,8 +86,10 @@ class SceneResolver:
             },
         )
 
-    def _asset(self, asset_id: str) -> ResolvedScene:
+    def _asset(self, asset_id: str, principal: Principal | None) -> ResolvedScene:
         try:
+            if self.tenancy and principal and not self.tenancy.sees_asset(principal, asset_id):
+                raise AssetNotFound(asset_id)
             asset = load_asset(asset_id, self.assets_root)
         except (AssetNotFound, ValueError):
             raise InvalidInput(
