@@ -152,7 +152,7 @@ def authorize(db: Database, token: str | None, scope: str, missing: str) -> Prin
     with db.reading() as session:
         stored = session.get(ApiToken, token_hash(token))
     if stored is None:
-        raise Unauthorized("unknown or revoked token")
+        raise Unauthorized("unknown token")  # never issued, or revoked
     if SCOPES.index(stored.scope) < SCOPES.index(scope):
         raise Forbidden(f"this token has scope {stored.scope!r}; this needs {scope!r}")
     return Principal(stored.tenant, stored.scope)
