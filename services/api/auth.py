@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import secrets
 from pathlib import Path
 from typing import Annotated
@@ -85,6 +86,9 @@ def generated_admin_token(data_dir: Path) -> tuple[str, Path]:
     return token, path
 
 
+TOKEN_ID = re.compile(r"tok-[0-9a-f]{16}")
+
+
 def _token_id() -> str:
     return f"tok-{secrets.token_hex(8)}"
 
@@ -134,6 +138,8 @@ def list_tokens(db: Database) -> list[ApiToken]:
 def revoke_token(db: Database, token_id: str) -> ApiToken:
     """Delete a created token; the next request with it gets 401. Configured tokens are revoked by removing
     them from the configuration (they would come back at the next start)."""
+    if TOKEN_ID.fullmatch(token_id) is None:
+        raise TokenNotFound(f"no token {token_id!r}", "token_id")
     with db.writing() as session:
         row = session.scalars(select(ApiToken).where(ApiToken.id == token_id)).one_or_none()
         if row is None:

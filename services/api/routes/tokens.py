@@ -33,7 +33,9 @@ class TokenRequest(BaseModel):
     scope: Literal["read", "submit", "admin"] = Field(
         "read", description="`admin` tokens see every tenant and manage tokens."
     )
-    name: str = Field("", max_length=128, description="A note saying who or what holds the token.")
+    name: str = Field(
+        "", max_length=128, pattern=r"^[^\x00-\x1f\x7f]*$", description="Who or what holds the token."
+    )
 
 
 class TokenView(BaseModel):
