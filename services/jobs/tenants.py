@@ -9,6 +9,8 @@ and assets made before tenants existed and artifacts that no job published (plac
 from __future__ import annotations
 
 import re
+import threading
+from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -50,11 +52,18 @@ class Principal:
         return None if self.sees_all else self.tenant
 
 
+SEEN_CACHE_SIZE = 4096
+
+
 class Tenancy:
-    """Who may see which asset and artifact, read from the job database."""
+    """Who may see which asset and artifact, read from the job database. An artifact's tenant never
+    changes once its job holds it, so a "yes" is remembered (the inference service asks at every query);
+    a "no" is asked again, since the job may be about to record the artifact it just published."""
 
     def __init__(self, db: Database):
         self.db = db
+        self._seen: OrderedDict[tuple[str, str], None] = OrderedDict()
+        self._lock = threading.Lock()
 
     def artifact(self, principal: Principal, artifact_id: str) -> str:
         """`artifact_id` if it is a digest the caller sees; ArtifactNotFound (404) otherwise."""
@@ -73,9 +82,20 @@ class Tenancy:
         published is the default tenant's."""
         if principal.sees_all:
             return True
+        key = (principal.tenant, artifact_id)
+        with self._lock:
+            if key in self._seen:
+                self._seen.move_to_end(key)
+                return True
         with self.db.reading() as session:
             owners = set(session.scalars(select(Job.tenant).where(Job.artifact_id == artifact_id).distinct()))
-        return principal.tenant in owners or (not owners and principal.tenant == DEFAULT_TENANT)
+        if principal.tenant in owners:
+            with self._lock:
+                self._seen[key] = None
+                while len(self._seen) > SEEN_CACHE_SIZE:
+                    self._seen.popitem(last=False)
+            return True
+        return not owners and principal.tenant == DEFAULT_TENANT  # a job may claim it yet: not remembered
 
     def sees_asset(self, principal: Principal, asset_id: str) -> bool:
         if principal.sees_all:
