@@ -49,6 +49,8 @@ class SceneResolver:
     def resolve(self, scene: str | dict[str, Any], principal: Principal | None = None) -> ResolvedScene:
         """InvalidInput naming the field for an unknown name or asset (another tenant's included) and for
         any problem in the scene."""
+        if isinstance(scene, str) and not self._visible(scene, principal):  # before anything is read
+            raise InvalidInput(f"no asset {scene!r}; upload it with POST /v1/assets first", "scene")
         try:
             if isinstance(scene, dict):
                 spec = scene_from_dict(scene)
@@ -58,7 +60,7 @@ class SceneResolver:
                     )
                 return ResolvedScene(spec, {"source": "inline", "name": spec.name}, self._hash(spec, {}))
             if scene.startswith(ASSET_PREFIX):
-                return self._asset(scene, principal)
+                return self._asset(scene)
             if scene not in BUILTIN_SCENES:
                 known = ", ".join(sorted(BUILTIN_SCENES))
                 raise InvalidInput(
@@ -86,10 +88,14 @@ class SceneResolver:
             },
         )
 
-    def _asset(self, asset_id: str, principal: Principal | None) -> ResolvedScene:
+    def _visible(self, scene: str, principal: Principal | None) -> bool:
+        """Whether `principal`'s tenant sees `scene` when it names an asset (built-in names: always)."""
+        if not scene.startswith(ASSET_PREFIX) or self.tenancy is None or principal is None:
+            return True
+        return self.tenancy.sees_asset(principal, scene)
+
+    def _asset(self, asset_id: str) -> ResolvedScene:
         try:
-            if self.tenancy and principal and not self.tenancy.sees_asset(principal, asset_id):
-                raise AssetNotFound(asset_id)
             asset = load_asset(asset_id, self.assets_root)
         except (AssetNotFound, ValueError):
             raise InvalidInput(
