@@ -10,7 +10,7 @@ from fastapi import FastAPI
 
 from services.api import problems
 from services.api.limits import MULTIPART_OVERHEAD, BodyLimit
-from services.api.routes import artifacts, assets, catalog, health, jobs
+from services.api.routes import artifacts, assets, catalog, health, jobs, tokens
 from services.api.services import Services
 from services.api.settings import ServiceSettings
 from services.dashboard import mount_dashboard
@@ -43,7 +43,7 @@ def create_app(settings: ServiceSettings) -> FastAPI:
         upload_bytes=settings.upload_limits.max_total_bytes + MULTIPART_OVERHEAD,
         upload_paths=("/v1/assets",),
     )
-    for module in (jobs, assets, artifacts, catalog, health):
+    for module in (jobs, assets, artifacts, catalog, tokens, health):
         app.include_router(module.router)
     mount_dashboard(app)
     return app

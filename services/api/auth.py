@@ -1,28 +1,36 @@
-"""Bearer tokens with scopes read < submit < admin, stored as sha256 hashes in the job database.
+"""Bearer tokens with scopes read < submit < admin, each of one tenant, stored as sha256 hashes in the job
+database (the secret itself is never stored).
 
-Tokens come from `NBAKE_TOKENS=token:scope,...` and/or a tokens file; the configured set replaces the
-stored one at every start (so removing a token revokes it). With none configured, an admin token is
-generated into `<data_dir>/admin-token` (mode 0600) and reused on later starts.
+Configured tokens come from `NBAKE_TOKENS=token:scope,...` and/or a tokens file and belong to the default
+tenant; the configured set replaces the stored configured ones at every start (so removing a token revokes
+it). With none configured, an admin token is generated into `<data_dir>/admin-token` (mode 0600) and reused
+on later starts. An admin creates tenants' tokens through `POST /v1/tokens` (`nbake tokens create`); they
+last until revoked, and a revoked token is refused from the next request on (every request reads the
+database).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import secrets
 from pathlib import Path
 from typing import Annotated
 
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy import delete
+from sqlalchemy import delete, select
 
 from services.jobs.db import Database
-from services.jobs.errors import JobServiceError
-from services.jobs.tables import ApiToken
+from services.jobs.errors import Conflict, InvalidInput, JobServiceError
+from services.jobs.tables import ApiToken, utcnow
+from services.jobs.tenants import DEFAULT_TENANT, Principal, checked_tenant
 
 SCOPES = ("read", "submit", "admin")  # each scope includes the ones before it
 ADMIN_TOKEN_FILE = "admin-token"
+CONFIGURED, CREATED = "configured", "created"
+SECRET_PREFIX = "nbk_"  # created tokens: easy to recognise in a leaked log or a secret scanner
 
 
 class Unauthorized(JobServiceError):
@@ -32,6 +40,10 @@ class Unauthorized(JobServiceError):
 
 class Forbidden(JobServiceError):
     status, title = 403, "Forbidden"
+
+
+class TokenNotFound(JobServiceError):
+    status, title = 404, "Token not found"
 
 
 def token_hash(token: str) -> str:
@@ -74,29 +86,87 @@ def generated_admin_token(data_dir: Path) -> tuple[str, Path]:
     return token, path
 
 
+TOKEN_ID = re.compile(r"tok-[0-9a-f]{16}")
+
+
+def _token_id() -> str:
+    return f"tok-{secrets.token_hex(8)}"
+
+
 def store_tokens(db: Database, tokens: dict[str, str]) -> None:
-    """Replace the stored tokens with `tokens`, hashed."""
+    """Replace the stored configured tokens with `tokens` (of the default tenant), hashed; created tokens
+    stay."""
     with db.writing() as session:
-        session.execute(delete(ApiToken))
-        session.add_all(ApiToken(token_hash=token_hash(t), scope=scope) for t, scope in tokens.items())
+        session.execute(delete(ApiToken).where(ApiToken.source == CONFIGURED))
+        hashes = {token_hash(t): scope for t, scope in tokens.items()}
+        taken = set(session.scalars(select(ApiToken.token_hash).where(ApiToken.token_hash.in_(hashes))))
+        session.add_all(
+            ApiToken(
+                token_hash=h, id=_token_id(), tenant=DEFAULT_TENANT, scope=scope, name="", source=CONFIGURED
+            )
+            for h, scope in hashes.items()
+            if h not in taken
+        )
 
 
-def authorize(db: Database, token: str | None, scope: str, missing: str) -> str:
-    """The token's scope if it holds `scope` (or a wider one); Unauthorized / Forbidden otherwise. Both APIs
-    check tokens here so they agree on every answer; `missing` tells how that API expects the token."""
+def create_token(db: Database, tenant: str, scope: str, name: str = "") -> tuple[ApiToken, str]:
+    """A new token of `tenant` with `scope`: (its stored row, its secret). The secret is returned once and
+    only its hash is kept."""
+    if scope not in SCOPES:
+        raise InvalidInput(f"one of {', '.join(SCOPES)}", "scope")
+    secret = SECRET_PREFIX + secrets.token_urlsafe(32)
+    row = ApiToken(
+        token_hash=token_hash(secret),
+        id=_token_id(),
+        tenant=checked_tenant(tenant),
+        scope=scope,
+        name=name,
+        source=CREATED,
+        created_at=utcnow(),
+    )
+    with db.writing() as session:
+        session.add(row)
+    return row, secret
+
+
+def list_tokens(db: Database) -> list[ApiToken]:
+    """Every stored token (configured and created), oldest first."""
+    with db.reading() as session:
+        return list(session.scalars(select(ApiToken).order_by(ApiToken.created_at, ApiToken.id)))
+
+
+def revoke_token(db: Database, token_id: str) -> ApiToken:
+    """Delete a created token; the next request with it gets 401. Configured tokens are revoked by removing
+    them from the configuration (they would come back at the next start)."""
+    if TOKEN_ID.fullmatch(token_id) is None:
+        raise TokenNotFound(f"no token {token_id!r}", "token_id")
+    with db.writing() as session:
+        row = session.scalars(select(ApiToken).where(ApiToken.id == token_id)).one_or_none()
+        if row is None:
+            raise TokenNotFound(f"no token {token_id!r}", "token_id")
+        if row.source != CREATED:
+            raise Conflict(f"{token_id} is configured: remove it from NBAKE_TOKENS and restart", "token_id")
+        session.delete(row)
+    return row
+
+
+def authorize(db: Database, token: str | None, scope: str, missing: str) -> Principal:
+    """Who the token acts for if it holds `scope` (or a wider one); Unauthorized / Forbidden otherwise. Both
+    APIs check tokens here so they agree on every answer; `missing` tells how that API expects the token."""
     if token is None:
         raise Unauthorized(missing)
     with db.reading() as session:
         stored = session.get(ApiToken, token_hash(token))
     if stored is None:
-        raise Unauthorized("unknown token")
+        raise Unauthorized("unknown token")  # never issued, or revoked
     if SCOPES.index(stored.scope) < SCOPES.index(scope):
         raise Forbidden(f"this token has scope {stored.scope!r}; this needs {scope!r}")
-    return stored.scope
+    return Principal(stored.tenant, stored.scope)
 
 
 _bearer = HTTPBearer(
-    auto_error=False, description="A token from NBAKE_TOKENS or the generated admin-token file."
+    auto_error=False,
+    description="A token from NBAKE_TOKENS, the generated admin-token file or `nbake tokens create`.",
 )
 
 
@@ -105,9 +175,14 @@ def require(scope: str):
 
     def check(
         request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-    ) -> str:
+    ) -> Principal:
         token = None if credentials is None else credentials.credentials
         db: Database = request.app.state.services.db
         return authorize(db, token, scope, "send `Authorization: Bearer <token>`")
 
     return check
+
+
+CanRead = Annotated[Principal, Depends(require("read"))]
+CanSubmit = Annotated[Principal, Depends(require("submit"))]
+IsAdmin = Annotated[Principal, Depends(require("admin"))]

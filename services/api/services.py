@@ -10,6 +10,7 @@ import ray
 from services.api.auth import configured_tokens, generated_admin_token, store_tokens
 from services.api.settings import ServiceSettings
 from services.artifacts.artifacts import ArtifactStore
+from services.artifacts.assets import asset_ids
 from services.artifacts.store import BlobStore
 from services.geometry import GeometryProcesses
 from services.jobs.db import Database
@@ -19,6 +20,7 @@ from services.jobs.scenes import SceneResolver
 from services.jobs.scheduler import Scheduler, SchedulerSettings
 from services.jobs.submission import JobRequest, Submitter
 from services.jobs.tables import Job
+from services.jobs.tenants import Principal, Tenancy
 
 
 @dataclass
@@ -33,6 +35,7 @@ class Services:
     metrics: ServiceMetrics
     scheduler: Scheduler
     geometry: GeometryProcesses
+    tenancy: Tenancy
     admin_token_file: Path | None = None
 
     @classmethod
@@ -43,7 +46,8 @@ class Services:
         jobs = JobRepository(db)
         blobs = BlobStore(settings.store)
         artifacts = ArtifactStore(blobs, settings.store)  # checkpoints in the store: any node resumes a job
-        scenes = SceneResolver(blobs, settings.store, data_dir / "scenes")
+        tenancy = Tenancy(db)
+        scenes = SceneResolver(blobs, settings.store, data_dir / "scenes", tenancy)
         metrics = ServiceMetrics(jobs.count_by_state)
         scheduler_settings = SchedulerSettings(
             owner=settings.owner,
@@ -54,11 +58,13 @@ class Services:
         scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
         geometry = GeometryProcesses()
         submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
-        return cls(settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry)
+        return cls(
+            settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry, tenancy
+        )
 
     def start(self) -> None:
-        """Migrate the database, install the tokens, start scheduling (Ray must be initialised for that;
-        an API-only replica does not use Ray)."""
+        """Migrate the database, install the tokens, give assets from before tenants to the default tenant,
+        start scheduling (Ray must be initialised for that; an API-only replica does not use Ray)."""
         if self.settings.scheduling and not ray.is_initialized():
             raise RuntimeError("ray.init() first: the scheduler runs jobs on Ray")
         self.db.migrate()
@@ -67,6 +73,7 @@ class Services:
             token, self.admin_token_file = generated_admin_token(self.settings.data_dir)
             tokens = {token: "admin"}
         store_tokens(self.db, tokens)
+        self.tenancy.adopt_unowned_assets(asset_ids(self.settings.store))
         if self.settings.scheduling:
             self.scheduler.start()
 
@@ -75,16 +82,18 @@ class Services:
         self.geometry.stop()
         self.db.dispose()
 
-    def submit(self, request: JobRequest, idempotency_key: str | None = None) -> tuple[Job, bool]:
+    def submit(
+        self, request: JobRequest, idempotency_key: str | None = None, principal: Principal | None = None
+    ) -> tuple[Job, bool]:
         """`Submitter.submit`, counted; a new job wakes the scheduler rather than waiting for its tick."""
-        job, created = self.submitter.submit(request, idempotency_key)
+        job, created = self.submitter.submit(request, idempotency_key, principal)
         self.metrics.submissions.labels(str(created).lower()).inc()
         if created:
             self.scheduler.wake()
         return job, created
 
-    def cancel(self, job_id: str) -> Job:
+    def cancel(self, job_id: str, principal: Principal | None = None) -> Job:
         """Request the cancellation and wake the scheduler, which stops a running job's driver."""
-        job = self.jobs.request_cancel(job_id)
+        job = self.jobs.request_cancel(job_id, principal and principal.visible_tenant)
         self.scheduler.wake()
         return job

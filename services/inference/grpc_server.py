@@ -14,7 +14,7 @@ from grpc_reflection.v1alpha import reflection
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
 from pydantic import ValidationError
 
-from services.api.grpc.auth import TokenAuth
+from services.api.grpc.auth import TokenAuth, principal
 from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.server import GrpcServer
 from services.inference import images
@@ -64,15 +64,19 @@ def _array_message(name: str, array: np.ndarray) -> inference_pb2.Array:
 
 class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
     def __init__(self, state: InferenceState):
-        self.service = state.service
+        self.service, self.tenancy = state.service, state.tenancy
 
     def ListModels(self, request, context):
-        return inference_pb2.ListModelsResponse(models=[_model(m) for m in self.service.models()])
+        caller = principal(context)
+        models = [m for m in self.service.models() if self.tenancy.sees_artifact(caller, m.artifact_id)]
+        return inference_pb2.ListModelsResponse(models=[_model(m) for m in models])
 
     def LoadModel(self, request, context):
-        return inference_pb2.LoadModelResponse(model=_model(self.service.served(request.artifact_id).info()))
+        artifact_id = self.tenancy.artifact(principal(context), request.artifact_id)
+        return inference_pb2.LoadModelResponse(model=_model(self.service.served(artifact_id).info()))
 
     def Query(self, request, context):
+        self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
         params = json_format.MessageToDict(request.params)
         served, answer = self.service.call(request.artifact_id, QUERY, params, _arrays(request.arrays))
         return inference_pb2.QueryResponse(
@@ -83,6 +87,7 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
         )
 
     def Render(self, request, context):
+        self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
         params = json_format.MessageToDict(request.params)
         _, answer = self.service.call(request.artifact_id, RENDER, params, {})
         context.set_trailing_metadata((("server-timing", server_timing(answer)),))

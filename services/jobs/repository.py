@@ -99,15 +99,23 @@ class JobRepository:
 
     # ------------------------------------------------------------------ reading
 
-    def get(self, job_id: str) -> Job:
+    def get(self, job_id: str, tenant: str | None = None) -> Job:
+        """The job; JobNotFound also when `tenant` is given and the job is another tenant's."""
         with self.db.reading() as session:
-            return self._job(session, job_id)
+            return self._job(session, job_id, tenant=tenant)
 
     def list(
-        self, states: Sequence[str], kind: str | None, cursor: str | None, limit: int
+        self,
+        states: Sequence[str],
+        kind: str | None,
+        cursor: str | None,
+        limit: int,
+        tenant: str | None = None,
     ) -> tuple[list[Job], str | None]:
-        """Newest first; `next_cursor` is None on the last page."""
+        """Newest first, only `tenant`'s when given; `next_cursor` is None on the last page."""
         query = select(Job).order_by(Job.seq.desc()).limit(limit + 1)
+        if tenant is not None:
+            query = query.where(Job.tenant == tenant)
         if states:
             query = query.where(Job.state.in_(list(states)))
         if kind:
@@ -195,10 +203,10 @@ class JobRepository:
                 .values(lease_expires=utcnow() + timedelta(seconds=lease_s))
             )
 
-    def request_cancel(self, job_id: str) -> Job:
+    def request_cancel(self, job_id: str, tenant: str | None = None) -> Job:
         """A queued job is cancelled now; a running one is flagged for the scheduler to stop."""
         with self.db.writing() as session:
-            job = self._job(session, job_id, lock=True)
+            job = self._job(session, job_id, lock=True, tenant=tenant)
             state = JobState(job.state)
             if state.terminal:
                 raise Conflict(
@@ -255,8 +263,10 @@ class JobRepository:
         return job
 
     @staticmethod
-    def _job(session: Session, job_id: str, lock: bool = False) -> Job:
+    def _job(session: Session, job_id: str, lock: bool = False, tenant: str | None = None) -> Job:
         query = select(Job).where(Job.id == job_id)
+        if tenant is not None:  # another tenant's job is not found, exactly like one that does not exist
+            query = query.where(Job.tenant == tenant)
         job = session.scalars(query.with_for_update() if lock else query).one_or_none()
         if job is None:
             raise JobNotFound(f"no job {job_id!r}", "job_id")

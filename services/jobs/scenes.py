@@ -16,6 +16,7 @@ from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
 from services.jobs.errors import InvalidInput
 from services.jobs.identity import scene_hash
+from services.jobs.tenants import Principal, Tenancy
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
 from workers.scene.io import load_scene, scene_from_dict
@@ -38,13 +39,18 @@ def scene_field(error: SceneError) -> str:
 
 
 class SceneResolver:
-    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused."""
+    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused.
+    With `tenancy`, an asset resolves only for a caller whose tenant sees it."""
 
-    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path):
+    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path, tenancy: Tenancy | None = None):
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
+        self.tenancy = tenancy
 
-    def resolve(self, scene: str | dict[str, Any]) -> ResolvedScene:
-        """InvalidInput naming the field for an unknown name or asset and for any problem in the scene."""
+    def resolve(self, scene: str | dict[str, Any], principal: Principal | None = None) -> ResolvedScene:
+        """InvalidInput naming the field for an unknown name or asset (another tenant's included) and for
+        any problem in the scene."""
+        if isinstance(scene, str) and not self._visible(scene, principal):  # before anything is read
+            raise InvalidInput(f"no asset {scene!r}; upload it with POST /v1/assets first", "scene")
         try:
             if isinstance(scene, dict):
                 spec = scene_from_dict(scene)
@@ -81,6 +87,12 @@ class SceneResolver:
                 e.name: StoredFile(url=self.blobs.blob_url(e.digest), digest=e.digest) for e in asset.files
             },
         )
+
+    def _visible(self, scene: str, principal: Principal | None) -> bool:
+        """Whether `principal`'s tenant sees `scene` when it names an asset (built-in names: always)."""
+        if not scene.startswith(ASSET_PREFIX) or self.tenancy is None or principal is None:
+            return True
+        return self.tenancy.sees_asset(principal, scene)
 
     def _asset(self, asset_id: str) -> ResolvedScene:
         try:

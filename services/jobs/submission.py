@@ -20,6 +20,7 @@ from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
+from services.jobs.tenants import DEFAULT_TENANT, Principal
 from workers.models.registry import UnknownKind, get_kind
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.budget import scene_triangles
@@ -73,8 +74,13 @@ class Submitter:
         self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
         self._plans_lock = threading.Lock()
 
-    def submit(self, request: JobRequest, header_key: str | None = None) -> tuple[Job, bool]:
-        """(job, created): created is False when an idempotency key named an existing job."""
+    def submit(
+        self, request: JobRequest, header_key: str | None = None, principal: Principal | None = None
+    ) -> tuple[Job, bool]:
+        """(job, created): created is False when an idempotency key named an existing job of the same
+        tenant. The job is `principal`'s tenant's (the default tenant's without one), and may name only
+        assets that tenant sees."""
+        principal = principal or Principal(DEFAULT_TENANT, "admin")
         try:
             kind = get_kind(request.kind)
         except UnknownKind as error:
@@ -91,7 +97,7 @@ class Submitter:
             raise InvalidInput(first["msg"], f"config.{field}" if field else "config") from None
         except ValueError as error:
             raise InvalidInput(str(error), "config") from None
-        scene = self.scenes.resolve(request.scene)
+        scene = self.scenes.resolve(request.scene, principal)
         try:
             triangles = scene_triangles(scene.spec)  # before anything is built, here or in a child
             plan = self._plan(kind.name, scene, config, in_process=_small(scene.spec, triangles))
@@ -116,6 +122,7 @@ class Submitter:
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
         job = Job(
             id=f"job-{uuid.uuid4().hex}",
+            tenant=principal.tenant,
             kind=kind.name,
             state=JobState.QUEUED,
             scene_ref=scene.ref,
@@ -134,8 +141,9 @@ class Submitter:
             last_event_seq=0,
             created_at=utcnow(),
         )
-        content_key = None if request.force else f"content:{key}"
-        return self.jobs.create(job, content_key, _header_key(header_key))
+        content_key = None if request.force else f"{principal.tenant}/content:{key}"
+        header = _header_key(header_key)
+        return self.jobs.create(job, content_key, header and f"{principal.tenant}/{header}")
 
     def _plan(self, kind_name: str, scene, config, in_process: bool) -> Plan:
         key = (kind_name, scene.content_hash, json.dumps(config.model_dump(mode="json"), sort_keys=True))

@@ -1,4 +1,5 @@
-"""The job database schema (SQLAlchemy 2 ORM): jobs, their events, idempotency keys and API tokens.
+"""The job database schema (SQLAlchemy 2 ORM): jobs, their events, idempotency keys, API tokens and
+which tenants own which uploaded assets.
 
 Alembic migrations in `migrations/` create exactly these tables; `test_jobs_db` checks that they agree.
 """
@@ -27,6 +28,9 @@ class UTCDateTime(TypeDecorator):
         return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
+DEFAULT_TENANT = "default"  # of configured tokens, and of everything made before tenants existed
+
+
 def utcnow() -> datetime:
     return datetime.now(UTC)
 
@@ -42,6 +46,9 @@ class Job(Base):
 
     seq: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     id: Mapped[str] = mapped_column(String(40), unique=True)
+    tenant: Mapped[str] = mapped_column(
+        String(64), index=True, default=DEFAULT_TENANT, server_default=DEFAULT_TENANT
+    )
     kind: Mapped[str] = mapped_column(String(64), index=True)
     state: Mapped[str] = mapped_column(String(16), index=True)
     scene_ref: Mapped[dict[str, Any]]  # how the user named the scene: builtin / asset / inline
@@ -58,7 +65,7 @@ class Job(Base):
     max_attempts: Mapped[int] = mapped_column(Integer)
     cancel_requested: Mapped[bool] = mapped_column(default=False)
     error: Mapped[str | None] = mapped_column(Text)
-    artifact_id: Mapped[str | None] = mapped_column(String(80))
+    artifact_id: Mapped[str | None] = mapped_column(String(80), index=True)  # whose artifact is it: a job's
     progress: Mapped[dict[str, Any] | None]  # the latest progress event
     last_event_seq: Mapped[int] = mapped_column(Integer, default=0)
     lease_owner: Mapped[str | None] = mapped_column(String(255))
@@ -81,21 +88,39 @@ class Event(Base):
 
 
 class IdempotencyKey(Base):
-    """A content key (`content:<sha256>`) or a client's `Idempotency-Key` header (`header:<sha256>`)."""
+    """A content key (`<tenant>/content:<sha256>`) or a client's `Idempotency-Key` header
+    (`<tenant>/header:<sha256>`): the tenant prefix keeps identical work of two tenants two jobs."""
 
     __tablename__ = "idempotency_keys"
 
-    key: Mapped[str] = mapped_column(String(80), primary_key=True)
+    key: Mapped[str] = mapped_column(String(160), primary_key=True)
     job_id: Mapped[str] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"))
     request_hash: Mapped[str] = mapped_column(String(80))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
 class ApiToken(Base):
-    """A bearer token, stored as its sha256 (tokens are random, so a plain hash is enough)."""
+    """A bearer token, stored as its sha256 (tokens are random, so a plain hash is enough), never in clear.
+    `id` names it in listings and revocations; `source` is `configured` (NBAKE_TOKENS, replaced at every
+    start) or `created` (through `POST /v1/tokens`, kept until revoked)."""
 
     __tablename__ = "api_tokens"
 
     token_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
+    id: Mapped[str] = mapped_column(String(40), unique=True)
+    tenant: Mapped[str] = mapped_column(String(64), default=DEFAULT_TENANT, server_default=DEFAULT_TENANT)
     scope: Mapped[str] = mapped_column(String(16))
+    name: Mapped[str] = mapped_column(String(128), server_default="")
+    source: Mapped[str] = mapped_column(String(16), server_default="configured")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class AssetOwner(Base):
+    """A tenant that uploaded an asset. Assets are content-addressed, so two tenants uploading the same
+    files share its blobs and listing; each sees it only through its own row here."""
+
+    __tablename__ = "asset_owners"
+
+    asset_id: Mapped[str] = mapped_column(String(80), primary_key=True)
+    tenant: Mapped[str] = mapped_column(String(64), primary_key=True)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -167,6 +167,8 @@ def test_async_client(served):
         (sdk_models.Asset, "Asset"),
         (sdk_models.Manifest, "Manifest"),
         (sdk_models.FileEntry, "FileEntry"),
+        (sdk_models.Token, "TokenView"),
+        (sdk_models.CreatedToken, "CreatedToken"),
     ],
 )
 def test_sdk_models_match_the_servers_schemas(served, model, schema):

@@ -39,6 +39,7 @@ _MODULES = {
     ],
     "models": [
         "Asset",
+        "CreatedToken",
         "FileEntry",
         "Job",
         "JobEvent",
@@ -47,6 +48,7 @@ _MODULES = {
         "Manifest",
         "ModelInfo",
         "Progress",
+        "Token",
     ],
     "retry": ["Retry"],
     "transport_grpc": ["DeadlineExceeded"],

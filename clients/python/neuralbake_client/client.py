@@ -25,7 +25,18 @@ from urllib.parse import urlsplit
 from neuralbake_client.archive import upload_parts
 from neuralbake_client.download import DownloadedFile, download_file
 from neuralbake_client.errors import RETRYABLE, NeuralbakeError
-from neuralbake_client.models import Asset, Job, JobEvent, JobList, JobState, Manifest, ModelInfo, Progress
+from neuralbake_client.models import (
+    Asset,
+    CreatedToken,
+    Job,
+    JobEvent,
+    JobList,
+    JobState,
+    Manifest,
+    ModelInfo,
+    Progress,
+    Token,
+)
 from neuralbake_client.retry import DEFAULT_RETRY, Retry
 
 if TYPE_CHECKING:
@@ -275,6 +286,27 @@ class Client:
             download_file(self.transport, manifest.artifact_id, entry, folder, self.retry, on_bytes)
             for entry in entries
         ]
+
+    # ------------------------------------------------------------------ tokens (admin, REST only)
+
+    def create_token(self, tenant: str = "default", scope: str = "read", name: str = "") -> CreatedToken:
+        """A new token of `tenant` (its jobs, assets and artifacts are all it sees) with `scope` (read,
+        submit or admin). Its secret, `.token`, is in this answer only: the server keeps its hash."""
+        return self._token_admin().create_token(tenant, scope, name)
+
+    def tokens(self) -> list[Token]:
+        """Every token of the deployment, without secrets."""
+        return self.retry.call(lambda: self._token_admin().list_tokens())
+
+    def revoke_token(self, token: Token | str) -> None:
+        """Revoke a created token by id: its next request gets 401."""
+        ident = token.id if isinstance(token, Token) else token
+        self.retry.call(lambda: self._token_admin().revoke_token(ident))
+
+    def _token_admin(self) -> HttpTransport:
+        if not hasattr(self.transport, "create_token"):
+            raise NeuralbakeError("tokens are managed over REST: connect with an http(s):// URL")
+        return self.transport
 
     # ------------------------------------------------------------------ inference
 

@@ -114,6 +114,22 @@ class Manifest(BaseModel):
         return [entry.name for entry in self.files]
 
 
+class Token(BaseModel):
+    """A bearer token as an admin lists it: never its secret. `source` is `configured` (NBAKE_TOKENS) or
+    `created` (`create_token`, revocable)."""
+
+    id: str
+    tenant: str
+    scope: str
+    name: str
+    source: str
+    created_at: datetime
+
+
+class CreatedToken(Token):
+    token: str = Field(description="The secret, shown only when the token is created.")
+
+
 class ModelInfo(BaseModel):
     """A model the inference service holds in memory (`operations`: `query`, `render`)."""
 

@@ -9,7 +9,7 @@ from typing import Any, BinaryIO
 import httpx
 
 from neuralbake_client.errors import ApiError, ConnectionFailed, api_error
-from neuralbake_client.models import Asset, Job, JobEvent, JobList, Manifest
+from neuralbake_client.models import Asset, CreatedToken, Job, JobEvent, JobList, Manifest, Token
 
 STREAM_READ_TIMEOUT_S = 60.0  # the server sends a keep-alive comment every 15 s
 
@@ -119,3 +119,15 @@ class HttpTransport:
                         yield chunk
         except httpx.TransportError as error:
             raise ConnectionFailed(f"{self.http.base_url}: {error}") from error
+
+    # ------------------------------------------------------------------ tokens (admin)
+
+    def create_token(self, tenant: str, scope: str, name: str) -> CreatedToken:
+        body = {"tenant": tenant, "scope": scope, "name": name}
+        return CreatedToken.model_validate(self.send("POST", "/v1/tokens", json=body).json())
+
+    def list_tokens(self) -> list[Token]:
+        return [Token.model_validate(item) for item in self.send("GET", "/v1/tokens").json()["items"]]
+
+    def revoke_token(self, token_id: str) -> None:
+        self.send("DELETE", f"/v1/tokens/{token_id}")

@@ -8,10 +8,9 @@ from typing import TYPE_CHECKING
 
 from neuralbake.v1 import artifacts_pb2, artifacts_pb2_grpc
 
+from services.api.grpc.auth import principal
 from services.api.grpc.messages import manifest_message
 from services.api.grpc.streams import StreamTracker
-from services.artifacts.artifacts import ArtifactNotFound
-from services.artifacts.digests import known_digest
 from services.jobs.errors import InvalidInput
 
 if TYPE_CHECKING:  # annotations only: the inference service reuses this package
@@ -25,11 +24,13 @@ class ArtifactServicer(artifacts_pb2_grpc.ArtifactServiceServicer):
         self.svc, self.streams = services, streams
 
     def GetManifest(self, request, context):
-        manifest = self.svc.artifacts.manifest(known_digest(request.artifact_id, ArtifactNotFound))
+        artifact_id = self.svc.tenancy.artifact(principal(context), request.artifact_id)
+        manifest = self.svc.artifacts.manifest(artifact_id)
         return artifacts_pb2.GetManifestResponse(manifest=manifest_message(manifest))
 
     def DownloadFile(self, request, context) -> Iterator[artifacts_pb2.DownloadFileResponse]:
-        entry = self.svc.artifacts.file(known_digest(request.artifact_id, ArtifactNotFound), request.name)
+        artifact_id = self.svc.tenancy.artifact(principal(context), request.artifact_id)
+        entry = self.svc.artifacts.file(artifact_id, request.name)
         if not 0 <= request.offset <= entry.size:
             raise InvalidInput(f"must be 0 to the file's size {entry.size}", "offset")
         self.svc.blobs.verify(entry.digest)

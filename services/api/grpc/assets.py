@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING, BinaryIO
 
 from neuralbake.v1 import assets_pb2, assets_pb2_grpc
 
+from services.api.grpc.auth import principal
 from services.api.grpc.messages import asset_message
-from services.artifacts.digests import known_digest
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, UploadError
-from services.artifacts.uploads import AssetNotFound, ingest_upload, load_asset, save_asset
+from services.artifacts.uploads import ingest_upload, load_asset, save_asset
 
 if TYPE_CHECKING:  # annotations only: the inference service reuses this package
     from services.api.services import Services
@@ -43,9 +43,11 @@ class AssetServicer(assets_pb2_grpc.AssetServiceServicer):
             for _, spool in parts:
                 spool.seek(0)
             asset = ingest_upload(parts, self.svc.blobs, limits, work_dir=work, geometry=self.svc.geometry)
+        self.svc.tenancy.own_asset(principal(context).tenant, asset.asset_id)
         save_asset(asset, self.svc.blobs, self.svc.settings.store)
         return assets_pb2.UploadAssetResponse(asset=asset_message(asset))
 
     def GetAsset(self, request, context):
-        asset = load_asset(known_digest(request.asset_id, AssetNotFound), self.svc.settings.store)
+        asset_id = self.svc.tenancy.asset(principal(context), request.asset_id)
+        asset = load_asset(asset_id, self.svc.settings.store)
         return assets_pb2.GetAssetResponse(asset=asset_message(asset))

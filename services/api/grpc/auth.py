@@ -1,5 +1,6 @@
 """Bearer tokens over gRPC: `authorization: Bearer <token>` metadata, checked by the same `authorize` as
-REST requests. The health and reflection services stay open, like `/healthz`.
+REST requests. The health and reflection services stay open, like `/healthz`. A checked call's context
+carries the caller's `Principal` (its tenant and scope) to the servicer: `principal(context)`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from neuralbake.v1 import artifacts_pb2, assets_pb2, jobs_pb2
 from services.api.auth import authorize
 from services.api.grpc.handlers import Behaviour, rewrap
 from services.jobs.db import Database
+from services.jobs.tenants import Principal
 
 PROTECTED = {
     service.full_name: service
@@ -44,6 +46,22 @@ def bearer_token(context: grpc.ServicerContext) -> str | None:
     return None
 
 
+class AuthorizedContext:
+    """The call's context (every method delegated) with the principal its token stands for: gRPC's own
+    context takes no attributes."""
+
+    def __init__(self, context: grpc.ServicerContext, principal: Principal):
+        self._context, self.principal = context, principal
+
+    def __getattr__(self, name: str):
+        return getattr(self._context, name)
+
+
+def principal(context) -> Principal:
+    """Who a call checked by `TokenAuth` acts for."""
+    return context.principal
+
+
 class TokenAuth(grpc.ServerInterceptor):
     """Checks the caller's token before the call's behaviour runs (in the call's worker thread).
     `scope_for(method)` names the scope a method needs (None: open); the inference server passes its own."""
@@ -59,8 +77,8 @@ class TokenAuth(grpc.ServerInterceptor):
 
         def around(behaviour: Behaviour, streaming: bool) -> Behaviour:
             def checked(request, context):
-                authorize(self.db, bearer_token(context), scope, MISSING)
-                return behaviour(request, context)
+                caller = authorize(self.db, bearer_token(context), scope, MISSING)
+                return behaviour(request, AuthorizedContext(context, caller))
 
             return checked
 

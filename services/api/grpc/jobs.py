@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import grpc
 from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
 
+from services.api.grpc.auth import principal
 from services.api.grpc.messages import STATE_NAMES, event_message, job_message, submit_fields
 from services.api.grpc.streams import StreamTracker, pause
 from services.jobs.errors import InvalidInput
@@ -30,11 +31,12 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
 
     def SubmitJob(self, request, context):
         body = JobRequest.model_validate(submit_fields(request))
-        job, created = self.svc.submit(body, idempotency_key(context))
+        job, created = self.svc.submit(body, idempotency_key(context), principal(context))
         return jobs_pb2.SubmitJobResponse(job=job_message(job), created=created)
 
     def GetJob(self, request, context):
-        return jobs_pb2.GetJobResponse(job=job_message(self.svc.jobs.get(request.job_id)))
+        job = self.svc.jobs.get(request.job_id, principal(context).visible_tenant)
+        return jobs_pb2.GetJobResponse(job=job_message(job))
 
     def ListJobs(self, request, context):
         size = request.page_size or DEFAULT_PAGE
@@ -44,15 +46,17 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
         if unknown:
             raise InvalidInput(f"unknown or unspecified state {unknown[0]}", "states")
         states = [STATE_NAMES[s].value for s in request.states]
-        jobs, cursor = self.svc.jobs.list(states, request.kind or None, request.page_token or None, size)
+        tenant, cursor = principal(context).visible_tenant, request.page_token or None
+        jobs, cursor = self.svc.jobs.list(states, request.kind or None, cursor, size, tenant)
         return jobs_pb2.ListJobsResponse(jobs=[job_message(j) for j in jobs], next_page_token=cursor or "")
 
     def CancelJob(self, request, context):
-        return jobs_pb2.CancelJobResponse(job=job_message(self.svc.cancel(request.job_id)))
+        job = self.svc.cancel(request.job_id, principal(context))
+        return jobs_pb2.CancelJobResponse(job=job_message(job))
 
     def WatchJob(self, request, context) -> Iterator[jobs_pb2.WatchJobResponse]:
         """Events in order until the final state, by the loop `services.jobs.following` shares with SSE."""
-        self.svc.jobs.get(request.job_id)  # NOT_FOUND before anything is sent
+        self.svc.jobs.get(request.job_id, principal(context).visible_tenant)  # NOT_FOUND before any is sent
         with self.streams.track("WatchJob"):
             for events in follow(self.svc.jobs, request.job_id, request.after_seq):
                 for event in events:

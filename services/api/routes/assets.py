@@ -4,13 +4,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, File, Response, UploadFile
+from fastapi import APIRouter, File, Response, UploadFile
 
-from services.api.auth import require
+from services.api.auth import CanRead, CanSubmit
 from services.api.deps import ServicesDep
 from services.api.problems import PROBLEM_RESPONSES
-from services.artifacts.digests import known_digest
-from services.artifacts.uploads import Asset, AssetNotFound, ingest_upload, load_asset, save_asset
+from services.artifacts.uploads import Asset, ingest_upload, load_asset, save_asset
 
 router = APIRouter(prefix="/v1/assets", tags=["assets"], responses={401: PROBLEM_RESPONSES[401]})
 
@@ -19,7 +18,6 @@ router = APIRouter(prefix="/v1/assets", tags=["assets"], responses={401: PROBLEM
     "",
     status_code=201,
     response_model=Asset,
-    dependencies=[Depends(require("submit"))],
     responses={s: PROBLEM_RESPONSES[s] for s in (400, 403, 413, 422)},
 )
 def upload_asset(
@@ -29,12 +27,16 @@ def upload_asset(
     ],
     response: Response,
     svc: ServicesDep,
+    principal: CanSubmit,
 ) -> Asset:
-    """Store the files content-addressed (sha256); the scene is validated now (errors name the field)."""
+    """Store the files content-addressed (sha256); the scene is validated now (errors name the field).
+    The asset becomes visible to the token's tenant (the same files of another tenant share the storage,
+    not the visibility)."""
     parts = [(upload.filename or "", upload.file) for upload in files]
     asset = ingest_upload(
         parts, svc.blobs, svc.settings.upload_limits, work_dir=svc.settings.data_dir, geometry=svc.geometry
     )
+    svc.tenancy.own_asset(principal.tenant, asset.asset_id)
     save_asset(asset, svc.blobs, svc.settings.store)
     response.headers["Location"] = f"/v1/assets/{asset.asset_id}"
     return asset
@@ -43,8 +45,7 @@ def upload_asset(
 @router.get(
     "/{asset_id}",
     response_model=Asset,
-    dependencies=[Depends(require("read"))],
     responses={s: PROBLEM_RESPONSES[s] for s in (403, 404)},
 )
-def get_asset(asset_id: str, svc: ServicesDep) -> Asset:
-    return load_asset(known_digest(asset_id, AssetNotFound), svc.settings.store)
+def get_asset(asset_id: str, svc: ServicesDep, principal: CanRead) -> Asset:
+    return load_asset(svc.tenancy.asset(principal, asset_id), svc.settings.store)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
 
-from services.api.auth import require
+from services.api.auth import CanRead, CanSubmit
 from services.api.deps import ServicesDep
 from services.api.problems import PROBLEM_RESPONSES
 from services.api.schemas import EventView, JobList, JobView
@@ -22,18 +22,19 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses={401: PROBLEM_RES
     "",
     status_code=201,
     response_model=JobView,
-    dependencies=[Depends(require("submit"))],
-    responses={200: {"model": JobView, "description": "An identical job already exists: that job"}}
+    responses={200: {"model": JobView, "description": "An identical job of this tenant exists: that job"}}
     | {s: PROBLEM_RESPONSES[s] for s in (400, 403, 409, 413, 422)},
 )
 def submit_job(
     body: JobRequest,
     response: Response,
     svc: ServicesDep,
+    principal: CanSubmit,
     idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
 ) -> JobView:
-    """Queue a job (201), or return the existing identical one (200) unless `force` is set."""
-    job, created = svc.submit(body, idempotency_key)
+    """Queue a job of the token's tenant (201), or return the tenant's existing identical one (200) unless
+    `force` is set."""
+    job, created = svc.submit(body, idempotency_key, principal)
     if not created:
         response.status_code = 200
     response.headers["Location"] = f"/v1/jobs/{job.id}"
@@ -43,11 +44,11 @@ def submit_job(
 @router.get(
     "",
     response_model=JobList,
-    dependencies=[Depends(require("read"))],
     responses={s: PROBLEM_RESPONSES[s] for s in (403, 422)},
 )
 def list_jobs(
     svc: ServicesDep,
+    principal: CanRead,
     state: Annotated[list[JobState] | None, Query(description="Repeat to match any of several.")] = None,
     kind: Annotated[str | None, Query(max_length=64)] = None,
     cursor: Annotated[
@@ -55,32 +56,31 @@ def list_jobs(
     ] = None,
     limit: Annotated[int, Query(ge=1, le=200)] = 50,
 ) -> JobList:
-    """Jobs, newest first."""
-    jobs, next_cursor = svc.jobs.list([s.value for s in state or []], kind, cursor, limit)
+    """The tenant's jobs (every tenant's for an admin token), newest first."""
+    states = [s.value for s in state or []]
+    jobs, next_cursor = svc.jobs.list(states, kind, cursor, limit, principal.visible_tenant)
     return JobList(items=[JobView.of(job) for job in jobs], next_cursor=next_cursor)
 
 
 @router.get(
     "/{job_id}",
     response_model=JobView,
-    dependencies=[Depends(require("read"))],
     responses={s: PROBLEM_RESPONSES[s] for s in (403, 404)},
 )
-def get_job(job_id: str, svc: ServicesDep) -> JobView:
-    return JobView.of(svc.jobs.get(job_id))
+def get_job(job_id: str, svc: ServicesDep, principal: CanRead) -> JobView:
+    return JobView.of(svc.jobs.get(job_id, principal.visible_tenant))
 
 
 @router.post(
     "/{job_id}:cancel",
     response_model=JobView,
     status_code=202,
-    dependencies=[Depends(require("submit"))],
     responses={200: {"model": JobView, "description": "A queued job: cancelled at once"}}
     | {s: PROBLEM_RESPONSES[s] for s in (403, 404, 409)},
 )
-def cancel_job(job_id: str, response: Response, svc: ServicesDep) -> JobView:
+def cancel_job(job_id: str, response: Response, svc: ServicesDep, principal: CanSubmit) -> JobView:
     """A queued job is cancelled at once (200); a running one stops within seconds (202)."""
-    job = svc.cancel(job_id)
+    job = svc.cancel(job_id, principal)
     if job.state == JobState.CANCELLED:
         response.status_code = 200
     return JobView.of(job)
@@ -88,7 +88,6 @@ def cancel_job(job_id: str, response: Response, svc: ServicesDep) -> JobView:
 
 @router.get(
     "/{job_id}/events",
-    dependencies=[Depends(require("read"))],
     response_class=StreamingResponse,
     responses={
         200: {
@@ -103,11 +102,12 @@ def job_events(
     job_id: str,
     request: Request,
     svc: ServicesDep,
+    principal: CanRead,
     last_event_id: Annotated[int | None, Header(ge=0, le=2**31 - 1)] = None,
     after: Annotated[int | None, Query(ge=0, le=2**31 - 1, description="Like Last-Event-ID.")] = None,
 ) -> StreamingResponse:
     """State changes, progress (step, loss, samples/s, ETA) and log lines; resumable with Last-Event-ID."""
-    svc.jobs.get(job_id)  # 404 before the stream starts
+    svc.jobs.get(job_id, principal.visible_tenant)  # 404 before the stream starts (another tenant's too)
     start = max(last_event_id or 0, after or 0)
     return StreamingResponse(
         event_stream(request, svc.jobs, job_id, start, svc.metrics.sse_streams),

@@ -6,12 +6,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
 
-from services.api.auth import require
+from services.api.auth import CanRead
 from services.api.problems import PROBLEM_RESPONSES
 from services.inference import images, wire
 from services.inference.errors import MalformedBody
@@ -19,7 +19,7 @@ from services.inference.service import server_timing
 from services.inference.state import StateDep
 from workers.models.registry import QUERY, RENDER
 
-router = APIRouter(prefix="/v1/artifacts", tags=["inference"], dependencies=[Depends(require("read"))])
+router = APIRouter(prefix="/v1/artifacts", tags=["inference"])
 ERRORS = {**PROBLEM_RESPONSES, 503: {"description": "No answer within the request timeout; retry"}}
 
 BINARY_DOC = (
@@ -77,8 +77,9 @@ async def _parse(request: Request) -> tuple[dict[str, Any], dict[str, np.ndarray
         }
     },
 )
-async def query(artifact_id: str, request: Request, state: StateDep) -> Response:
+async def query(artifact_id: str, request: Request, state: StateDep, principal: CanRead) -> Response:
     """Batched kind-specific queries: concurrent requests for one model are merged into one call."""
+    await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
     params, arrays = await _parse(request)
     served, answer = await run_in_threadpool(state.service.call, artifact_id, QUERY, params, arrays)
     head = {"artifact_id": artifact_id, "kind": served.loaded.kind, "meta": answer.meta}
@@ -102,10 +103,11 @@ async def query(artifact_id: str, request: Request, state: StateDep) -> Response
     },
 )
 async def render(
-    artifact_id: str, request: Request, state: StateDep, body: RenderBody | None = None
+    artifact_id: str, request: Request, state: StateDep, principal: CanRead, body: RenderBody | None = None
 ) -> Response:
     """An image of the artifact, for kinds that make one (a path-traced view takes `params.camera`:
     position, target, up, fov, width, height); `Server-Timing: frame;dur=<ms>` says how long it took."""
+    await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
     params = body.params if body else {}
     _, answer = await run_in_threadpool(state.service.call, artifact_id, RENDER, params, {})
     media_type = images.media_type_for(request.headers.get("accept"))

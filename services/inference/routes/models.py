@@ -2,25 +2,27 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter
 from starlette.concurrency import run_in_threadpool
 
-from services.api.auth import require
+from services.api.auth import CanRead
 from services.api.problems import PROBLEM_RESPONSES
 from services.inference.service import ModelInfo
 from services.inference.state import StateDep
 
-router = APIRouter(prefix="/v1/models", tags=["models"], dependencies=[Depends(require("read"))])
+router = APIRouter(prefix="/v1/models", tags=["models"])
 
 
 @router.get("", responses=PROBLEM_RESPONSES)
-def list_models(state: StateDep) -> list[ModelInfo]:
-    """Loaded models, least recently used first: the next to be evicted when the memory budget is full."""
-    return state.service.models()
+def list_models(state: StateDep, principal: CanRead) -> list[ModelInfo]:
+    """Loaded models of the token's tenant, least recently used first: the next to be evicted when the
+    memory budget is full."""
+    return [m for m in state.service.models() if state.tenancy.sees_artifact(principal, m.artifact_id)]
 
 
 @router.post("/{artifact_id}:load", responses=PROBLEM_RESPONSES)
-async def load_model(artifact_id: str, state: StateDep) -> ModelInfo:
+async def load_model(artifact_id: str, state: StateDep, principal: CanRead) -> ModelInfo:
     """Fetch, verify and load an artifact now, so its first query does not pay for it."""
+    await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)
     served = await run_in_threadpool(state.service.served, artifact_id)
     return served.info()

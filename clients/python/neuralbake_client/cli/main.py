@@ -14,6 +14,7 @@ from neuralbake_client.cli.jobs import register as register_job_commands
 from neuralbake_client.cli.plugins import LazyCommand, plugin_commands
 from neuralbake_client.cli.query import query_command
 from neuralbake_client.cli.render import SceneOrArtifact, render_command
+from neuralbake_client.cli.tokens import tokens_app
 
 
 class Nbake(TyperGroup):
@@ -40,3 +41,4 @@ app = typer.Typer(
 register_job_commands(app)  # submit, jobs, show, watch, cancel, download
 app.command("query")(query_command)
 app.command("render", cls=SceneOrArtifact)(render_command)
+app.add_typer(tokens_app)  # tokens create | list | revoke

@@ -1,0 +1,148 @@
+"""Tenancy in the job database, on real SQLite and real PostgreSQL: migration 0002 puts everything that
+existed into the default tenant, identical work of two tenants is two jobs, another tenant's job, artifact
+or asset is not found, and tokens are stored hashed, survive restarts when created, and stop working the
+moment they are revoked."""
+
+from __future__ import annotations
+
+import hashlib
+
+import pytest
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import text
+
+from services.api.auth import (
+    Forbidden,
+    Unauthorized,
+    authorize,
+    create_token,
+    list_tokens,
+    revoke_token,
+    store_tokens,
+)
+from services.artifacts.artifacts import ArtifactNotFound
+from services.artifacts.assets import AssetNotFound
+from services.artifacts.store import BlobStore
+from services.jobs.db import MIGRATIONS, Database
+from services.jobs.errors import Conflict, InvalidInput, JobNotFound
+from services.jobs.repository import JobRepository
+from services.jobs.scenes import SceneResolver
+from services.jobs.submission import JobRequest, Submitter
+from services.jobs.tables import utcnow
+from services.jobs.tenants import DEFAULT_TENANT, Principal, Tenancy
+from tests.unit.test_jobs_repository import db, new_job  # noqa: F401 (db is a fixture)
+
+A, B = Principal("acme", "submit"), Principal("bolt", "submit")
+ADMIN = Principal(DEFAULT_TENANT, "admin")
+TINY = JobRequest(kind="render", scene="cornell_box", preset="quick", config={"width": 8, "height": 8})
+ARTIFACT, ASSET = "sha256:" + "a" * 64, "sha256:" + "b" * 64
+
+
+def test_migration_0002_puts_existing_jobs_and_keys_in_the_default_tenant(db):  # noqa: F811
+    with db.engine.begin() as connection:
+        for table in ("asset_owners", "job_events", "idempotency_keys", "jobs", "api_tokens"):
+            connection.execute(text(f"DROP TABLE {table}"))
+        connection.execute(text("DROP TABLE alembic_version"))
+        config = Config()
+        config.set_main_option("script_location", str(MIGRATIONS))
+        config.attributes["connection"] = connection
+        command.upgrade(config, "0001")
+    old = new_job("sha256:old")
+    columns = {c.key: getattr(old, c.key) for c in old.__table__.columns if c.key not in ("seq", "tenant")}
+    columns |= {"scene_ref": "{}", "scene": "{}", "config": "{}", "state": "QUEUED", "created_at": utcnow()}
+    with db.engine.begin() as connection:  # rows as 0001 holds them, written without today's models
+        names = ", ".join(f'"{name}"' for name in columns)
+        values = ", ".join(f":{name}" for name in columns)
+        connection.execute(text(f"INSERT INTO jobs ({names}) VALUES ({values})"), columns)
+        key = {"key": "content:sha256:old", "job": old.id, "now": utcnow()}
+        connection.execute(text("INSERT INTO idempotency_keys VALUES (:key, :job, 'r', :now)"), key)
+        connection.execute(text("INSERT INTO api_tokens VALUES ('h', 'admin', :now)"), key)
+    db.migrate()
+    jobs = JobRepository(db)
+    with db.engine.connect() as connection:
+        assert connection.execute(text("SELECT tenant FROM jobs")).scalar() == DEFAULT_TENANT
+        keys = connection.execute(text("SELECT key FROM idempotency_keys")).scalars().all()
+        assert keys == ["default/content:sha256:old"]
+        assert connection.execute(text("SELECT count(*) FROM api_tokens")).scalar() == 0  # stored at start
+    assert jobs.get(old.id, DEFAULT_TENANT).id == old.id
+
+
+def submitter(db: Database, tmp_path) -> Submitter:  # noqa: F811
+    blobs = BlobStore(str(tmp_path / "store"))
+    return Submitter(
+        JobRepository(db), SceneResolver(blobs, str(tmp_path / "store"), tmp_path, Tenancy(db)), 3
+    )
+
+
+def test_identical_work_is_one_job_per_tenant_and_invisible_to_the_others(db, tmp_path):  # noqa: F811
+    submit = submitter(db, tmp_path)
+    a, created_a = submit.submit(TINY, principal=A)
+    b, created_b = submit.submit(TINY, principal=B)
+    assert created_a and created_b and a.id != b.id and a.idempotency_key == b.idempotency_key
+    assert (a.tenant, b.tenant) == ("acme", "bolt")
+    assert submit.submit(TINY, principal=A)[0].id == a.id
+    assert submit.submit(TINY, principal=B)[0].id == b.id
+    forced = TINY.model_copy(update={"force": True})
+    keyed_a, keyed_b = (submit.submit(forced, "same-key", p)[0] for p in (A, B))
+    assert keyed_a.id != keyed_b.id and submit.submit(forced, "same-key", A)[0].id == keyed_a.id
+
+    jobs = submit.jobs
+    with pytest.raises(JobNotFound):
+        jobs.get(a.id, "bolt")
+    with pytest.raises(JobNotFound):
+        jobs.request_cancel(a.id, "bolt")
+    assert jobs.get(a.id, "acme").id == a.id and jobs.get(a.id).id == a.id  # None: every tenant (admin)
+    assert {j.id for j in jobs.list([], None, None, 50, "bolt")[0]} == {b.id, keyed_b.id}
+    assert {j.id for j in jobs.list([], None, None, 50)[0]} == {a.id, b.id, keyed_a.id, keyed_b.id}
+
+
+def test_artifacts_are_their_jobs_tenants_and_assets_their_uploaders(db, tmp_path):  # noqa: F811
+    tenancy = Tenancy(db)
+    JobRepository(db).create(new_job(tenant="acme", artifact_id=ARTIFACT), None, None)
+    assert tenancy.artifact(A, ARTIFACT) == ARTIFACT and tenancy.artifact(ADMIN, ARTIFACT) == ARTIFACT
+    for principal, artifact in ((B, ARTIFACT), (Principal(DEFAULT_TENANT, "read"), ARTIFACT), (A, "x")):
+        with pytest.raises(ArtifactNotFound):
+            tenancy.artifact(principal, artifact)
+    unowned = "sha256:" + "c" * 64  # published by no job (by hand): the default tenant's
+    assert tenancy.sees_artifact(Principal(DEFAULT_TENANT, "read"), unowned)
+    assert not tenancy.sees_artifact(A, unowned)
+
+    tenancy.own_asset("acme", ASSET)
+    tenancy.own_asset("acme", ASSET)  # an upload of the same files again
+    assert tenancy.asset(A, ASSET) == ASSET
+    with pytest.raises(AssetNotFound):
+        tenancy.asset(B, ASSET)
+    with pytest.raises(InvalidInput, match="no asset"):  # a job of B cannot name A's upload either
+        submitter(db, tmp_path).submit(TINY.model_copy(update={"scene": ASSET}), principal=B)
+    older = "sha256:" + "d" * 64
+    assert tenancy.adopt_unowned_assets([ASSET, older]) == 1  # only the one from before tenants
+    assert tenancy.sees_asset(Principal(DEFAULT_TENANT, "read"), older)
+    assert not tenancy.sees_asset(Principal(DEFAULT_TENANT, "read"), ASSET)
+
+
+def test_tokens_are_hashed_kept_across_restarts_and_revoked_at_once(db):  # noqa: F811
+    store_tokens(db, {"configured-admin": "admin"})
+    row, secret = create_token(db, "acme", "read", "ci")
+    assert authorize(db, secret, "read", "") == Principal("acme", "read")
+    with pytest.raises(Forbidden):
+        authorize(db, secret, "submit", "")
+    with db.engine.connect() as connection:
+        stored = [tuple(r) for r in connection.execute(text("SELECT * FROM api_tokens"))]
+    assert not any(secret in str(value) for r in stored for value in r)
+    assert hashlib.sha256(secret.encode()).hexdigest() in {r[0] for r in stored}
+
+    store_tokens(db, {"configured-admin": "admin"})  # the next start: created tokens stay
+    assert authorize(db, secret, "read", "").tenant == "acme"
+    assert {(t.tenant, t.scope, t.source) for t in list_tokens(db)} == {
+        (DEFAULT_TENANT, "admin", "configured"),
+        ("acme", "read", "created"),
+    }
+    configured = next(t for t in list_tokens(db) if t.source == "configured")
+    with pytest.raises(Conflict):
+        revoke_token(db, configured.id)
+    revoke_token(db, row.id)
+    with pytest.raises(Unauthorized, match="unknown token"):
+        authorize(db, secret, "read", "")
+    with pytest.raises(InvalidInput):
+        create_token(db, "Not A Tenant", "read")
