@@ -13,6 +13,7 @@ from services.jobs.tables import Job
 
 class JobView(BaseModel):
     id: str
+    tenant: str = Field(description="The submitting token's tenant (an admin token lists every tenant's).")
     kind: str
     state: JobState
     scene: dict[str, str] = Field(description="How the scene was named: source builtin, asset or inline.")

@@ -130,7 +130,9 @@ def test_another_tenants_job_events_and_artifact_are_not_found_over_rest(tenants
         assert b.get(f"/v1/jobs/{job['id']}").json()["title"] == unknown["title"]  # no difference to probe
         assert job["id"] not in {j["id"] for j in b.get("/v1/jobs", params={"limit": 200}).json()["items"]}
         assert job["id"] in {j["id"] for j in a.get("/v1/jobs", params={"limit": 200}).json()["items"]}
-        assert job["id"] in {j["id"] for j in admin.get("/v1/jobs", params={"limit": 200}).json()["items"]}
+        listed = admin.get("/v1/jobs", params={"limit": 200}).json()["items"]
+        everyone = {j["id"]: j["tenant"] for j in listed}
+        assert job["tenant"] == "acme" and everyone[job["id"]] == "acme"  # an admin sees whose a job is
     with tenants.http("b-submit") as b:
         assert b.post(f"/v1/jobs/{job['id']}:cancel").status_code == 404
         named = b.post("/v1/jobs", json=RENDER | {"scene": tenants.asset})
@@ -188,6 +190,8 @@ def test_another_tenants_job_stream_and_artifact_are_not_found_over_grpc(tenants
         assert refused.value.code() == grpc.StatusCode.NOT_FOUND
         listed = jobs.ListJobs(jobs_pb2.ListJobsRequest(page_size=200), metadata=tenants.metadata("b-read"))
         assert job_id not in {j.id for j in listed.jobs}
+        mine = jobs.GetJob(jobs_pb2.GetJobRequest(job_id=job_id), metadata=tenants.metadata("a-read"))
+        assert mine.job.tenant == "acme"
 
 
 # ---------------------------------------------------------------------------------------------- inference

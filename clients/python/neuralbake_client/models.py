@@ -14,6 +14,7 @@ from neuralbake_client.states import JobState
 
 class Job(BaseModel):
     id: str
+    tenant: str
     kind: str
     state: JobState
     scene: dict[str, str]
