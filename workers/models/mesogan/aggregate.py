@@ -38,6 +38,8 @@ from workers.render.aggregate import AggregateEvents
 
 HEIGHT_BITS = 20
 OPAQUE = 60.0  # optical depth standing for the opaque base: exp(-60) ~ 1e-26, so alpha rounds to 1
+MIN_RISE = 0.5  # grazing rays march at most twice the step of a ray along the normal
+MAX_STEPS_PER_INTERVAL = 4  # times `samples`: long grazing intervals in one prism
 FLOOR_LIFT = 1e-3  # a base event sits this fraction of the shell height above the skin (no self-hits)
 
 
@@ -162,18 +164,25 @@ class ShellAggregate:
         """Height variance and footprint radius (slab heights) of cone segments at distances `t` with
         variance `axis` along the ray (`slab.march`, `volume.footprint_radius`)."""
         radial = (t * self.cone / self.shell.height) ** 2
-        z2 = (d * self.shell.frame(prism, b)[2]).sum(1) ** 2
+        z2 = np.einsum("ij,ij->i", d, self.shell.normal(prism, b)) ** 2
         variance = axis * z2 + radial * (1 - z2)
         return variance, np.sqrt(np.minimum(radial, radial * z2 + axis * (1 - z2)))
 
-    def _march(self, origins, directions, t_max, iv: Intervals, u: np.ndarray) -> _Samples:
-        """`samples` stratified samples per interval (offsets `u` (I, S)) and an opaque sample where an
-        interval ends on the skin (module docstring)."""
+    def _march(self, origins, directions, t_max, iv: Intervals, rng) -> _Samples:
+        """Stratified samples (random offsets from `rng`, midpoints without) at the step training marched
+        with, `samples` per crossing of the slab's height (slab.march), at least one per interval and
+        at most `MAX_STEPS_PER_INTERVAL` `samples`, and an opaque sample where an interval ends on the
+        skin (module docstring). A ray crossing several prisms is not sampled `samples` times in each."""
         shell, s = self.shell, self.samples
-        step = (iv.leave - iv.enter) / s
-        t = iv.enter[:, None] + (np.arange(s)[None] + u) * step[:, None]
-        rows = np.repeat(np.arange(len(iv.ray)), s)
-        t = t.ravel()
+        length = iv.leave - iv.enter
+        rise = np.abs(np.einsum("ij,ij->i", directions[iv.ray], self.shell.normals[iv.prism].mean(1)))
+        chord_step = shell.height / (np.clip(rise, MIN_RISE, 1.0) * s)
+        count = np.clip(np.ceil(length / chord_step - 1e-9), 1, MAX_STEPS_PER_INTERVAL * s).astype(np.int64)
+        step = length / count
+        rows = np.repeat(np.arange(len(iv.ray)), count)
+        k = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)
+        u = rng.random(len(rows)) if rng is not None else np.full(len(rows), 0.5)
+        t = iv.enter[rows] + (k + u) * step[rows]
         o, d = origins[iv.ray[rows]], directions[iv.ray[rows]]
         b, height = shell.inverse(iv.prism[rows], o + t[:, None] * d)
         height = np.clip(height, 0.0, 1.0)
@@ -188,7 +197,7 @@ class ShellAggregate:
         if len(floor):
             # The skin: an opaque sample a little above it (no self-hits), read at height 0 as in training.
             d_floor = directions[iv.ray[floor]]
-            cos = np.abs((d_floor * shell.frame(iv.prism[floor], b_leave[floor])[2]).sum(1))
+            cos = np.abs(np.einsum("ij,ij->i", d_floor, shell.normal(iv.prism[floor], b_leave[floor])))
             back = FLOOR_LIFT * shell.height / np.maximum(cos, 1e-3)
             t_floor = np.maximum(iv.leave[floor] - back, iv.enter[floor])
             v_floor, r_floor = self._footprint(
@@ -231,7 +240,7 @@ class ShellAggregate:
         iv = self.shell.intervals(origins, directions, t_min, t_max)
         if len(iv.ray) == 0:
             return events
-        samples = self._march(origins, directions, t_max, iv, rng.random((len(iv.ray), self.samples)))
+        samples = self._march(origins, directions, t_max, iv, rng)
         ray = iv.ray[samples.interval]
         weight = self._transmittance_before(ray, samples.optical) * -np.expm1(-samples.optical)
         u = rng.random(n)
@@ -258,7 +267,7 @@ class ShellAggregate:
         blocked = np.zeros(n, bool)
         if len(iv.ray) == 0:
             return blocked
-        samples = self._march(origins, directions, t_max, iv, np.full((len(iv.ray), self.samples), 0.5))
+        samples = self._march(origins, directions, t_max, iv, None)
         depth = np.zeros(n)
         np.add.at(depth, iv.ray[samples.interval], samples.optical)
         return ray_uniforms(origins, directions) < -np.expm1(-depth)
