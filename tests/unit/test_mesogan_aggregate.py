@@ -10,12 +10,18 @@ import numpy as np
 import torch
 
 from workers.models.mesogan.aggregate import NeuralMaterial, ShellAggregate, pack_events, unpack_events
+from workers.models.mesogan.config import PRESETS, MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.mesogan.sampling import Instance, hemisphere, slab_scene, stack_views, to_scene
 from workers.models.mesogan.shell import Shell
+from workers.models.mesogan.slab import Window, draw_noise, generate_planes, render_slab
+from workers.models.mesogan.volume import mip_stack
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import ground
 from workers.scene.compile import compile_scene
+from workers.scene.mesoscale import Appearance, Structure
 from workers.scene.spec import Camera, ConstantBackground, Diffuse, DirectionalLight, SceneSpec
 
 SIGMA = 0.8  # extinction per shell height
@@ -121,3 +127,41 @@ def test_a_path_traced_shell_over_an_opaque_base_has_the_analytic_radiance():
     image = render(tracer, RenderSettings(spp=4, max_depth=3, seed=0, threads=1)).image
     expected = RHO * (SUN + 2 * math.pi * SKY)
     assert np.allclose(image.mean((0, 1)), expected, rtol=0.08), (image.mean((0, 1)), expected)
+
+
+def test_the_shell_path_traced_over_a_flat_slab_matches_the_training_renderer():
+    """The transport the tracer runs through the shell (the scattered term with the sun and one traced
+    path for the sky, light and view in the tangent frame, the opaque skin) against `render_slab`, what the
+    discriminator trained on: one plane, one set of labels, a flat slab seen from well inside its edges. An
+    untrained decoder made dense, so the strands' rho carries the light, not only the skin's."""
+    config = MesoganConfig.model_validate(PRESETS["quick"])
+    torch.manual_seed(0)
+    model = MesoGAN(config).eval()
+    with torch.no_grad():
+        [m for m in model.decoder.trunk.modules() if isinstance(m, torch.nn.Linear)][-1].bias[0] += 3.0
+    eye = 2.5 * hemisphere(math.radians(70), 0.4)
+    camera = Camera(
+        position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=16, height=16
+    )
+    instance = Instance(Structure(), Appearance(hue=0.3), hemisphere(math.radians(40), 2.0), camera, 0)
+    batch = stack_views([(instance, np.zeros((16, 16, 3)))])
+    window = Window((-6, -6), (12, 12), config.texel)  # the 3 x 3 slab heights of the quick slab
+    with torch.no_grad():
+        planes = generate_planes(
+            model, config, batch["structure"], torch.randn(1, config.latent_dims),
+            draw_noise(model, config, 1, 0), window,
+        )  # fmt: skip
+        trained_view = torch.stack(
+            [render_slab(model, config, planes, window, batch, jitter=True)[0] for _ in range(16)]
+        ).mean((0, 2, 3))
+    spec = slab_scene(config, instance)
+    scene = compile_scene(spec.model_copy(update={"objects": [o for o in spec.objects if o.name == "skin"]}))
+    shell = build_shell(scene, covering(scene, ["skin"], 1.0, config.texel), 1.0)
+    material = NeuralMaterial(
+        model, config, mip_stack(planes, config.mip_levels), window, batch["appearance"][0]
+    )
+    cone = 2 * math.tan(math.radians(config.fov) / 2) / 16 / math.sqrt(3)
+    tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
+    settings = RenderSettings(spp=32, max_depth=config.max_depth, seed=0, threads=1)
+    traced = render(tracer, settings).image.mean((0, 1))
+    assert np.allclose(traced, trained_view.numpy(), rtol=0.05), (traced, trained_view)
