@@ -4,6 +4,7 @@ shell coordinates."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -145,7 +146,8 @@ def test_the_shell_path_traced_over_a_flat_slab_matches_the_training_renderer():
     )
     instance = Instance(Structure(), Appearance(hue=0.3), hemisphere(math.radians(40), 2.0), camera, 0)
     batch = stack_views([(instance, np.zeros((16, 16, 3)))])
-    window = Window((-6, -6), (12, 12), config.texel)  # the 3 x 3 slab heights of the quick slab
+    side = round(config.tile * config.tiles / config.texel)  # texels over the slab's base
+    window = Window((-side // 2, -side // 2), (side, side), config.texel)
     with torch.no_grad():
         planes = generate_planes(
             model, config, batch["structure"], torch.randn(1, config.latent_dims),
@@ -156,6 +158,8 @@ def test_the_shell_path_traced_over_a_flat_slab_matches_the_training_renderer():
         ).mean((0, 2, 3))
     spec = slab_scene(config, instance)
     scene = compile_scene(spec.model_copy(update={"objects": [o for o in spec.objects if o.name == "skin"]}))
+    # The floor's v runs along the slab's -y: flipped, the plane's (x, y) lie along the slab's (x, y).
+    scene = dataclasses.replace(scene, uvs=scene.uvs * np.float32([1, -1]) + np.float32([0, 1]))
     shell = build_shell(scene, covering(scene, ["skin"], 1.0, config.texel), 1.0)
     material = NeuralMaterial(
         model, config, mip_stack(planes, config.mip_levels), window, batch["appearance"][0]

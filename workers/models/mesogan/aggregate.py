@@ -2,7 +2,10 @@
 plugged in as the tracer's `Aggregate` (`workers.render.aggregate`), so no integrator code changes.
 
 A ray meeting the shell is marched through its prisms (`shell.Shell.intervals`), with stratified samples
-whose (u, v, height) come from the exact inverse prism map; the decoder gives extinction there. The ray
+whose (u, v, height) come from the exact inverse prism map; the decoder gives extinction there, per slab
+height, so a step's optical depth is measured in the slab's coordinates (`Shell.slab_length`): where a
+prism widens over a convex surface, a sideways step crosses less of the generated slab than its world
+length over h. The ray
 then scatters at sample i with probability w_i = T_i (1 - exp(-sigma_i delta_i)) (the scattered term) or
 passes with probability T (the uncollided term, carried on by the tracer to whatever lies behind): an
 unbiased mixture whose weight is 1. Where a ray leaves a prism through its base (the skin), the base is
@@ -179,6 +182,10 @@ class ShellAggregate:
         chord_step = shell.height / (np.clip(rise, MIN_RISE, 1.0) * s)
         count = np.clip(np.ceil(length / chord_step - 1e-9), 1, MAX_STEPS_PER_INTERVAL * s).astype(np.int64)
         step = length / count
+        leave_point = origins[iv.ray] + iv.leave[:, None] * directions[iv.ray]
+        b_leave, h_leave = shell.inverse(iv.prism, leave_point)
+        slab_step = shell.slab_length(iv.prism, origins[iv.ray] + iv.enter[:, None] * directions[iv.ray],
+                                      b_leave, h_leave) / count  # fmt: skip
         rows = np.repeat(np.arange(len(iv.ray)), count)
         k = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)
         u = rng.random(len(rows)) if rng is not None else np.full(len(rows), 0.5)
@@ -186,12 +193,10 @@ class ShellAggregate:
         o, d = origins[iv.ray[rows]], directions[iv.ray[rows]]
         b, height = shell.inverse(iv.prism[rows], o + t[:, None] * d)
         height = np.clip(height, 0.0, 1.0)
-        variance, radius = self._footprint(t, (step[rows] / shell.height) ** 2 / 12, d, iv.prism[rows], b)
+        variance, radius = self._footprint(t, slab_step[rows] ** 2 / 12, d, iv.prism[rows], b)
         self.density_queries += len(t)
         density, _ = self.material.hidden(shell.uv(iv.prism[rows], b), height, variance, radius)
-        optical = np.minimum(density.double().cpu().numpy() * step[rows] / shell.height, OPAQUE)
-        leave_point = origins[iv.ray] + iv.leave[:, None] * directions[iv.ray]
-        b_leave, h_leave = shell.inverse(iv.prism, leave_point)
+        optical = np.minimum(density.double().cpu().numpy() * slab_step[rows], OPAQUE)
         cut = iv.leave >= t_max[iv.ray]
         floor = np.flatnonzero((h_leave < 1e-6) | (cut & (h_leave < FLOOR_LIFT)))
         if len(floor):

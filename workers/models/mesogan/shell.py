@@ -107,6 +107,14 @@ class Shell:
             self.base, self.offsets, _rows(prism), np.ascontiguousarray(p, np.float64), iterations
         )
 
+    def slab_length(self, prism: np.ndarray, start: np.ndarray, b_end: np.ndarray, t_end: np.ndarray):
+        """Length in slab heights of the segments from points `start` (N, 3) to the points at (b_end,
+        t_end) in prisms `prism`: the chord in the slab's coordinates (the base-triangle position over h,
+        and the height), which the prism map stretches sideways by the offset triangle's growth."""
+        b_start, t_start = self.inverse(prism, start)
+        lateral = np.einsum("ni,nij->nj", b_end - b_start, self.base[prism]) / self.height
+        return np.sqrt(np.einsum("ij,ij->i", lateral, lateral) + (t_end - t_start) ** 2)
+
     def contains(self, b: np.ndarray, t: np.ndarray) -> np.ndarray:
         tol = INSIDE_TOLERANCE
         return (b >= -tol).all(1) & (t >= -tol) & (t <= 1 + tol)
@@ -120,8 +128,10 @@ class Shell:
         return n / np.maximum(np.sqrt(np.einsum("ij,ij->i", n, n)), 1e-300)[:, None]
 
     def frame(self, prism: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Tangent (along +u), bitangent and normal at barycentrics b: the frame the plane's (x, y, height)
-        axes map to, from the base triangle's UV derivatives and the interpolated normal."""
+        """Tangent (along +u), bitangent (on the side of +v) and normal at barycentrics b: the frame the
+        plane's (x, y, height) axes map to, from the base triangle's UV derivatives and the interpolated
+        normal. Where the UVs are mirrored (u, v, n left-handed), so is the frame: the plane's y runs along
+        +v, and the light and view the decoder reads must be expressed on the same side."""
         n = self.normal(prism, b)
         v, uv = self.base[prism], self.uvs[prism]
         e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
@@ -129,9 +139,12 @@ class Shell:
         det = du1[:, 0] * du2[:, 1] - du1[:, 1] * du2[:, 0]
         det = np.where(np.abs(det) > 1e-300, det, 1e-300)
         dpdu = (e1 * du2[:, 1:] - e2 * du1[:, 1:]) / det[:, None]
+        dpdv = (e2 * du1[:, :1] - e1 * du2[:, :1]) / det[:, None]
         tangent = dpdu - (dpdu * n).sum(1, keepdims=True) * n
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
-        return tangent, np.cross(n, tangent), n
+        bitangent = np.cross(n, tangent)
+        mirrored = (bitangent * dpdv).sum(1) < 0
+        return tangent, np.where(mirrored[:, None], -bitangent, bitangent), n
 
     # ------------------------------------------------------------------ rays
 
