@@ -121,3 +121,15 @@ def test_degenerate_triangles_and_folding_shells_are_refused_naming_the_field():
     mesh = sphere((0.0, 0.0, 0.0), 0.1, 1)  # concave fold: normals flipped inwards, shell thicker than r
     with pytest.raises(SceneError, match="folds over"):
         Shell(mesh.vertices[mesh.faces], -mesh.normals[mesh.faces], mesh.uvs[mesh.faces], 0.3)
+
+
+def test_the_frame_follows_u_and_v_also_where_the_uvs_are_mirrored():
+    """The plane's x runs along +u and its y along +v, so the decoder's light and view must be expressed
+    on the same sides: a mirrored UV layout (v against n x u) mirrors the frame."""
+    positions = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]] * 2)
+    normals = np.tile([0.0, 0.0, 1.0], (2, 3, 1))
+    uvs = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], [[0.0, 1.0], [1.0, 1.0], [0.0, 0.0]]])
+    shell = Shell(positions, normals, uvs, 0.1)
+    tangent, bitangent, normal = shell.frame(np.array([0, 1]), np.full((2, 3), 1 / 3))
+    assert np.allclose(tangent, [1, 0, 0]) and np.allclose(normal, [0, 0, 1])
+    assert np.allclose(bitangent, [[0, 1, 0], [0, -1, 0]])

@@ -2,7 +2,10 @@
 plugged in as the tracer's `Aggregate` (`workers.render.aggregate`), so no integrator code changes.
 
 A ray meeting the shell is marched through its prisms (`shell.Shell.intervals`), with stratified samples
-whose (u, v, height) come from the exact inverse prism map; the decoder gives extinction there. The ray
+whose (u, v, height) come from the exact inverse prism map; the decoder gives extinction there, per slab
+height, so a step's optical depth is measured in the slab's coordinates (`Shell.slab_length`): where a
+prism widens over a convex surface, a sideways step crosses less of the generated slab than its world
+length over h. The ray
 then scatters at sample i with probability w_i = T_i (1 - exp(-sigma_i delta_i)) (the scattered term) or
 passes with probability T (the uncollided term, carried on by the tracer to whatever lies behind): an
 unbiased mixture whose weight is 1. Where a ray leaves a prism through its base (the skin), the base is
@@ -11,8 +14,15 @@ direction; `throughput` is the learned rho(y, wo, wi) (radiance per unit irradia
 albedo-weighted transport integrated over the slab's boundary, so a continuing ray starts where it
 leaves the shell (`exit_distance`) and shadow rays test the shell stochastically by its transmittance.
 
-A scattering event is identified by its shell coordinates packed into the protocol's int64 triple:
-(prism << 20 | height in 2^-20 steps, bits of barycentric b1, bits of b2).
+A scattering event is identified by its shell coordinates and its sample's footprint packed into the
+protocol's int64 triple: (prism << 20 | height in 2^-20 steps, float32 bits of b1 and b2, float32 bits of
+the height variance and footprint radius), so `throughput` reads rho from the hidden state of the very
+sample the event was drawn from (the mip level and height encoding training rendered it with).
+
+An interval ends on the skin where it leaves through the prism's base, or where the ray is cut by a
+surface hit (`t_max`) within `FLOOR_LIFT` of the base: the base is the covered mesh itself, and the
+float32 hit distance places it up to ~1e-5 shell heights off the prism's float64 base (a thin shell far
+from the origin), so a tight tolerance there let rays through to the mesh's own material.
 """
 
 from __future__ import annotations
@@ -31,6 +41,8 @@ from workers.render.aggregate import AggregateEvents
 
 HEIGHT_BITS = 20
 OPAQUE = 60.0  # optical depth standing for the opaque base: exp(-60) ~ 1e-26, so alpha rounds to 1
+MIN_RISE = 0.5  # grazing rays march at most twice the step of a ray along the normal
+MAX_STEPS_PER_INTERVAL = 4  # times `samples`: long grazing intervals in one prism
 FLOOR_LIFT = 1e-3  # a base event sits this fraction of the shell height above the skin (no self-hits)
 
 
@@ -70,18 +82,37 @@ class NeuralMaterial:
         return out[:, :3].double().cpu().numpy()
 
 
-def pack_events(prism: np.ndarray, b: np.ndarray, height: np.ndarray) -> np.ndarray:
+def _pack_floats(high: np.ndarray, low: np.ndarray) -> np.ndarray:
+    bits = lambda a: np.ascontiguousarray(a, np.float32).view(np.uint32).astype(np.int64)  # noqa: E731
+    return (bits(high) << 32) | bits(low)
+
+
+def _unpack_floats(packed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    floats = lambda a: a.astype(np.uint32).view(np.float32).astype(np.float64)  # noqa: E731
+    return floats((packed >> 32) & 0xFFFFFFFF), floats(packed & 0xFFFFFFFF)
+
+
+def pack_events(
+    prism: np.ndarray, b: np.ndarray, height: np.ndarray, variance: np.ndarray, radius: np.ndarray
+) -> np.ndarray:
     q = np.clip(np.round(height * (1 << HEIGHT_BITS)), 0, (1 << HEIGHT_BITS) - 1).astype(np.int64)
     return np.stack(
-        [(prism.astype(np.int64) << HEIGHT_BITS) | q, b[:, 1].view(np.int64), b[:, 2].view(np.int64)], 1
+        [
+            (prism.astype(np.int64) << HEIGHT_BITS) | q,
+            _pack_floats(b[:, 1], b[:, 2]),
+            _pack_floats(variance, radius),
+        ],
+        1,
     )
 
 
-def unpack_events(voxel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def unpack_events(voxel: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Prism, barycentrics (N, 3), height, height variance and footprint radius of packed events."""
     prism = voxel[:, 0] >> HEIGHT_BITS
     height = (voxel[:, 0] & ((1 << HEIGHT_BITS) - 1)) / float(1 << HEIGHT_BITS)
-    b1, b2 = voxel[:, 1].copy().view(np.float64), voxel[:, 2].copy().view(np.float64)
-    return prism, np.stack([1 - b1 - b2, b1, b2], 1), height
+    b1, b2 = _unpack_floats(voxel[:, 1])
+    variance, radius = _unpack_floats(voxel[:, 2])
+    return prism, np.stack([1 - b1 - b2, b1, b2], 1), height, variance, radius
 
 
 def _running_max_by_ray(ray: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -107,13 +138,16 @@ def ray_uniforms(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Samples:
-    """Samples along interval rows: the interval, distance, shell coordinates and optical depth."""
+    """Samples along interval rows: the interval, distance, shell coordinates, footprint and optical
+    depth."""
 
     interval: np.ndarray
     t: np.ndarray
     prism: np.ndarray
     b: np.ndarray
     height: np.ndarray
+    variance: np.ndarray
+    radius: np.ndarray
     optical: np.ndarray
 
 
@@ -129,42 +163,69 @@ class ShellAggregate:
 
     # ------------------------------------------------------------------ marching
 
-    def _march(self, origins, directions, iv: Intervals, u: np.ndarray) -> _Samples:
-        """`samples` stratified samples per interval (offsets `u` (I, S)) and an opaque sample where an
-        interval leaves through the base."""
+    def _footprint(self, t, axis, d, prism, b) -> tuple[np.ndarray, np.ndarray]:
+        """Height variance and footprint radius (slab heights) of cone segments at distances `t` with
+        variance `axis` along the ray (`slab.march`, `volume.footprint_radius`)."""
+        radial = (t * self.cone / self.shell.height) ** 2
+        z2 = np.einsum("ij,ij->i", d, self.shell.normal(prism, b)) ** 2
+        variance = axis * z2 + radial * (1 - z2)
+        return variance, np.sqrt(np.minimum(radial, radial * z2 + axis * (1 - z2)))
+
+    def _march(self, origins, directions, t_max, iv: Intervals, rng) -> _Samples:
+        """Stratified samples (random offsets from `rng`, midpoints without) at the step training marched
+        with, `samples` per crossing of the slab's height (slab.march), at least one per interval and
+        at most `MAX_STEPS_PER_INTERVAL` `samples`, and an opaque sample where an interval ends on the
+        skin (module docstring). A ray crossing several prisms is not sampled `samples` times in each."""
         shell, s = self.shell, self.samples
-        step = (iv.leave - iv.enter) / s
-        t = iv.enter[:, None] + (np.arange(s)[None] + u) * step[:, None]
-        rows = np.repeat(np.arange(len(iv.ray)), s)
-        t = t.ravel()
+        length = iv.leave - iv.enter
+        rise = np.abs(np.einsum("ij,ij->i", directions[iv.ray], self.shell.normals[iv.prism].mean(1)))
+        chord_step = shell.height / (np.clip(rise, MIN_RISE, 1.0) * s)
+        count = np.clip(np.ceil(length / chord_step - 1e-9), 1, MAX_STEPS_PER_INTERVAL * s).astype(np.int64)
+        step = length / count
+        leave_point = origins[iv.ray] + iv.leave[:, None] * directions[iv.ray]
+        b_leave, h_leave = shell.inverse(iv.prism, leave_point)
+        slab_step = shell.slab_length(iv.prism, origins[iv.ray] + iv.enter[:, None] * directions[iv.ray],
+                                      b_leave, h_leave) / count  # fmt: skip
+        rows = np.repeat(np.arange(len(iv.ray)), count)
+        k = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)
+        u = rng.random(len(rows)) if rng is not None else np.full(len(rows), 0.5)
+        t = iv.enter[rows] + (k + u) * step[rows]
         o, d = origins[iv.ray[rows]], directions[iv.ray[rows]]
         b, height = shell.inverse(iv.prism[rows], o + t[:, None] * d)
         height = np.clip(height, 0.0, 1.0)
-        axis = (step[rows] / shell.height) ** 2 / 12
-        radial = (t * self.cone / shell.height) ** 2
-        normal = shell.frame(iv.prism[rows], b)[2]
-        z2 = (d * normal).sum(1) ** 2
-        variance = axis * z2 + radial * (1 - z2)
-        radius = np.sqrt(np.minimum(radial, radial * z2 + axis * (1 - z2)))
-        uv = shell.uv(iv.prism[rows], b)
+        variance, radius = self._footprint(t, slab_step[rows] ** 2 / 12, d, iv.prism[rows], b)
         self.density_queries += len(t)
-        density, _ = self.material.hidden(uv, height, variance, radius)
-        optical = np.minimum(density.double().cpu().numpy() * step[rows] / shell.height, OPAQUE)
-        # Intervals leaving through the base end on the skin: an opaque sample just above it.
-        leave_point = origins[iv.ray] + iv.leave[:, None] * directions[iv.ray]
-        b_leave, h_leave = shell.inverse(iv.prism, leave_point)
-        floor = np.flatnonzero(h_leave < 1e-6)
+        density, _ = self.material.hidden(shell.uv(iv.prism[rows], b), height, variance, radius)
+        optical = np.minimum(density.double().cpu().numpy() * slab_step[rows], OPAQUE)
+        cut = iv.leave >= t_max[iv.ray]
+        floor = np.flatnonzero((h_leave < 1e-6) | (cut & (h_leave < FLOOR_LIFT)))
         if len(floor):
-            cos = np.abs((directions[iv.ray[floor]] * shell.frame(iv.prism[floor], b_leave[floor])[2]).sum(1))
+            # The skin: an opaque sample a little above it (no self-hits), read at height 0 as in training.
+            d_floor = directions[iv.ray[floor]]
+            cos = np.abs(np.einsum("ij,ij->i", d_floor, shell.normal(iv.prism[floor], b_leave[floor])))
             back = FLOOR_LIFT * shell.height / np.maximum(cos, 1e-3)
             t_floor = np.maximum(iv.leave[floor] - back, iv.enter[floor])
+            v_floor, r_floor = self._footprint(
+                t_floor, np.zeros(len(floor)), d_floor, iv.prism[floor], b_leave[floor]
+            )
             rows = np.concatenate([rows, floor])
             t = np.concatenate([t, t_floor])
             b = np.concatenate([b, b_leave[floor]])
-            height = np.concatenate([height, np.full(len(floor), FLOOR_LIFT)])
+            height = np.concatenate([height, np.zeros(len(floor))])
+            variance = np.concatenate([variance, v_floor])
+            radius = np.concatenate([radius, r_floor])
             optical = np.concatenate([optical, np.full(len(floor), OPAQUE)])
         order = np.lexsort((t, iv.ray[rows]))
-        return _Samples(rows[order], t[order], iv.prism[rows[order]], b[order], height[order], optical[order])
+        return _Samples(
+            rows[order],
+            t[order],
+            iv.prism[rows[order]],
+            b[order],
+            height[order],
+            variance[order],
+            radius[order],
+            optical[order],
+        )
 
     @staticmethod
     def _transmittance_before(ray: np.ndarray, optical: np.ndarray) -> np.ndarray:
@@ -184,7 +245,7 @@ class ShellAggregate:
         iv = self.shell.intervals(origins, directions, t_min, t_max)
         if len(iv.ray) == 0:
             return events
-        samples = self._march(origins, directions, iv, rng.random((len(iv.ray), self.samples)))
+        samples = self._march(origins, directions, t_max, iv, rng)
         ray = iv.ray[samples.interval]
         weight = self._transmittance_before(ray, samples.optical) * -np.expm1(-samples.optical)
         u = rng.random(n)
@@ -196,7 +257,13 @@ class ShellAggregate:
         pick = chosen[first]
         events.found[rays] = True
         events.t[rays] = samples.t[pick]
-        events.voxel[rays] = pack_events(samples.prism[pick], samples.b[pick], samples.height[pick])
+        events.voxel[rays] = pack_events(
+            samples.prism[pick],
+            samples.b[pick],
+            samples.height[pick],
+            samples.variance[pick],
+            samples.radius[pick],
+        )
         return events
 
     def occluded(self, origins, directions, t_min, t_max) -> np.ndarray:
@@ -205,17 +272,16 @@ class ShellAggregate:
         blocked = np.zeros(n, bool)
         if len(iv.ray) == 0:
             return blocked
-        samples = self._march(origins, directions, iv, np.full((len(iv.ray), self.samples), 0.5))
+        samples = self._march(origins, directions, t_max, iv, None)
         depth = np.zeros(n)
         np.add.at(depth, iv.ray[samples.interval], samples.optical)
         return ray_uniforms(origins, directions) < -np.expm1(-depth)
 
     def throughput(self, voxel, wo, wi) -> np.ndarray:
-        prism, b, height = unpack_events(voxel)
+        prism, b, height, variance, radius = unpack_events(voxel)
         tangent, bitangent, normal = self.shell.frame(prism, b)
         local = lambda w: np.stack([(w * tangent).sum(1), (w * bitangent).sum(1), (w * normal).sum(1)], 1)  # noqa: E731
-        zeros = np.zeros(len(prism))
-        _, hidden = self.material.hidden(self.shell.uv(prism, b), height, zeros, zeros)
+        _, hidden = self.material.hidden(self.shell.uv(prism, b), height, variance, radius)
         return self.material.rho(hidden, local(wi), local(wo))
 
     def exit_distance(self, voxel, origins, directions) -> np.ndarray:

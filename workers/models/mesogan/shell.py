@@ -11,7 +11,8 @@ across triangles wherever the UVs are.
 
 Rays meet prisms at the top and bottom triangles (Moller-Trumbore) and at the side patches (a
 quadratic after projecting onto two planes containing the ray); the segments between consecutive
-crossings whose midpoints map inside are the ray's intervals in that prism.
+crossings whose midpoints map inside are the ray's intervals in that prism. The per-point work is compiled
+(`prism_kernels`); this module holds the shell's arrays and checks.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workers.models.mesogan import prism_kernels
 from workers.scene.errors import SceneError
-from workers.scene.procedural import orthonormal_frames
 
 EDGES = ((0, 1), (1, 2), (2, 0))
 DEGENERATE = 1e-12  # relative area below which a base triangle has no well-defined prism
 INSIDE_TOLERANCE = 1e-7
+NEWTON_STEPS = 30  # at most, for the height in the inverse map (each point stops at 1e-13)
 GROUP = 16  # prisms per box of the hierarchy's upper level
 
 
@@ -97,61 +99,52 @@ class Shell:
         return (b[:, :, None] * corners).sum(1)
 
     def inverse(
-        self, prism: np.ndarray, p: np.ndarray, iterations: int = 30
+        self, prism: np.ndarray, p: np.ndarray, iterations: int = NEWTON_STEPS
     ) -> tuple[np.ndarray, np.ndarray]:
         """Barycentrics (N, 3) and height t (N,) of points p (N, 3) in their prisms (module docstring); points
         outside a prism get coordinates outside [0, 1]."""
-        v, o = self.base[prism], self.offsets[prism]
+        return prism_kernels.inverse(
+            self.base, self.offsets, _rows(prism), np.ascontiguousarray(p, np.float64), iterations
+        )
 
-        def det(t: np.ndarray) -> np.ndarray:
-            c = v + t[:, None, None] * o
-            return np.einsum("ij,ij->i", np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), p - c[:, 0])
-
-        # Exact cubic coefficients from four samples (Lagrange on t = 0, 1/3, 2/3, 1).
-        samples = np.stack([det(np.full(len(p), k / 3.0)) for k in range(4)], 1)
-        nodes = np.array([0.0, 1 / 3, 2 / 3, 1.0])
-        coefficients = samples @ np.linalg.inv(np.vander(nodes, 4, increasing=True)).T  # (N, 4): a0..a3
-        normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        rise = np.einsum("ij,ij->i", o.mean(1), normal)
-        t = np.einsum("ij,ij->i", p - v[:, 0], normal) / np.where(np.abs(rise) > 1e-300, rise, 1e-300)
-        a0, a1, a2, a3 = coefficients.T
-        for _ in range(iterations):
-            f = a0 + t * (a1 + t * (a2 + t * a3))
-            df = a1 + t * (2 * a2 + 3 * a3 * t)
-            step = f / np.where(np.abs(df) > 1e-300, df, 1e-300)
-            t = t - np.clip(step, -0.5, 0.5)
-            if np.all(np.abs(step) < 1e-13):
-                break
-        c = v + t[:, None, None] * o
-        e1, e2, q = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], p - c[:, 0]
-        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-        q1, q2 = (q * e1).sum(1), (q * e2).sum(1)
-        denominator = d11 * d22 - d12 * d12
-        b1 = (d22 * q1 - d12 * q2) / denominator
-        b2 = (d11 * q2 - d12 * q1) / denominator
-        return np.stack([1 - b1 - b2, b1, b2], 1), t
+    def slab_length(self, prism: np.ndarray, start: np.ndarray, b_end: np.ndarray, t_end: np.ndarray):
+        """Length in slab heights of the segments from points `start` (N, 3) to the points at (b_end,
+        t_end) in prisms `prism`: the chord in the slab's coordinates (the base-triangle position over h,
+        and the height), which the prism map stretches sideways by the offset triangle's growth."""
+        b_start, t_start = self.inverse(prism, start)
+        lateral = np.einsum("ni,nij->nj", b_end - b_start, self.base[prism]) / self.height
+        return np.sqrt(np.einsum("ij,ij->i", lateral, lateral) + (t_end - t_start) ** 2)
 
     def contains(self, b: np.ndarray, t: np.ndarray) -> np.ndarray:
         tol = INSIDE_TOLERANCE
         return (b >= -tol).all(1) & (t >= -tol) & (t <= 1 + tol)
 
     def uv(self, prism: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return (b[:, :, None] * self.uvs[prism]).sum(1)
+        return np.einsum("ni,nij->nj", b, self.uvs[prism])
+
+    def normal(self, prism: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The interpolated unit normal at barycentrics b (the height axis)."""
+        n = np.einsum("ni,nij->nj", b, self.normals[prism])
+        return n / np.maximum(np.sqrt(np.einsum("ij,ij->i", n, n)), 1e-300)[:, None]
 
     def frame(self, prism: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Tangent (along +u), bitangent and normal at barycentrics b: the frame the plane's (x, y, height)
-        axes map to, from the base triangle's UV derivatives and the interpolated normal."""
-        n = (b[:, :, None] * self.normals[prism]).sum(1)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        """Tangent (along +u), bitangent (on the side of +v) and normal at barycentrics b: the frame the
+        plane's (x, y, height) axes map to, from the base triangle's UV derivatives and the interpolated
+        normal. Where the UVs are mirrored (u, v, n left-handed), so is the frame: the plane's y runs along
+        +v, and the light and view the decoder reads must be expressed on the same side."""
+        n = self.normal(prism, b)
         v, uv = self.base[prism], self.uvs[prism]
         e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
         du1, du2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
         det = du1[:, 0] * du2[:, 1] - du1[:, 1] * du2[:, 0]
         det = np.where(np.abs(det) > 1e-300, det, 1e-300)
         dpdu = (e1 * du2[:, 1:] - e2 * du1[:, 1:]) / det[:, None]
+        dpdv = (e2 * du1[:, :1] - e1 * du2[:, :1]) / det[:, None]
         tangent = dpdu - (dpdu * n).sum(1, keepdims=True) * n
         tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
-        return tangent, np.cross(n, tangent), n
+        bitangent = np.cross(n, tangent)
+        mirrored = (bitangent * dpdv).sum(1) < 0
+        return tangent, np.where(mirrored[:, None], -bitangent, bitangent), n
 
     # ------------------------------------------------------------------ rays
 
@@ -170,129 +163,21 @@ class Shell:
         self.group_lo = np.minimum.reduceat(self.lo[self.order], starts)
         self.group_hi = np.maximum.reduceat(self.hi[self.order], starts)
 
-    def candidates(self, origins, directions, t_min, t_max) -> tuple[np.ndarray, np.ndarray]:
-        """(ray, prism) pairs whose prism's box the ray segment [t_min, t_max] meets (slab tests against
-        the groups' boxes, then against the prisms of the groups met)."""
-        inv = 1.0 / np.where(np.abs(directions) > 1e-300, directions, 1e-300)
-        ray, group = _boxes_met(origins, inv, t_min, t_max, self.group_lo, self.group_hi)
-        ray = np.repeat(ray, GROUP)
-        slot = (group[:, None] * GROUP + np.arange(GROUP)[None]).ravel()
-        inside = slot < len(self)
-        ray, prism = ray[inside], self.order[slot[inside]]
-        a, b = (self.lo[prism] - origins[ray]) * inv[ray], (self.hi[prism] - origins[ray]) * inv[ray]
-        near, far = np.minimum(a, b).max(-1), np.maximum(a, b).min(-1)
-        met = (near <= far) & (far >= t_min[ray]) & (near <= t_max[ray])
-        return ray[met], prism[met]
-
-    def crossings(self, o: np.ndarray, d: np.ndarray, prism: np.ndarray) -> np.ndarray:
-        """Distances (N, 8) where rays cross the boundary of their prisms (inf where they do not): the
-        bottom and top triangles and two per side patch."""
-        out = np.full((len(o), 8), np.inf)
-        out[:, 0] = _triangle(o, d, self.base[prism])
-        out[:, 1] = _triangle(o, d, self.top[prism])
-        for k, (i, j) in enumerate(EDGES):
-            out[:, 2 + 2 * k : 4 + 2 * k] = _bilinear(
-                o, d, self.base[prism, i], self.base[prism, j], self.top[prism, i], self.top[prism, j]
-            )
-        return out
-
     def intervals(self, origins, directions, t_min, t_max) -> Intervals:
-        """Every segment of every ray (within [t_min, t_max]) inside a prism, sorted by ray then enter."""
-        ray, prism = self.candidates(origins, directions, t_min, t_max)
-        if len(ray) == 0:
-            empty = np.zeros(0, np.int64)
-            return Intervals(empty, empty, np.zeros(0), np.zeros(0))
-        o, d = origins[ray], directions[ray]
-        lo, hi = t_min[ray], t_max[ray]
-        cross = self.crossings(o, d, prism)
-        cross = np.where((cross > lo[:, None]) & (cross < hi[:, None]), cross, np.inf)
-        bounds = np.sort(np.concatenate([lo[:, None], cross, np.full((len(ray), 1), np.inf)], 1), axis=1)
-        bounds = np.minimum(bounds, hi[:, None])
-        enter, leave = bounds[:, :-1], bounds[:, 1:]
-        valid = (leave > enter) & np.isfinite(leave)
-        rows, cols = np.nonzero(valid)
-        a, b = enter[rows, cols], leave[rows, cols]
-        mid = 0.5 * (a + b)
-        bary, t = self.inverse(prism[rows], o[rows] + mid[:, None] * d[rows])
-        inside = self.contains(bary, t)
-        rows, a, b = rows[inside], a[inside], b[inside]
-        order = np.lexsort((a, ray[rows]))
-        rows, a, b = rows[order], a[order], b[order]
-        return Intervals(ray[rows], prism[rows], a, b)
+        """Every segment of every ray (within [t_min, t_max]) inside a prism, sorted by ray then enter: the
+        segments between consecutive crossings of a prism's boundary whose midpoints map inside, for the
+        prisms whose boxes (and their group's) the ray meets (`prism_kernels.intervals`)."""
+        f64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+        geometry = (
+            self.base, self.top, self.offsets, self.group_lo, self.group_hi, self.order, self.lo, self.hi
+        )  # fmt: skip
+        ray, prism, enter, leave = prism_kernels.intervals(
+            f64(origins), f64(directions), f64(t_min), f64(t_max), geometry, GROUP, NEWTON_STEPS,
+            INSIDE_TOLERANCE,
+        )  # fmt: skip
+        order = np.lexsort((enter, ray))
+        return Intervals(ray[order], prism[order], enter[order], leave[order])
 
 
-def _boxes_met(origins, inv, t_min, t_max, lo, hi, chunk: int = 1 << 21) -> tuple[np.ndarray, np.ndarray]:
-    """(ray, box) pairs of rays (inverse directions `inv`) meeting boxes [lo, hi] within [t_min, t_max]."""
-    rays, boxes = [], []
-    per = max(1, chunk // max(len(lo), 1))
-    for start in range(0, len(origins), per):
-        o, i = origins[start : start + per, None], inv[start : start + per, None]
-        a, b = (lo[None] - o) * i, (hi[None] - o) * i
-        near, far = np.minimum(a, b).max(-1), np.maximum(a, b).min(-1)
-        lo_t, hi_t = t_min[start : start + per, None], t_max[start : start + per, None]
-        r, g = np.nonzero((near <= far) & (far >= lo_t) & (near <= hi_t))
-        rays.append(r + start)
-        boxes.append(g)
-    return np.concatenate(rays), np.concatenate(boxes)
-
-
-def _triangle(o: np.ndarray, d: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Moller-Trumbore: distance to triangles (N, 3, 3) or inf."""
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    pv = np.cross(d, e2)
-    det = (e1 * pv).sum(1)
-    safe = np.where(np.abs(det) > 1e-300, det, 1e-300)
-    tv = o - tri[:, 0]
-    u = (tv * pv).sum(1) / safe
-    qv = np.cross(tv, e1)
-    v = (d * qv).sum(1) / safe
-    t = (e2 * qv).sum(1) / safe
-    hit = (np.abs(det) > 1e-300) & (u >= 0) & (v >= 0) & (u + v <= 1)
-    return np.where(hit, t, np.inf)
-
-
-def _bilinear(o, d, q00, q10, q01, q11) -> np.ndarray:
-    """Distances (N, 2) to the bilinear patches q(s, t) = lerp(lerp(q00, q10, s), lerp(q01, q11, s), t).
-
-    Projected on two planes containing each ray, q(s, t) - o = 0 is two bilinear equations in (s, t);
-    eliminating t leaves a quadratic in s."""
-    u1, u2 = orthonormal_frames(d)
-
-    def coefficients(u):
-        a = ((q00 - o) * u).sum(1)
-        b = ((q10 - q00) * u).sum(1)
-        c = ((q01 - q00) * u).sum(1)
-        e = ((q11 - q10 - q01 + q00) * u).sum(1)
-        return a, b, c, e  # a + b s + c t + e s t
-
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        return _bilinear_roots(o, d, q00, q10, q01, q11, coefficients(u1), coefficients(u2))
-
-
-def _bilinear_roots(o, d, q00, q10, q01, q11, first, second) -> np.ndarray:
-    a1, b1, c1, e1 = first
-    a2, b2, c2, e2 = second
-    # t = -(a1 + b1 s) / (c1 + e1 s); (a2 + b2 s)(c1 + e1 s) - (c2 + e2 s)(a1 + b1 s) = 0
-    qa = b2 * e1 - e2 * b1
-    qb = a2 * e1 + b2 * c1 - c2 * b1 - e2 * a1
-    qc = a2 * c1 - c2 * a1
-    out = np.full((len(o), 2), np.inf)
-    linear = np.abs(qa) <= 1e-12 * (np.abs(qb) + np.abs(qc) + 1e-300)
-    disc = qb * qb - 4 * qa * qc
-    root = np.sqrt(np.maximum(disc, 0.0))
-    # Numerically stable roots: q = -(b + sign(b) sqrt(disc)) / 2; s = q / a and c / q.
-    qq = -0.5 * (qb + np.where(qb >= 0, root, -root))
-    s_a = np.where(linear, -qc / np.where(np.abs(qb) > 1e-300, qb, 1e-300), qq / np.where(linear, 1.0, qa))
-    s_b = np.where(linear, np.inf, qc / np.where(np.abs(qq) > 1e-300, qq, 1e-300))
-    for k, s in enumerate((s_a, s_b)):
-        ok = (disc >= 0) & (s >= 0) & (s <= 1)
-        den1, den2 = c1 + e1 * s, c2 + e2 * s
-        use1 = np.abs(den1) >= np.abs(den2)
-        num = np.where(use1, a1 + b1 * s, a2 + b2 * s)
-        den = np.where(use1, den1, den2)
-        t = -num / np.where(np.abs(den) > 1e-300, den, 1e-300)
-        ok &= (t >= 0) & (t <= 1)
-        s3, t3 = np.where(ok, s, 0.0)[:, None], np.where(ok, t, 0.0)[:, None]
-        point = (1 - t3) * ((1 - s3) * q00 + s3 * q10) + t3 * ((1 - s3) * q01 + s3 * q11)
-        out[:, k] = np.where(ok, ((point - o) * d).sum(1), np.inf)
-    return out
+def _rows(prism: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(prism, np.int64)

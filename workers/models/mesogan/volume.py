@@ -44,17 +44,19 @@ def mip_level(radius: Tensor, texel: float, levels: int) -> Tensor:
 def sample_mipmapped(stack: list[Tensor], uv: Tensor, level: Tensor) -> Tensor:
     """Trilinear lookup: bilinear in the two levels around `level` (B, N), blended linearly; `uv` (B, N, 2)
     in [0, 1] over the plane (clamped at its border). Returns (B, N, C). Continuous in `level`: at an
-    integer level the other level's weight is exactly zero."""
+    integer level the other level's weight is exactly zero. Levels above the highest one asked for are not
+    read (close views on a deep stack read one or two)."""
     grid = (uv * 2.0 - 1.0)[:, :, None, :]
+    used = min(len(stack), int(level.detach().max().ceil()) + 1) if level.numel() else 1
     samples = torch.stack(
         [
             F.grid_sample(m, grid, mode="bilinear", padding_mode="border", align_corners=False)[..., 0]
-            for m in stack
+            for m in stack[:used]
         ],
         dim=-1,
     )  # (B, C, N, L)
-    lower = level.floor().long().clamp(0, len(stack) - 1)
-    upper = (lower + 1).clamp(max=len(stack) - 1)
+    lower = level.floor().long().clamp(0, used - 1)
+    upper = (lower + 1).clamp(max=used - 1)
     weight = (level - lower.to(level.dtype))[:, None, :]
     index = lambda i: i[:, None, :, None].expand(-1, samples.shape[1], -1, 1)  # noqa: E731
     low = samples.gather(-1, index(lower))[..., 0]
