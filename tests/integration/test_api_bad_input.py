@@ -8,7 +8,7 @@ import pytest
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import QUICK_RENDER, problem_of, submit
 
-database, server, client = api.database, api.server, api.client  # fixtures
+database, server, client = api.incidental_database, api.server, api.client  # fixtures
 UNKNOWN_DIGEST = "sha256:" + "0" * 64
 
 

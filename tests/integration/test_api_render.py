@@ -16,7 +16,7 @@ from workers.scene.compile import compile_scene
 from workers.scene.image_io import read_exr
 
 SEED = 7
-database, server, client = api.database, api.server, api.client  # fixtures
+database, server, client = api.incidental_database, api.server, api.client  # fixtures
 
 
 def test_render_job_over_http_equals_a_direct_render(client, tmp_path):

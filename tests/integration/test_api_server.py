@@ -56,8 +56,20 @@ def postgres_url() -> str:
 
 @pytest.fixture(scope="module", params=["sqlite", "postgresql"])
 def database(request) -> Iterator[DatabaseChoice]:
-    """Each variant of the suite: SQLite, or a private schema on the test PostgreSQL, dropped after."""
-    if request.param == "sqlite":
+    """Each variant of the suite: SQLite, or a private schema on the test PostgreSQL, dropped after. For
+    modules that test what the database does: job states, queries, events, recovery."""
+    yield from choose_database(request.param)
+
+
+@pytest.fixture(scope="module", params=["sqlite", pytest.param("postgresql", marks=pytest.mark.slow)])
+def incidental_database(request) -> Iterator[DatabaseChoice]:
+    """`database` for modules that test something else through the server (rendering, validation, files):
+    their PostgreSQL variant repeats the same jobs for no new coverage, so it runs with `make test-all`."""
+    yield from choose_database(request.param)
+
+
+def choose_database(name: str) -> Iterator[DatabaseChoice]:
+    if name == "sqlite":
         yield DatabaseChoice("sqlite", None)
         return
     url = postgres_url()
