@@ -95,8 +95,8 @@ def _token_id() -> str:
 
 def store_tokens(db: Database, tokens: dict[str, str]) -> None:
     """Replace the stored configured tokens with `tokens` (of the default tenant), hashed; created tokens
-    stay."""
-    with db.writing() as session:
+    stay. Replicas starting together take turns (otherwise both delete, both insert, and one fails)."""
+    with db.writing_alone() as session:
         session.execute(delete(ApiToken).where(ApiToken.source == CONFIGURED))
         hashes = {token_hash(t): scope for t, scope in tokens.items()}
         taken = set(session.scalars(select(ApiToken.token_hash).where(ApiToken.token_hash.in_(hashes))))

@@ -69,6 +69,16 @@ class Database:
         with self._write() as session, session.begin():
             yield session
 
+    @contextmanager
+    def writing_alone(self) -> Iterator[Session]:
+        """`writing`, serialised with every replica's (the migration lock on PostgreSQL; SQLite's BEGIN
+        IMMEDIATE already is): for start-up work that replaces rows, which replicas starting together
+        would otherwise interleave."""
+        with self.writing() as session:
+            if not self.is_sqlite:
+                session.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK})
+            yield session
+
     def migrate(self) -> None:
         """Bring the schema to the newest Alembic revision (run at every start; a no-op when current)."""
         with self.engine.begin() as connection:

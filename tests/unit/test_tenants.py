@@ -6,6 +6,7 @@ moment they are revoked."""
 from __future__ import annotations
 
 import hashlib
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from alembic import command
@@ -146,3 +147,18 @@ def test_tokens_are_hashed_kept_across_restarts_and_revoked_at_once(db):  # noqa
         authorize(db, secret, "read", "")
     with pytest.raises(InvalidInput):
         create_token(db, "Not A Tenant", "read")
+
+
+def test_replicas_starting_together_store_the_configured_tokens_once(db):  # noqa: F811
+    """Each replica replaces the configured tokens at start; without turns, two interleave their delete
+    and insert and one fails on the token's primary key (seen with two API processes on PostgreSQL)."""
+    tokens = {f"configured-{i}": "read" for i in range(50)}
+    replicas = [Database(db.url.render_as_string(hide_password=False), db.schema) for _ in range(4)]
+    try:
+        for _ in range(5):
+            with ThreadPoolExecutor(len(replicas)) as pool:
+                list(pool.map(lambda replica: store_tokens(replica, tokens), replicas))
+    finally:
+        for replica in replicas:
+            replica.dispose()
+    assert len([t for t in list_tokens(db) if t.source == "configured"]) == len(tokens)
