@@ -142,6 +142,12 @@ def bsdf_family(name: str) -> BSDF:
     return _registry.families[bsdf_code(name)]
 
 
+def contiguous(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The arrays as C-contiguous float64, the one layout the families' compiled kernels are built for
+    (callers pass slices such as `u[:, 3:5]`; one signature per kernel keeps the JIT cache small)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
+
+
 def _groups(family: np.ndarray):
     """(family, indices) for each family present; a single family avoids any gather."""
     present = np.unique(family)
