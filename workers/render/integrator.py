@@ -519,13 +519,14 @@ class PathTracer:
         if self.lights.count == 0:
             return 0
         delta = sh.surf.is_delta
-        rows = np.arange(len(idx)) if not delta.any() else np.flatnonzero(~delta)
+        every = not delta.any()
+        rows = np.arange(len(idx)) if every else np.flatnonzero(~delta)
         if len(rows) == 0:
             return 0
-        ls = self.lights.sample(sh.position[rows], u[rows, 0], u[rows, 1:3])
+        sel = slice(None) if every else rows  # a view, not a gather, when every vertex samples lights
+        ls = self.lights.sample(sh.position[sel], u[sel, 0], u[sel, 1:3])
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
-        surf = sh.surf if len(rows) == len(idx) else sh.surf.take(rows)
-        f_cos, bsdf_pdf = eval_bsdf(surf, sh.wo_local[rows], wi_local)
+        f_cos, bsdf_pdf = eval_bsdf(sh.surf if every else sh.surf.take(rows), sh.wo_local[sel], wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)
         live, contribution, origin, t_max, light_scale = wavefront.shadow_rays(
             rows, beta, _f64(f_cos), _f64(bsdf_pdf), lights, sh.position, sh.ng, sh.scale

@@ -3,10 +3,9 @@ f cos = F D G / (4 cos_o), sampled by visible normals (Heitz 2018), the weight t
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.kernels import (
     ALPHA_MIN,
     ggx_d,
@@ -20,7 +19,7 @@ from workers.scene import spec
 
 
 @register_material("conductor")
-class Conductor(BSDF):
+class Conductor(CompiledBSDF):
     delta_when_smooth = True
 
     def parameters(self, material: spec.Conductor) -> MaterialParameters:
@@ -28,18 +27,16 @@ class Conductor(BSDF):
             base=material.specular, alpha=material.roughness, roughness=material.roughness
         )
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        return _eval(*contiguous(s.base, s.alpha, wo, wi))
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.base, s.alpha, wo, wi), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        return _sample(*contiguous(s.base, s.alpha, wo, u))
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.base, s.alpha, wo, u), *out)
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _eval(base, alpha, wo, wi):
-    n = len(wo)
-    f_cos, pdf = np.zeros((n, 3)), np.zeros(n)
-    for i in range(n):
+def _eval(rows, base, alpha, wo, wi, f_cos, pdf):
+    for i in rows:
         if not (wo[i, 2] > 0 and wi[i, 2] > 0 and alpha[i] > 0):
             continue
         a = max(alpha[i], ALPHA_MIN)
@@ -51,14 +48,11 @@ def _eval(base, alpha, wo, wi):
         for c in range(3):
             f_cos[i, c] = base[i, c] * value
         pdf[i] = visible_normal_pdf(wo[i, 2], wo_h, hz, a) / max(4.0 * wo_h, 1e-300)
-    return f_cos, pdf
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _sample(base, alpha, wo, u):
-    n = len(wo)
-    wi, weight, pdf, delta = np.empty((n, 3)), np.zeros((n, 3)), np.zeros(n), np.empty(n, np.bool_)
-    for i in range(n):
+def _sample(rows, base, alpha, wo, u, wi, weight, pdf, delta):
+    for i in rows:
         a = max(alpha[i], ALPHA_MIN)
         smooth = alpha[i] <= 0
         delta[i] = smooth
@@ -76,4 +70,3 @@ def _sample(base, alpha, wo, u):
         if not smooth:
             wo_m = wo[i, 0] * mx + wo[i, 1] * my + wo[i, 2] * mz
             pdf[i] = visible_normal_pdf(wo[i, 2], wo_m, mz, a) / max(4.0 * wo_m, 1e-300)
-    return wi, weight, pdf, delta

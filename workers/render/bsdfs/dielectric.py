@@ -3,10 +3,9 @@
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.kernels import (
     ALPHA_MIN,
     fresnel_dielectric,
@@ -22,18 +21,18 @@ from workers.scene import spec
 
 
 @register_material("dielectric")
-class Dielectric(BSDF):
+class Dielectric(CompiledBSDF):
     two_sided = False
     delta_when_smooth = True
 
     def parameters(self, material: spec.Dielectric) -> MaterialParameters:
         return MaterialParameters(alpha=material.roughness, ior=material.ior, roughness=material.roughness)
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        return _eval(*contiguous(s.alpha, s.ior, wo, wi))
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.alpha, s.ior, wo, wi), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        return _sample(*contiguous(s.alpha, s.ior, wo, u, uc))
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.alpha, s.ior, wo, u, uc), *out)
 
 
 @scalar
@@ -76,20 +75,15 @@ def _eval_one(alpha, ior, wo, wi):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _eval(alpha, ior, wo, wi):
-    n = len(wo)
-    f_cos, pdf = np.empty((n, 3)), np.empty(n)
-    for i in range(n):
+def _eval(rows, alpha, ior, wo, wi, f_cos, pdf):
+    for i in rows:
         value, pdf[i] = _eval_one(alpha[i], ior[i], wo[i], wi[i])
         f_cos[i, 0] = f_cos[i, 1] = f_cos[i, 2] = value
-    return f_cos, pdf
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _sample(alpha, ior, wo, u, uc):
-    n = len(wo)
-    wi, weight, pdf, delta = np.empty((n, 3)), np.zeros((n, 3)), np.zeros(n), np.empty(n, np.bool_)
-    for i in range(n):
+def _sample(rows, alpha, ior, wo, u, uc, wi, weight, pdf, delta):
+    for i in rows:
         a = max(alpha[i], ALPHA_MIN)
         smooth = alpha[i] <= 0
         delta[i] = smooth
@@ -116,4 +110,3 @@ def _sample(alpha, ior, wo, u, uc):
         weight[i, 0] = weight[i, 1] = weight[i, 2] = w
         if not smooth:
             pdf[i] = _eval_one(alpha[i], ior[i], wo[i], wi[i])[1]
-    return wi, weight, pdf, delta

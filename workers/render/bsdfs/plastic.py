@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from workers.render import kernels as k
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.microfacet import fresnel_dielectric, reflect, sample_visible_normal, smith_g1
 from workers.scene import spec
 
@@ -83,12 +83,13 @@ def coat(alpha: float, ior: float) -> Coat:
     return Coat(ior, table, float(2.0 * np.mean(inside * cosines)))
 
 
-def _coats(s: SurfaceBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row the index of its coat, and per coat its transmittance table and internal reflectance; one
-    pass per (alpha, ior) present, as a scene has few of them."""
-    index = np.empty(len(s.alpha), np.int64)
+def _coats(s: SurfaceBatch, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of the batch the index of its coat (set on `rows`), and per coat its transmittance table and
+    internal reflectance; one pass per (alpha, ior) present, as a scene has few of them."""
+    index = np.zeros(len(s.alpha), np.int64)
     tables, internal = [], []
-    todo = np.ones(len(s.alpha), bool)
+    todo = np.zeros(len(s.alpha), bool)
+    todo[rows] = True
     while todo.any():
         first = int(np.argmax(todo))
         rows = todo & (s.alpha == s.alpha[first]) & (s.ior == s.ior[first])
@@ -102,17 +103,17 @@ def _coats(s: SurfaceBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @register_material("plastic")
-class Plastic(BSDF):
+class Plastic(CompiledBSDF):
     def parameters(self, material: spec.Plastic) -> MaterialParameters:
         return MaterialParameters(
             base=material.diffuse, alpha=material.roughness, ior=material.ior, roughness=material.roughness
         )
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        return _eval(*contiguous(s.base, s.alpha, s.ior, wo, wi), *_coats(s))
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.base, s.alpha, s.ior, wo, wi), *_coats(s, rows), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        return _sample(*contiguous(s.base, s.alpha, s.ior, wo, u, uc), *_coats(s))
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.base, s.alpha, s.ior, wo, u, uc), *_coats(s, rows), *out)
 
 
 @k.scalar
@@ -154,25 +155,20 @@ def _eval_one(base, alpha, ior, table, internal, ox, oy, oz, ix, iy, iz, f_cos):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _eval(base, alpha, ior, wo, wi, coat_index, tables, internal):
-    n = len(wo)
-    f_cos, pdf = np.zeros((n, 3)), np.zeros(n)
-    for i in range(n):
+def _eval(rows, base, alpha, ior, wo, wi, coat_index, tables, internal, f_cos, pdf):
+    for i in rows:
         if wo[i, 2] > 0 and wi[i, 2] > 0:
             j = coat_index[i]
             pdf[i] = _eval_one(
                 base[i], alpha[i], ior[i], tables[j], internal[j], wo[i, 0], wo[i, 1], wo[i, 2],
                 wi[i, 0], wi[i, 1], wi[i, 2], f_cos[i],
             )  # fmt: skip
-    return f_cos, pdf
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _sample(base, alpha, ior, wo, u, uc, coat_index, tables, internal):
-    n = len(wo)
-    wi, weight, pdf, delta = np.empty((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, np.bool_)
+def _sample(rows, base, alpha, ior, wo, u, uc, coat_index, tables, internal, wi, weight, pdf, delta):
     f_cos = np.empty(3)
-    for i in range(n):
+    for i in rows:
         j = coat_index[i]
         ox, oy, oz = wo[i, 0], wo[i, 1], wo[i, 2]
         t_o = _transmittance(min(max(oz, 0.0), 1.0), alpha[i], ior[i], tables[j])
@@ -198,4 +194,3 @@ def _sample(base, alpha, ior, wo, u, uc, coat_index, tables, internal):
         pdf[i] = _eval_one(base[i], alpha[i], ior[i], tables[j], internal[j], ox, oy, oz, ix, iy, iz, f_cos)
         for c in range(3):
             weight[i, c] = f_cos[c] / max(pdf[i], 1e-300)
-    return wi, weight, pdf, delta
