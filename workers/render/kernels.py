@@ -142,3 +142,16 @@ def fresnel_dielectric(cos_i, eta):
 def reflect(wx, wy, wz, mx, my, mz):
     c = 2.0 * (wx * mx + wy * my + wz * mz)
     return c * mx - wx, c * my - wy, c * mz - wz
+
+
+@scalar
+def search_right(cdf, u):
+    """np.searchsorted(cdf, u, side="right"): the number of entries <= u (binary search)."""
+    lo, hi = 0, len(cdf)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cdf[mid] <= u:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo

@@ -233,14 +233,7 @@ def _sample_lights(p, u_select, u, lights):
     cdf = lights.cdf
     count = len(cdf)
     for i in range(n):
-        lo, hi = 0, count  # np.searchsorted(cdf, u, side="right")
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if cdf[mid] <= u_select[i]:
-                lo = mid + 1
-            else:
-                hi = mid
-        entry = min(lo, count - 1)
+        entry = min(kernels.search_right(cdf, u_select[i]), count - 1)
         k, which, select = lights.kinds[entry], lights.index[entry], lights.prob[entry]
         kind[i] = k
         if k == TRIANGLE:
