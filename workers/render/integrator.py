@@ -84,7 +84,9 @@ class _Paths:
     spread: np.ndarray
 
     def take(self, rows: np.ndarray) -> _Paths:
-        return _Paths(*(getattr(self, f.name)[rows] for f in fields(self)))
+        arrays = (np.asarray(self.idx, np.int64), *map(_f64, (self.o, self.d, self.beta, self.prev_pdf)))
+        arrays += (np.asarray(self.prev_delta, np.bool_), _f64(self.t_min), _f64(self.spread))
+        return _Paths(*wavefront.take_paths(np.asarray(rows, dtype=np.int64), arrays))
 
     @staticmethod
     def concatenate(a: _Paths, b: _Paths) -> _Paths:

@@ -248,3 +248,20 @@ def next_paths(idx, beta, sampled, frames, position, ng, scale, u_roulette, use_
         out_pdf[:count],
         out_delta[:count],
     )
+
+
+@kernel
+def take_paths(rows, paths):
+    """The wavefront arrays (idx, o, d, beta, prev_pdf, prev_delta, t_min, spread) at `rows`, in one pass."""
+    idx, o, d, beta, prev_pdf, prev_delta, t_min, spread = paths
+    m = len(rows)
+    out_o, out_d, out_beta = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    out_idx, out_pdf, out_delta = np.empty(m, np.int64), np.empty(m), np.empty(m, np.bool_)
+    out_t_min, out_spread = np.empty(m), np.empty(m)
+    for j in range(m):
+        i = rows[j]
+        for c in range(3):
+            out_o[j, c], out_d[j, c], out_beta[j, c] = o[i, c], d[i, c], beta[i, c]
+        out_idx[j], out_pdf[j], out_delta[j] = idx[i], prev_pdf[i], prev_delta[i]
+        out_t_min[j], out_spread[j] = t_min[i], spread[i]
+    return out_idx, out_o, out_d, out_beta, out_pdf, out_delta, out_t_min, out_spread
