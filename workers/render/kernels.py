@@ -10,6 +10,9 @@ Conventions are those of the NumPy helpers of `workers.render.sampling` and `wor
 (local frame z = normal); vectors are passed as three floats and returned as tuples.
 Compiled with `cache=True` (paid once per machine) and `fastmath=False`, so results do not depend on
 how the compiler vectorises a loop, and `nogil=True` kernels run in parallel from the renderer's threads.
+Numba's on-disk cache checks only the timestamp of the file a kernel is defined in, not of the functions
+it inlines from here: after editing this module, delete the `__pycache__/*.nbi|*.nbc` files of
+`workers/render` (or touch the modules whose kernels use it).
 """
 
 from __future__ import annotations
