@@ -3,7 +3,9 @@
 A BSDF family (`diffuse`, `conductor`, ...; the built-in ones are in `workers.render.bsdfs`) subclasses
 `BSDF` and registers with `@register_material("name")`; the scene's materials map to families by their
 `type`. Batches carry a family code per row: `eval_bsdf` and `sample_bsdf` hand each family the rows of
-its own kind (vectorised NumPy) and scatter the results back, so a new family needs no dispatch table.
+its own kind, so a new family needs no dispatch table. A family written in NumPy implements `eval` and
+`sample` over a batch of its own rows; the built-in ones are compiled kernels (`workers.render.kernels`)
+that read and write their rows of the whole batch in place (`eval_rows`, `sample_rows`).
 
 Conventions, in the local shading frame (z = normal): `wo` points to the camera (or previous vertex),
 `wi` towards the light; both unit. `eval` returns f(wo, wi) * |cos(wi)| and the solid-angle pdf of
@@ -85,6 +87,23 @@ class BSDF(ABC):
     def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
         """wi, weight f |cos| / pdf, pdf and whether the sampled lobe is a delta, per row."""
 
+    def eval_rows(self, s: SurfaceBatch, wo, wi, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
+        """`eval` of the batch's `rows` written there into `out` (f_cos, pdf). By default a gather, `eval`
+        and a scatter; the compiled families read and write their rows in place."""
+        every = len(rows) == len(wo)
+        results = self.eval(s, wo, wi) if every else self.eval(s.take(rows), wo[rows], wi[rows])
+        for array, result in zip(out, results, strict=True):
+            array[slice(None) if every else rows] = result
+
+    def sample_rows(self, s: SurfaceBatch, wo, u, uc, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
+        """`sample` of the batch's `rows` into `out` (wi, weight, pdf, delta), as `eval_rows`."""
+        every = len(rows) == len(wo)
+        results = (
+            self.sample(s, wo, u, uc) if every else self.sample(s.take(rows), wo[rows], u[rows], uc[rows])
+        )
+        for array, result in zip(out, results, strict=True):
+            array[slice(None) if every else rows] = result
+
     def textures(self, material: Any) -> dict[str, Any]:
         """The material's textured parameters by slot name (`workers.scene.spec` textures); none by default.
         The slots `normal` and `emission` are the renderer's (`workers.render.materials`)."""
@@ -93,6 +112,44 @@ class BSDF(ABC):
     def apply_textures(self, material: Any, s: SurfaceBatch, lookups: dict[str, np.ndarray]) -> None:  # noqa: B027
         """Overwrite the rows `s` of `material` with its textures' values `lookups` (slot -> (N, 3) RGB);
         a family without textures never receives any."""
+
+
+class CompiledBSDF(BSDF):
+    """A family whose rows are evaluated and sampled by compiled kernels (`eval_kernel`, `sample_kernel`)
+    reading and writing their rows of the whole batch; `eval` and `sample` run them on every row. A
+    subclass that redefines `eval` or `sample` (in NumPy, say) is dispatched through its own method."""
+
+    @abstractmethod
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None: ...
+
+    @abstractmethod
+    def sample_kernel(
+        self, s: SurfaceBatch, wo, u, uc, rows: np.ndarray, out: tuple[np.ndarray, ...]
+    ) -> None: ...
+
+    def eval(self, s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = len(wo)
+        out = np.zeros((n, 3)), np.zeros(n)
+        self.eval_kernel(s, wo, wi, np.arange(n), out)
+        return out
+
+    def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
+        n = len(wo)
+        out = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
+        self.sample_kernel(s, wo, u, uc, np.arange(n), out)
+        return out
+
+    def eval_rows(self, s: SurfaceBatch, wo, wi, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
+        if type(self).eval is CompiledBSDF.eval:
+            self.eval_kernel(s, wo, wi, rows, out)
+        else:
+            super().eval_rows(s, wo, wi, rows, out)
+
+    def sample_rows(self, s: SurfaceBatch, wo, u, uc, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
+        if type(self).sample is CompiledBSDF.sample:
+            self.sample_kernel(s, wo, u, uc, rows, out)
+        else:
+            super().sample_rows(s, wo, u, uc, rows, out)
 
 
 class _Registry:
@@ -142,25 +199,28 @@ def bsdf_family(name: str) -> BSDF:
     return _registry.families[bsdf_code(name)]
 
 
+def contiguous(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The arrays as C-contiguous float64, the one layout the families' compiled kernels are built for
+    (callers pass slices such as `u[:, 3:5]`; one signature per kernel keeps the JIT cache small)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
+
+
 def _groups(family: np.ndarray):
-    """(family, indices) for each family present; a single family avoids any gather."""
-    present = np.unique(family)
-    if len(present) == 1:
-        yield _registry.families[int(present[0])], None
+    """(family, rows) for each family present."""
+    if len(family) and family.min() == family.max():
+        yield _registry.families[int(family[0])], np.arange(len(family))
         return
-    for code in present:
+    for code in np.unique(family):
         yield _registry.families[int(code)], np.flatnonzero(family == code)
 
 
 def eval_bsdf(s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """f(wo, wi) |cos wi| (N, 3) and the pdf of sampling wi (N,)."""
     n = len(wo)
-    f_cos, pdf = np.zeros((n, 3)), np.zeros(n)
-    for family, idx in _groups(s.family):
-        if idx is None:
-            return family.eval(s, wo, wi)
-        f_cos[idx], pdf[idx] = family.eval(s.take(idx), wo[idx], wi[idx])
-    return f_cos, pdf
+    out = np.zeros((n, 3)), np.zeros(n)
+    for family, rows in _groups(s.family):
+        family.eval_rows(s, wo, wi, rows, out)
+    return out
 
 
 def sample_bsdf(s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
@@ -169,9 +229,7 @@ def sample_bsdf(s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
     Returns (wi, weight (N, 3), pdf (N,), delta (N,) bool); weight is zero for invalid samples.
     """
     n = len(wo)
-    wi, weight, pdf, delta = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
-    for family, idx in _groups(s.family):
-        if idx is None:
-            return family.sample(s, wo, u, uc)
-        wi[idx], weight[idx], pdf[idx], delta[idx] = family.sample(s.take(idx), wo[idx], u[idx], uc[idx])
-    return wi, weight, pdf, delta
+    out = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
+    for family, rows in _groups(s.family):
+        family.sample_rows(s, wo, u, uc, rows, out)
+    return out

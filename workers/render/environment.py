@@ -3,20 +3,26 @@ or a constant background. Both answer radiance, sample and pdf in world space.""
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+from numba import njit
+
+from workers.render import kernels
 from workers.render.sampling import luminance, square_to_uniform_sphere
-from workers.scene.envmaps import direction_to_uv, uv_to_direction
+
+kernel = njit(cache=True, nogil=True, fastmath=False)
 
 
 class EnvironmentMapLight:
     """Texels are chosen with probability proportional to luminance x sin(theta), then a point
-    uniformly inside the texel; the solid-angle pdf divides by the texel's Jacobian 2 pi^2 sin(theta)."""
+    uniformly inside the texel; the solid-angle pdf divides by the texel's Jacobian 2 pi^2 sin(theta).
+    Lookups and samples are compiled kernels (one pass over the directions)."""
 
     def __init__(self, image: np.ndarray, rotation: np.ndarray):
         self.image = np.ascontiguousarray(image, dtype=np.float64)
         self.height, self.width = image.shape[:2]
-        self.rotation = np.asarray(rotation, dtype=np.float64)  # local -> world
+        self.rotation = np.ascontiguousarray(rotation, dtype=np.float64)  # local -> world
         theta = (np.arange(self.height) + 0.5) / self.height * np.pi
         weights = luminance(self.image) * np.sin(theta)[:, None]
         self.total_weight = float(weights.sum())
@@ -28,40 +34,14 @@ class EnvironmentMapLight:
 
     def radiance(self, directions: np.ndarray) -> np.ndarray:
         """Bilinearly interpolated radiance seen along world directions (texel centres at (i + 0.5) / W)."""
-        uv = direction_to_uv(directions @ self.rotation)
-        x = uv[:, 0] * self.width - 0.5
-        y = np.clip(uv[:, 1] * self.height - 0.5, 0.0, self.height - 1.0)
-        x0 = np.floor(x)
-        y0 = np.minimum(np.floor(y), self.height - 2) if self.height > 1 else np.zeros_like(y)
-        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-        x0 = x0.astype(np.int64) % self.width
-        x1 = (x0 + 1) % self.width
-        y0 = y0.astype(np.int64)
-        y1 = np.minimum(y0 + 1, self.height - 1)
-        im = self.image
-        top = im[y0, x0] * (1 - fx) + im[y0, x1] * fx
-        bottom = im[y1, x0] * (1 - fx) + im[y1, x1] * fx
-        return top * (1 - fy) + bottom * fy
+        return _radiance(_f64(directions), self.rotation, self.image)
 
     def sample(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World directions and their solid-angle pdfs from uniforms (N, 2)."""
-        idx = np.minimum(np.searchsorted(self.cdf, u[:, 0], side="right"), len(self.cdf) - 1)
-        lower = np.where(idx > 0, self.cdf[np.maximum(idx - 1, 0)], 0.0)
-        frac = np.clip((u[:, 0] - lower) / np.maximum(self.cdf[idx] - lower, 1e-300), 0.0, 1.0 - 1e-12)
-        row, col = np.divmod(idx, self.width)
-        uv = np.stack([(col + frac) / self.width, (row + u[:, 1]) / self.height], axis=1)
-        local = uv_to_direction(uv[:, 0], uv[:, 1])
-        sin_theta = np.sin(uv[:, 1] * np.pi)
-        pdf = self.texel_prob[idx] * self.width * self.height / np.maximum(2 * np.pi**2 * sin_theta, 1e-300)
-        return local @ self.rotation.T, np.where(sin_theta > 0, pdf, 0.0)
+        return _sample(_f64(u), self.cdf, self.texel_prob, self.width, self.height, self.rotation)
 
     def pdf(self, directions: np.ndarray) -> np.ndarray:
-        uv = direction_to_uv(directions @ self.rotation)
-        col = np.minimum((uv[:, 0] * self.width).astype(np.int64), self.width - 1)
-        row = np.minimum((uv[:, 1] * self.height).astype(np.int64), self.height - 1)
-        sin_theta = np.sin(uv[:, 1] * np.pi)
-        p = self.texel_prob[row * self.width + col] * self.width * self.height
-        return np.where(sin_theta > 1e-12, p / np.maximum(2 * np.pi**2 * sin_theta, 1e-300), 0.0)
+        return _pdf(_f64(directions), self.rotation, self.texel_prob, self.width, self.height)
 
 
 class ConstantEnvironment:
@@ -79,3 +59,78 @@ class ConstantEnvironment:
 
     def pdf(self, directions: np.ndarray) -> np.ndarray:
         return np.full(len(directions), 1.0 / (4 * np.pi))
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+@kernels.scalar
+def _lat_long(d, rotation):
+    """Lat-long (u, v) of world direction d in the map's frame (`workers.scene.envmaps.direction_to_uv`)."""
+    x = d[0] * rotation[0, 0] + d[1] * rotation[1, 0] + d[2] * rotation[2, 0]
+    y = d[0] * rotation[0, 1] + d[1] * rotation[1, 1] + d[2] * rotation[2, 1]
+    z = d[0] * rotation[0, 2] + d[1] * rotation[1, 2] + d[2] * rotation[2, 2]
+    length = max(math.sqrt(x * x + y * y + z * z), 1e-300)
+    x, y, z = x / length, y / length, z / length
+    u = math.atan2(x, -z) / (2.0 * math.pi) % 1.0
+    if u >= 1.0:  # -tiny % 1.0 rounds to 1.0
+        u = 0.0
+    return u, math.acos(min(max(y, -1.0), 1.0)) / math.pi
+
+
+@kernel
+def _radiance(directions, rotation, image):
+    height, width = image.shape[0], image.shape[1]
+    out = np.empty((len(directions), 3))
+    for i in range(len(directions)):
+        u, v = _lat_long(directions[i], rotation)
+        x = u * width - 0.5
+        y = min(max(v * height - 0.5, 0.0), height - 1.0)
+        x0f = math.floor(x)
+        y0f = min(math.floor(y), height - 2) if height > 1 else 0.0
+        fx, fy = x - x0f, y - y0f
+        x0 = int(x0f) % width
+        x1 = (x0 + 1) % width
+        y0 = int(y0f)
+        y1 = min(y0 + 1, height - 1)
+        for c in range(3):
+            top = image[y0, x0, c] * (1 - fx) + image[y0, x1, c] * fx
+            bottom = image[y1, x0, c] * (1 - fx) + image[y1, x1, c] * fx
+            out[i, c] = top * (1 - fy) + bottom * fy
+    return out
+
+
+@kernel
+def _sample(u, cdf, texel_prob, width, height, rotation):
+    n = len(u)
+    directions, pdf = np.empty((n, 3)), np.zeros(n)
+    for i in range(n):
+        idx = min(kernels.search_right(cdf, u[i, 0]), len(cdf) - 1)
+        lower = cdf[idx - 1] if idx > 0 else 0.0
+        frac = min(max((u[i, 0] - lower) / max(cdf[idx] - lower, 1e-300), 0.0), 1.0 - 1e-12)
+        row, col = idx // width, idx % width
+        phi = 2.0 * math.pi * ((col + frac) / width)
+        theta = math.pi * ((row + u[i, 1]) / height)
+        sin_theta = math.sin(theta)
+        local = (sin_theta * math.sin(phi), math.cos(theta), -sin_theta * math.cos(phi))
+        for r in range(3):
+            directions[i, r] = (
+                rotation[r, 0] * local[0] + rotation[r, 1] * local[1] + rotation[r, 2] * local[2]
+            )
+        if sin_theta > 0:
+            pdf[i] = texel_prob[idx] * width * height / max(2 * math.pi**2 * sin_theta, 1e-300)
+    return directions, pdf
+
+
+@kernel
+def _pdf(directions, rotation, texel_prob, width, height):
+    out = np.zeros(len(directions))
+    for i in range(len(directions)):
+        u, v = _lat_long(directions[i], rotation)
+        col = min(int(u * width), width - 1)
+        row = min(int(v * height), height - 1)
+        sin_theta = math.sin(v * math.pi)
+        if sin_theta > 1e-12:
+            out[i] = texel_prob[row * width + col] * width * height / max(2 * math.pi**2 * sin_theta, 1e-300)
+    return out

@@ -1,5 +1,5 @@
-"""Wavefront unidirectional path tracing: every bounce is a handful of NumPy operations over all
-live paths, with Embree answering closest-hit and shadow queries in bulk.
+"""Wavefront unidirectional path tracing: every bounce is a handful of compiled passes over all live
+paths (`workers.render.wavefront`), with Embree answering closest-hit and shadow queries in bulk.
 
 Next-event estimation and BSDF sampling are combined with the power heuristic; Russian roulette
 starts at `rr_depth`. `max_depth` counts path segments as Mitsuba does: 1 shows emitters only,
@@ -19,6 +19,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from workers.render import wavefront
 from workers.render.aggregate import Aggregate, AggregateEvents
 from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import RayScene
@@ -27,19 +28,16 @@ from workers.render.lights import LightSample, LightSampler
 from workers.render.materials import MaterialTable
 from workers.render.observer import PathObserver
 from workers.render.sampling import (
-    coordinate_frame,
     dot,
     max3,
     power_heuristic,
-    select_where,
-    selection_size,
     square_to_uniform_sphere,
     to_local,
     to_world,
 )
+from workers.render.wavefront import RAY_OFFSET
 from workers.scene.compile import CompiledScene
 
-RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
 
 
@@ -86,7 +84,9 @@ class _Paths:
     spread: np.ndarray
 
     def take(self, rows: np.ndarray) -> _Paths:
-        return _Paths(*(getattr(self, f.name)[rows] for f in fields(self)))
+        arrays = (np.asarray(self.idx, np.int64), *map(_f64, (self.o, self.d, self.beta, self.prev_pdf)))
+        arrays += (np.asarray(self.prev_delta, np.bool_), _f64(self.t_min), _f64(self.spread))
+        return _Paths(*wavefront.take_paths(np.asarray(rows, dtype=np.int64), arrays))
 
     @staticmethod
     def concatenate(a: _Paths, b: _Paths) -> _Paths:
@@ -155,16 +155,16 @@ class PathTracer:
         self.lights = LightSampler(
             scene, self.materials.emission_scale if self.materials.emission_textured else None
         )
-        self._positions = scene.positions.astype(np.float64)
-        self._ng = scene.geometric_normals.astype(np.float64)
-        self._ns = scene.shading_normals.astype(np.float64)
-        self._uv = scene.uvs.astype(np.float64)
-        self._emission = scene.emission.astype(np.float64)
-        self._coordinate_scale = np.abs(self._positions).max(axis=(1, 2))
+        positions = scene.positions.astype(np.float64)
+        self._ng = np.ascontiguousarray(scene.geometric_normals, dtype=np.float64)
+        self._ns = np.ascontiguousarray(scene.shading_normals, dtype=np.float64)
+        self._uv = np.ascontiguousarray(scene.uvs, dtype=np.float64)
+        self._emission = np.ascontiguousarray(scene.emission, dtype=np.float64)
+        self._two_sided_emission = np.ascontiguousarray(scene.two_sided_emission, dtype=np.bool_)
+        self._coordinate_scale = np.abs(positions).max(axis=(1, 2))
         # Triangles whose shading normals differ from the geometric one need interpolation.
         deviation = np.abs(self._ns - self._ng[:, None, :]).max(axis=(1, 2))
         self._smooth = deviation > 1e-6
-        self._any_smooth = bool(self._smooth.any())
         self._needs_uv = self.materials.needs_uv
         with np.errstate(divide="ignore"):
             uv_edges = self._uv[:, 1:] - self._uv[:, :1]
@@ -179,31 +179,26 @@ class PathTracer:
     def _interaction(
         self, hits: Hits, origins: np.ndarray, directions: np.ndarray, need_uv: bool
     ) -> _Interaction:
-        """Surface data at hits. The position is o + t d (float32 t: error far below the ray offset);
-        normals are interpolated only on smooth triangles and UVs only when something reads them."""
-        prim = hits.prim
-        position = origins + hits.t[:, None] * directions
-        ng = self._ng[prim]
-        ns = ng
-        smooth = np.flatnonzero(self._smooth[prim]) if self._any_smooth else ()
-        if len(smooth):
-            ns = ng.copy()
-            b1, b2 = hits.u[smooth].astype(np.float64)[:, None], hits.v[smooth].astype(np.float64)[:, None]
-            normals = self._ns[prim[smooth]]
-            interpolated = (1.0 - b1 - b2) * normals[:, 0] + b1 * normals[:, 1] + b2 * normals[:, 2]
-            ns[smooth] = interpolated / np.maximum(
-                np.linalg.norm(interpolated, axis=1, keepdims=True), 1e-300
-            )
-        uv = np.zeros((len(prim), 2))
-        if need_uv:
-            b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
-            uvs = self._uv[prim]
-            uv = (1.0 - b1 - b2) * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
+        """Surface data at hits (`wavefront.surface_points`): the position is o + t d (float32 t: error far
+        below the ray offset); predicted surfaces (`Hits.surface`) replace both normals."""
+        position, ng, ns, uv, scale = wavefront.surface_points(
+            _f64(origins),
+            _f64(directions),
+            _f64(hits.t),
+            np.asarray(hits.prim, dtype=np.int64),
+            _f64(hits.u),
+            _f64(hits.v),
+            self._ng,
+            self._ns,
+            self._smooth,
+            self._uv,
+            self._coordinate_scale,
+            need_uv,
+        )
         if hits.surface is not None and hits.surface.where.any():
             predicted = np.flatnonzero(hits.surface.where)
-            ng[predicted] = hits.surface.normal[predicted]  # ng is a fresh gather; ns is ng or a copy of it
+            ng[predicted] = hits.surface.normal[predicted]
             ns[predicted] = hits.surface.normal[predicted]
-        scale = np.maximum(max3(np.abs(position)), self._coordinate_scale[prim])
         return _Interaction(position, ng, ns, uv, scale)
 
     @staticmethod
@@ -215,9 +210,7 @@ class PathTracer:
         """
         if scale is None:
             scale = np.abs(position).max(axis=1)
-        eps = RAY_OFFSET * np.maximum(scale, 1e-30)
-        side = np.where(dot(direction, ng) >= 0, 1.0, -1.0)
-        return position + ng * (side * eps)[:, None]
+        return wavefront.offset_origins(_f64(position), _f64(ng), _f64(direction), _f64(scale))
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         return self._occluded(origins, directions, t_max)
@@ -257,7 +250,7 @@ class PathTracer:
         rec.instance_id[sel] = self.scene.instance_ids[prim]
         rec.albedo[sel] = self._surfaces(sub, mat, it.uv).base
         rec.roughness[sel] = self.materials.roughness(mat)
-        rec.emission[sel] = self._emitted(prim, -directions[sel], it.ng, it.uv)
+        rec.emission[sel] = self._emitted(prim, directions[sel], it.ng, it.uv)
         return rec
 
     def _footprint(
@@ -290,9 +283,12 @@ class PathTracer:
             surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf
 
-    def _emitted(self, prim: np.ndarray, towards: np.ndarray, ng: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        front = (dot(towards, ng) > 0) | self.scene.two_sided_emission[prim]
-        emitted = self._emission[prim] * front[:, None]
+    def _emitted(self, prim: np.ndarray, d: np.ndarray, ng: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """Radiance the hit triangles `prim` emit back along the rays `d`."""
+        prim = np.asarray(prim, dtype=np.int64)
+        emitted = wavefront.emitted_radiance(
+            prim, _f64(d), _f64(ng), self._emission, self._two_sided_emission
+        )
         if self.materials.emission_textured:
             emitted = emitted * self.materials.emission_scale(self.scene.material_ids[prim], uv)
         return emitted
@@ -318,8 +314,8 @@ class PathTracer:
         rays_traced = 0
         paths = _Paths(
             idx=np.arange(n),
-            o=np.asarray(origins, dtype=np.float64),
-            d=np.asarray(directions, dtype=np.float64),
+            o=_f64(origins),
+            d=_f64(directions),
             beta=np.ones((n, 3)),
             prev_pdf=np.zeros(n),
             prev_delta=np.ones(n, bool),  # the camera ray: emitters it sees count fully
@@ -354,11 +350,12 @@ class PathTracer:
                 if observer is not None:
                     observer.on_escape(paths.idx[miss], dm, paths.beta[miss] * weight[:, None])
 
+            roulette = segment >= rr_depth
             scattered = None
             if events is not None:
                 at = np.flatnonzero(events.found)
                 scattered = self._scatter_in_aggregate(
-                    paths.take(at), events.take(at), segment, max_depth, rng, radiance, observer
+                    paths.take(at), events.take(at), segment, max_depth, roulette, rng, radiance, observer
                 )
                 rays_traced += scattered.rays_traced
             if len(miss) or events is not None:
@@ -366,16 +363,11 @@ class PathTracer:
                 paths = paths.take(keep)
                 hits = hits.take(keep)
             paths, shadow_rays = self._scatter_at_surfaces(
-                paths, hits, segment, max_depth, rng, radiance, observer
+                paths, hits, segment, max_depth, roulette, rng, radiance, observer
             )
             rays_traced += shadow_rays
             if scattered is not None:
                 paths = _Paths.concatenate(paths, scattered.paths)
-            if segment >= rr_depth and len(paths.idx):
-                q = np.minimum(max3(paths.beta), 0.95)
-                survive = rng.random(len(paths.idx)) < q
-                paths.beta = paths.beta / np.maximum(q, 1e-300)[:, None] * survive[:, None]
-            paths = paths.take(np.flatnonzero(max3(paths.beta) > 0))
         np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return TraceResult(radiance, bounces, rays_traced)
 
@@ -385,42 +377,43 @@ class PathTracer:
         hits: Hits,
         segment: int,
         max_depth: int,
+        roulette: bool,
         rng,
         radiance: np.ndarray,
         observer: PathObserver | None,
     ) -> tuple[_Paths, int]:
-        """Emission, next-event estimation and BSDF sampling at surface hits: the continuing paths."""
+        """Emission, next-event estimation and BSDF sampling at surface hits: the continuing paths (after
+        Russian roulette where `roulette`)."""
         if len(paths.idx) == 0:
             return paths, 0
         idx, d, beta = paths.idx, paths.d, paths.beta
         it = self._interaction(hits, paths.o, d, self._needs_uv)
         if observer is not None:
             observer.on_surface(idx, it.position, it.ns, beta)
-        prim = hits.prim
-        wo = -d
 
         if self._has_emitters:
-            emitted = self._emitted(prim, wo, it.ng, it.uv)
-            lit = np.flatnonzero(max3(emitted) > 0)
-            if len(lit):
-                pdf_light = self.lights.pdf_hit_emitter(prim[lit], hits.t[lit], dot(wo[lit], it.ng[lit]))
-                weight = np.where(paths.prev_delta[lit], 1.0, power_heuristic(paths.prev_pdf[lit], pdf_light))
-                radiance[idx[lit]] += beta[lit] * emitted[lit] * weight[:, None]
+            prim = np.asarray(hits.prim, dtype=np.int64)
+            emitted = self._emitted(prim, d, it.ng, it.uv)
+            wavefront.add_emitter_hits(
+                radiance, idx, beta, emitted, prim, _f64(hits.t), d, it.ng,
+                self.lights.area_pdf, paths.prev_pdf, paths.prev_delta,
+            )  # fmt: skip
 
         if segment == max_depth:
             return paths.take(np.zeros(0, np.int64)), 0
 
-        sh = self._shade(it, hits, wo, self._footprint(hits, it, d, paths.spread))
-        u = rng.random((len(idx), 6))
+        sh = self._shade(it, hits, d, self._footprint(hits, it, d, paths.spread))
+        u = rng.random((len(idx), 7))
 
         shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
 
-        wi_local, weight, pdf, delta = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
-        wi = sh.to_world(wi_local)
-        o = self.offset(sh.position, sh.ng, wi, sh.scale)
-        return _Paths(
-            idx, o, wi, beta * weight, pdf, delta, np.zeros(len(idx)), np.zeros(len(idx))
-        ), shadow_rays
+        sampled = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
+        n_idx, o, wi, n_beta, pdf, delta = wavefront.next_paths(
+            idx, beta, _sampled(sampled), (sh.fs, sh.ft, sh.ns), sh.position, sh.ng, sh.scale,
+            np.ascontiguousarray(u[:, 6]), roulette,
+        )  # fmt: skip
+        zeros = np.zeros(len(n_idx))
+        return _Paths(n_idx, o, wi, n_beta, pdf, delta, zeros, zeros.copy()), shadow_rays
 
     def _scatter_in_aggregate(
         self,
@@ -428,13 +421,15 @@ class PathTracer:
         events: AggregateEvents,
         segment: int,
         max_depth: int,
+        roulette: bool,
         rng,
         radiance: np.ndarray,
         observer: PathObserver | None,
     ) -> _Scattered:
         """At voxels the aggregate scatters in: light sampling weighted by the voxel's throughput (MIS with
         the uniform direction sampling below; beyond Weier et al., switchable), then a uniform direction
-        with weight throughput / pdf. The continuing ray starts at the voxel's entry point."""
+        with weight throughput / pdf, Russian roulette where `roulette`. The continuing ray starts at the
+        voxel's entry point."""
         n = len(paths.idx)
         if n == 0:
             return _Scattered(paths, 0)
@@ -444,7 +439,7 @@ class PathTracer:
         if segment == max_depth:
             return _Scattered(paths.take(np.zeros(0, np.int64)), 0)
         wo = -paths.d
-        u = rng.random((n, 5))
+        u = rng.random((n, 6))
         wi = square_to_uniform_sphere(u[:, 3:5])
         shadow_rays = 0
         if self.aggregate_next_event and self.lights.count:
@@ -465,7 +460,11 @@ class PathTracer:
         pdf = np.full(n, UNIFORM_SPHERE_PDF)
         beta = paths.beta * phi / UNIFORM_SPHERE_PDF
         paths = _Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min, np.zeros(n))
-        return _Scattered(paths, shadow_rays)
+        if roulette:
+            keep = wavefront.roulette(beta, np.ascontiguousarray(u[:, 5]))
+        else:
+            keep = np.flatnonzero(max3(beta) > 0)
+        return _Scattered(paths.take(keep), shadow_rays)
 
     def _next_event_in_aggregate(
         self,
@@ -506,49 +505,54 @@ class PathTracer:
     def shade(self, hits: Hits, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Surface points of `hits` ready for BSDF queries (for samplers that walk paths themselves)."""
         it = self._interaction(hits, origins, directions, self._needs_uv)
-        return self._shade(it, hits, -directions)
+        return self._shade(it, hits, directions)
 
-    def _shade(self, it: _Interaction, hits: Hits, wo: np.ndarray, footprint=None) -> Shading:
+    def _shade(self, it: _Interaction, hits: Hits, d: np.ndarray, footprint=None) -> Shading:
         material_ids = self._material_ids(hits)
         surf = self._surfaces(hits, material_ids, it.uv, footprint)
         ns = it.ns
         if self.materials.normal_mapped:
             ns = self.materials.perturb_normals(material_ids, it.uv, ns, self._tangents(hits))
-        flip = (dot(wo, ns) < 0) & surf.two_sided
-        ns = np.where(flip[:, None], -ns, ns)
-        fs, ft = coordinate_frame(ns)
-        return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, to_local(wo, fs, ft, ns))
+        fs, ft, ns, wo_local = wavefront.shading_frames(_f64(d), _f64(ns), surf.two_sided)
+        return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, wo_local)
 
     def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
         """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
         if self.lights.count == 0:
             return 0
-        n = len(idx)
-        sel = select_where(~sh.surf.is_delta)
-        if selection_size(sel, n) == 0:
+        delta = sh.surf.is_delta
+        every = not delta.any()
+        rows = np.arange(len(idx)) if every else np.flatnonzero(~delta)
+        if len(rows) == 0:
             return 0
+        sel = slice(None) if every else rows  # a view, not a gather, when every vertex samples lights
         ls = self.lights.sample(sh.position[sel], u[sel, 0], u[sel, 1:3])
-        wi_local = to_local(ls.direction, sh.fs[sel], sh.ft[sel], sh.ns[sel])
-        f_cos, bsdf_pdf = eval_bsdf(
-            sh.surf if isinstance(sel, slice) else sh.surf.take(sel), sh.wo_local[sel], wi_local
+        wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
+        f_cos, bsdf_pdf = eval_bsdf(sh.surf if every else sh.surf.take(rows), sh.wo_local[sel], wi_local)
+        lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)
+        live, contribution, origin, t_max, light_scale = wavefront.shadow_rays(
+            rows, beta, _f64(f_cos), _f64(bsdf_pdf), lights, sh.position, sh.ng, sh.scale
         )
-        mis = np.where(ls.delta, 1.0, power_heuristic(ls.pdf, bsdf_pdf))
-        scale = np.where(ls.pdf > 0, mis / np.maximum(ls.pdf, 1e-300), 0.0)
-        contribution = beta[sel] * f_cos * ls.radiance * scale[:, None]
-        live = np.flatnonzero(max3(contribution) > 0)
         if len(live) == 0:
             return 0
-        at = live if isinstance(sel, slice) else sel[live]
-        direction = ls.direction[live]
-        origin = self.offset(sh.position[at], sh.ng[at], direction, sh.scale[at])
-        distance = ls.distance[live]
-        t_max = np.where(np.isfinite(distance), distance * (1 - 1e-5) - 2 * RAY_OFFSET * sh.scale[at], np.inf)
-        blocked = self._occluded(origin, direction, t_max)
-        radiance[idx[at]] += contribution[live] * ~blocked[:, None]
+        at = rows[live]
+        blocked = self._occluded(origin, ls.direction[live], t_max)
+        wavefront.add_unblocked(radiance, idx[at], contribution, blocked)
         if observer is not None:
-            weight = beta[at] * f_cos[live] * scale[live, None]
+            weight = beta[at] * f_cos[live] * light_scale[live, None]
             _observe_environment_samples(observer, idx[at], ls, live, weight, blocked)
         return len(live)
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    """`a` as the C-contiguous float64 array the compiled kernels take (one signature each)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _sampled(sampled: tuple) -> tuple:
+    """`sample_bsdf`'s (wi, weight, pdf, delta) in the kernels' layout."""
+    wi, weight, pdf, delta = sampled
+    return _f64(wi), _f64(weight), _f64(pdf), np.ascontiguousarray(delta, dtype=np.bool_)
 
 
 def _observe_environment_samples(

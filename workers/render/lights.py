@@ -8,31 +8,39 @@ bounding-sphere radius: power-proportional selection keeps shadow rays where the
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
+from workers.render import kernels
 from workers.render.environment import ConstantEnvironment, EnvironmentMapLight
-from workers.render.sampling import (
-    luminance,
-    normalize,
-    select_where,
-    selection_size,
-    square_to_uniform_triangle,
-)
+from workers.render.sampling import luminance, normalize
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
 
 TRIANGLE, POINT, DIRECTIONAL, ENVIRONMENT = 0, 1, 2, 3
 
 
+@kernels.scalar
+def _falloff(cos_axis, cos_inner, cos_outer):
+    if cos_outer < -1.0:
+        return 1.0
+    t = min(max((cos_axis - cos_outer) / max(cos_inner - cos_outer, 1e-3), 0.0), 1.0)
+    return t * t
+
+
+@njit(cache=True, nogil=True, fastmath=False)
 def spot_falloff(cos_axis: np.ndarray, cones: np.ndarray) -> np.ndarray:
-    """glTF's (KHR_lights_punctual) spot attenuation: clamp((cos - cos_outer) / (cos_inner - cos_outer))^2;
-    1 for point lights, whose cone covers every direction."""
-    cos_inner, cos_outer = cones[:, 0], cones[:, 1]
-    t = np.clip((cos_axis - cos_outer) / np.maximum(cos_inner - cos_outer, 1e-3), 0.0, 1.0)
-    return np.where(cos_outer < -1.0, 1.0, t * t)
+    """glTF's (KHR_lights_punctual) spot attenuation: clamp((cos - cos_outer) / (cos_inner - cos_outer))^2
+    per row of `cones` (cos inner, cos outer); 1 for point lights, whose cone covers every direction."""
+    out = np.empty(len(cos_axis))
+    for i in range(len(cos_axis)):
+        out[i] = _falloff(cos_axis[i], cones[i, 0], cones[i, 1])
+    return out
 
 
 @dataclass
@@ -130,65 +138,55 @@ class LightSampler:
         self.dir_irradiance = np.array([l.irradiance for l in self.directionals], dtype=np.float64).reshape(
             -1, 3
         )
+        self._tables = _LightTables(
+            self.cdf,
+            self.kinds,
+            self.index,
+            self.prob,
+            self._origin,
+            self._edge1,
+            self._edge2,
+            self._normals,
+            self._emission,
+            np.ascontiguousarray(scene.two_sided_emission, dtype=np.bool_),
+            np.ascontiguousarray(scene.areas, dtype=np.float64),
+            self.point_position,
+            self.point_intensity,
+            self.point_axis,
+            np.ascontiguousarray(self.point_cones, dtype=np.float64),
+            np.ascontiguousarray(self.dir_to_light, dtype=np.float64),
+            self.dir_irradiance,
+        )
 
     def sample(self, p: np.ndarray, u_select: np.ndarray, u: np.ndarray) -> LightSample:
-        """Pick a light for each shading point p (N, 3) and a point or direction on it."""
+        """Pick a light for each shading point p (N, 3) and a point or direction on it: one compiled pass
+        over the rows, then the environment's rows and textured emission in NumPy (both are lookups into
+        images, and the environment is replaceable: `workers.models.prt.lighting`)."""
         n = len(p)
-        direction, distance = np.zeros((n, 3)), np.full(n, np.inf)
-        radiance, pdf, delta = np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
         if self.count == 0 or n == 0:
-            return LightSample(direction, distance, radiance, pdf, delta)
-        entry = np.minimum(np.searchsorted(self.cdf, u_select, side="right"), self.count - 1)
-        kind, which, select = self.kinds[entry], self.index[entry], self.prob[entry]
-
-        sel = select_where(kind == TRIANGLE)
-        if selection_size(sel, n):
-            tri = which[sel]
-            b = square_to_uniform_triangle(u[sel])
-            d = self._origin[tri] + b[:, :1] * self._edge1[tri] + b[:, 1:] * self._edge2[tri] - p[sel]
-            dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-            d /= np.maximum(dist, 1e-300)[:, None]
-            cos_l = -np.einsum("ij,ij->i", d, self._normals[tri])
-            facing = (cos_l > 0) | self.scene.two_sided_emission[tri]
-            cos_abs = np.abs(cos_l)
-            ok = facing & (cos_abs > 1e-12) & (dist > 0)
-            direction[sel], distance[sel] = d, dist
-            radiance[sel] = self._emission[tri] * ok[:, None]
-            if self.emission_scale is not None:
-                uvs = self.scene.uvs[tri].astype(np.float64)
-                uv = uvs[:, 0] + b[:, :1] * (uvs[:, 1] - uvs[:, 0]) + b[:, 1:] * (uvs[:, 2] - uvs[:, 0])
-                radiance[sel] *= self.emission_scale(self.scene.material_ids[tri], uv)
-            pdf[sel] = np.where(
-                ok, select[sel] / self.scene.areas[tri] * dist**2 / np.maximum(cos_abs, 1e-300), 0.0
+            return LightSample(
+                np.zeros((n, 3)), np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
             )
-
-        sel = select_where(kind == POINT)
-        if selection_size(sel, n):
-            d = self.point_position[which[sel]] - p[sel]
-            dist = np.linalg.norm(d, axis=1)
-            direction[sel] = d / np.maximum(dist, 1e-300)[:, None]
-            distance[sel] = dist
-            falloff = spot_falloff(
-                -np.einsum("ij,ij->i", direction[sel], self.point_axis[which[sel]]),
-                self.point_cones[which[sel]],
-            )
-            radiance[sel] = (
-                self.point_intensity[which[sel]] * (falloff / np.maximum(dist**2, 1e-300))[:, None]
-            )
-            pdf[sel], delta[sel] = select[sel], True
-
-        sel = select_where(kind == DIRECTIONAL)
-        if selection_size(sel, n):
-            direction[sel] = self.dir_to_light[which[sel]]
-            radiance[sel] = self.dir_irradiance[which[sel]]
-            pdf[sel], delta[sel] = select[sel], True
-
-        sel = select_where(kind == ENVIRONMENT)
-        if selection_size(sel, n):
-            d, env_pdf = self.environment.sample(u[sel])
-            direction[sel] = d
-            radiance[sel] = self.environment.radiance(d) * (env_pdf > 0)[:, None]
-            pdf[sel] = select[sel] * env_pdf
+        direction, distance, radiance, pdf, delta, kind, tri, b = _sample_lights(
+            np.ascontiguousarray(p, dtype=np.float64),
+            np.ascontiguousarray(u_select, dtype=np.float64),
+            np.ascontiguousarray(u, dtype=np.float64),
+            self._tables,
+        )
+        if self.environment is not None:
+            sel = np.flatnonzero(kind == ENVIRONMENT)
+            if len(sel):
+                d, env_pdf = self.environment.sample(u[sel])
+                direction[sel] = d
+                radiance[sel] = self.environment.radiance(d) * (env_pdf > 0)[:, None]
+                pdf[sel] *= env_pdf
+        if self.emission_scale is not None:
+            sel = np.flatnonzero(kind == TRIANGLE)
+            if len(sel):
+                uvs = self.scene.uvs[tri[sel]].astype(np.float64)
+                bs = b[sel]
+                uv = uvs[:, 0] + bs[:, :1] * (uvs[:, 1] - uvs[:, 0]) + bs[:, 1:] * (uvs[:, 2] - uvs[:, 0])
+                radiance[sel] *= self.emission_scale(self.scene.material_ids[tri[sel]], uv)
         return LightSample(direction, distance, radiance, pdf, delta)
 
     def pdf_hit_emitter(self, prim: np.ndarray, distance: np.ndarray, cos_light: np.ndarray) -> np.ndarray:
@@ -199,3 +197,84 @@ class LightSampler:
         if self.environment is None or self.env_prob == 0:
             return np.zeros(len(directions))
         return self.env_prob * self.environment.pdf(directions)
+
+
+class _LightTables(NamedTuple):
+    """The light list as the arrays `_sample_lights` reads (a tuple: one typed argument)."""
+
+    cdf: np.ndarray
+    kinds: np.ndarray
+    index: np.ndarray
+    prob: np.ndarray
+    tri_origin: np.ndarray
+    tri_edge1: np.ndarray
+    tri_edge2: np.ndarray
+    tri_normal: np.ndarray
+    tri_emission: np.ndarray
+    two_sided: np.ndarray
+    areas: np.ndarray
+    point_position: np.ndarray
+    point_intensity: np.ndarray
+    point_axis: np.ndarray
+    point_cones: np.ndarray
+    dir_to_light: np.ndarray
+    dir_irradiance: np.ndarray
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _sample_lights(p, u_select, u, lights):
+    """Triangle, point and directional light samples per row; environment rows get their selection
+    probability in `pdf` and are finished by the caller. Also returns per row the light kind, the
+    triangle and its barycentrics (for emission textures)."""
+    n = len(p)
+    direction, distance = np.zeros((n, 3)), np.full(n, np.inf)
+    radiance, pdf, delta = np.zeros((n, 3)), np.zeros(n), np.zeros(n, np.bool_)
+    kind, tri, bary = np.empty(n, np.int8), np.zeros(n, np.int64), np.zeros((n, 2))
+    cdf = lights.cdf
+    count = len(cdf)
+    for i in range(n):
+        entry = min(kernels.search_right(cdf, u_select[i]), count - 1)
+        k, which, select = lights.kinds[entry], lights.index[entry], lights.prob[entry]
+        kind[i] = k
+        if k == TRIANGLE:
+            u0, u1 = u[i, 0], u[i, 1]  # Heitz's low-distortion split
+            if u1 > u0:
+                b0, b1 = u0 / 2, u1 - u0 / 2
+            else:
+                b0, b1 = u0 - u1 / 2, u1 / 2
+            tri[i], bary[i, 0], bary[i, 1] = which, b0, b1
+            o, e1, e2 = lights.tri_origin[which], lights.tri_edge1[which], lights.tri_edge2[which]
+            dx = o[0] + b0 * e1[0] + b1 * e2[0] - p[i, 0]
+            dy = o[1] + b0 * e1[1] + b1 * e2[1] - p[i, 1]
+            dz = o[2] + b0 * e1[2] + b1 * e2[2] - p[i, 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            inv = 1.0 / max(dist, 1e-300)
+            dx, dy, dz = dx * inv, dy * inv, dz * inv
+            nrm = lights.tri_normal[which]
+            cos_l = -(dx * nrm[0] + dy * nrm[1] + dz * nrm[2])
+            direction[i, 0], direction[i, 1], direction[i, 2] = dx, dy, dz
+            distance[i] = dist
+            if (cos_l > 0 or lights.two_sided[which]) and abs(cos_l) > 1e-12 and dist > 0:
+                radiance[i] = lights.tri_emission[which]
+                pdf[i] = select / lights.areas[which] * dist * dist / max(abs(cos_l), 1e-300)
+        elif k == POINT:
+            pos = lights.point_position[which]
+            dx, dy, dz = pos[0] - p[i, 0], pos[1] - p[i, 1], pos[2] - p[i, 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            inv = 1.0 / max(dist, 1e-300)
+            dx, dy, dz = dx * inv, dy * inv, dz * inv
+            direction[i, 0], direction[i, 1], direction[i, 2] = dx, dy, dz
+            distance[i] = dist
+            axis, cones = lights.point_axis[which], lights.point_cones[which]
+            falloff = _falloff(-(dx * axis[0] + dy * axis[1] + dz * axis[2]), cones[0], cones[1])
+            scale = falloff / max(dist * dist, 1e-300)
+            for c in range(3):
+                radiance[i, c] = lights.point_intensity[which, c] * scale
+            pdf[i], delta[i] = select, True
+        elif k == DIRECTIONAL:
+            direction[i] = lights.dir_to_light[which]
+            radiance[i] = lights.dir_irradiance[which]
+            pdf[i], delta[i] = select, True
+        else:
+            pdf[i] = select
+    return direction, distance, radiance, pdf, delta, kind, tri, bary

@@ -3,23 +3,23 @@ f cos = F D G / (4 cos_o), sampled by visible normals (Heitz 2018), the weight t
 
 from __future__ import annotations
 
-import numpy as np
+from numba import njit
 
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, register_material
-from workers.render.microfacet import (
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.kernels import (
     ALPHA_MIN,
     ggx_d,
+    normalized,
     reflect,
-    sample_visible_normal,
     smith_g1,
+    visible_normal,
     visible_normal_pdf,
 )
-from workers.render.sampling import normalize
 from workers.scene import spec
 
 
 @register_material("conductor")
-class Conductor(BSDF):
+class Conductor(CompiledBSDF):
     delta_when_smooth = True
 
     def parameters(self, material: spec.Conductor) -> MaterialParameters:
@@ -27,25 +27,46 @@ class Conductor(BSDF):
             base=material.specular, alpha=material.roughness, roughness=material.roughness
         )
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        a = np.maximum(s.alpha, ALPHA_MIN)
-        valid = (wo[:, 2] > 0) & (wi[:, 2] > 0) & (s.alpha > 0)
-        h = normalize(wo + wi)
-        d = ggx_d(h, a)
-        g = smith_g1(wo, h, a) * smith_g1(wi, h, a)
-        f_cos = d * g / (4.0 * np.maximum(wo[:, 2], 1e-300))
-        wo_h = np.einsum("ij,ij->i", wo, h)
-        pdf = visible_normal_pdf(wo, h, a) / np.maximum(4.0 * wo_h, 1e-300)
-        return s.base * np.where(valid, f_cos, 0.0)[:, None], np.where(valid, pdf, 0.0)
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.base, s.alpha, wo, wi), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        a = np.maximum(s.alpha, ALPHA_MIN)
-        smooth = s.alpha <= 0
-        m = np.where(smooth[:, None], np.array([0.0, 0.0, 1.0]), sample_visible_normal(wo, a, u))
-        wi = reflect(wo, m)
-        valid = (wo[:, 2] > 0) & (wi[:, 2] > 0)
-        g1 = np.where(smooth, 1.0, smith_g1(wi, m, a))
-        wo_m = np.einsum("ij,ij->i", wo, m)
-        pdf = np.where(smooth, 0.0, visible_normal_pdf(wo, m, a) / np.maximum(4.0 * wo_m, 1e-300))
-        weight = s.base * np.where(valid, g1, 0.0)[:, None]
-        return wi, weight, np.where(valid, pdf, 0.0), smooth
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.base, s.alpha, wo, u), *out)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _eval(rows, base, alpha, wo, wi, f_cos, pdf):
+    for i in rows:
+        if not (wo[i, 2] > 0 and wi[i, 2] > 0 and alpha[i] > 0):
+            continue
+        a = max(alpha[i], ALPHA_MIN)
+        hx, hy, hz = normalized(wo[i, 0] + wi[i, 0], wo[i, 1] + wi[i, 1], wo[i, 2] + wi[i, 2])
+        wo_h = wo[i, 0] * hx + wo[i, 1] * hy + wo[i, 2] * hz
+        wi_h = wi[i, 0] * hx + wi[i, 1] * hy + wi[i, 2] * hz
+        g = smith_g1(wo[i, 2], wo_h, a) * smith_g1(wi[i, 2], wi_h, a)
+        value = ggx_d(hz, a) * g / (4.0 * max(wo[i, 2], 1e-300))
+        for c in range(3):
+            f_cos[i, c] = base[i, c] * value
+        pdf[i] = visible_normal_pdf(wo[i, 2], wo_h, hz, a) / max(4.0 * wo_h, 1e-300)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _sample(rows, base, alpha, wo, u, wi, weight, pdf, delta):
+    for i in rows:
+        a = max(alpha[i], ALPHA_MIN)
+        smooth = alpha[i] <= 0
+        delta[i] = smooth
+        if smooth:
+            mx, my, mz = 0.0, 0.0, 1.0
+        else:
+            mx, my, mz = visible_normal(wo[i, 0], wo[i, 1], wo[i, 2], a, u[i, 0], u[i, 1])
+        wx, wy, wz = reflect(wo[i, 0], wo[i, 1], wo[i, 2], mx, my, mz)
+        wi[i, 0], wi[i, 1], wi[i, 2] = wx, wy, wz
+        if not (wo[i, 2] > 0 and wz > 0):
+            continue
+        g1 = 1.0 if smooth else smith_g1(wz, wx * mx + wy * my + wz * mz, a)
+        for c in range(3):
+            weight[i, c] = base[i, c] * g1
+        if not smooth:
+            wo_m = wo[i, 0] * mx + wo[i, 1] * my + wo[i, 2] * mz
+            pdf[i] = visible_normal_pdf(wo[i, 2], wo_m, mz, a) / max(4.0 * wo_m, 1e-300)

@@ -3,81 +3,110 @@
 
 from __future__ import annotations
 
-import numpy as np
+from numba import njit
 
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, register_material
-from workers.render.microfacet import (
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.kernels import (
     ALPHA_MIN,
     fresnel_dielectric,
     ggx_d,
+    normalized,
     reflect,
-    sample_visible_normal,
+    scalar,
     smith_g1,
+    visible_normal,
     visible_normal_pdf,
 )
-from workers.render.sampling import normalize
 from workers.scene import spec
 
 
-def _frame(s: SurfaceBatch, wo):
-    """Mirror the problem so wo is in the upper hemisphere; eta is then (far side) / (wo's side)."""
-    side = np.where(wo[:, 2] >= 0, 1.0, -1.0)
-    eta = np.where(side > 0, s.ior, 1.0 / s.ior)
-    return side, eta
-
-
 @register_material("dielectric")
-class Dielectric(BSDF):
+class Dielectric(CompiledBSDF):
     two_sided = False
     delta_when_smooth = True
 
     def parameters(self, material: spec.Dielectric) -> MaterialParameters:
         return MaterialParameters(alpha=material.roughness, ior=material.ior, roughness=material.roughness)
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        a = np.maximum(s.alpha, ALPHA_MIN)
-        side, eta = _frame(s, wo)
-        wo_f, wi_f = wo * side[:, None], wi * side[:, None]
-        reflection = wi_f[:, 2] > 0
-        h = np.where(reflection[:, None], wo_f + wi_f, wo_f + eta[:, None] * wi_f)
-        h = normalize(h) * np.where(h[:, 2] < 0, -1.0, 1.0)[:, None]
-        wo_h = np.einsum("ij,ij->i", wo_f, h)
-        wi_h = np.einsum("ij,ij->i", wi_f, h)
-        f, _, _ = fresnel_dielectric(wo_h, np.ones_like(eta) * eta)
-        d = ggx_d(h, a)
-        g = smith_g1(wo_f, h, a) * smith_g1(wi_f, h, a)
-        pdf_m = visible_normal_pdf(wo_f, h, a)
-        cos_o = np.maximum(wo_f[:, 2], 1e-300)
-        denom = np.maximum((wo_h + eta * wi_h) ** 2, 1e-300)
-        r_fcos = f * d * g / (4.0 * cos_o)
-        r_pdf = f * pdf_m / np.maximum(4.0 * wo_h, 1e-300)
-        t_fcos = np.abs(wi_h * wo_h) * (1.0 - f) * g * d / (cos_o * denom)
-        t_pdf = (1.0 - f) * pdf_m * eta * eta * np.abs(wi_h) / denom
-        valid = (s.alpha > 0) & (wo_h > 0) & np.where(reflection, wi_h > 0, wi_h < 0) & (wo_f[:, 2] > 0)
-        f_cos = np.where(reflection, r_fcos, t_fcos)
-        pdf = np.where(reflection, r_pdf, t_pdf)
-        return np.where(valid, f_cos, 0.0)[:, None] * np.ones((1, 3)), np.where(valid, pdf, 0.0)
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.alpha, s.ior, wo, wi), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        a = np.maximum(s.alpha, ALPHA_MIN)
-        smooth = s.alpha <= 0
-        side, eta = _frame(s, wo)
-        wo_f = wo * side[:, None]
-        m = np.where(smooth[:, None], np.array([0.0, 0.0, 1.0]), sample_visible_normal(wo_f, a, u))
-        wo_m = np.einsum("ij,ij->i", wo_f, m)
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.alpha, s.ior, wo, u, uc), *out)
+
+
+@scalar
+def _eval_one(alpha, ior, wo, wi):
+    """(f |cos wi|, pdf) of one rough interface for rows wo, wi. The problem is mirrored so wo is in the upper
+    hemisphere; eta is then (far side) / (wo's side)."""
+    if alpha <= 0:
+        return 0.0, 0.0
+    a = max(alpha, ALPHA_MIN)
+    side = 1.0 if wo[2] >= 0 else -1.0
+    eta = ior if side > 0 else 1.0 / ior
+    ox, oy, oz, ix, iy, iz = (
+        wo[0] * side,
+        wo[1] * side,
+        wo[2] * side,
+        wi[0] * side,
+        wi[1] * side,
+        wi[2] * side,
+    )
+    reflection = iz > 0
+    scale = 1.0 if reflection else eta
+    hx, hy, hz = ox + scale * ix, oy + scale * iy, oz + scale * iz
+    flip = -1.0 if hz < 0 else 1.0
+    hx, hy, hz = normalized(hx, hy, hz)
+    hx, hy, hz = hx * flip, hy * flip, hz * flip
+    wo_h = ox * hx + oy * hy + oz * hz
+    wi_h = ix * hx + iy * hy + iz * hz
+    if not (wo_h > 0 and oz > 0 and ((wi_h > 0) if reflection else (wi_h < 0))):
+        return 0.0, 0.0
+    f = fresnel_dielectric(wo_h, eta)[0]
+    d = ggx_d(hz, a)
+    g = smith_g1(oz, wo_h, a) * smith_g1(iz, wi_h, a)
+    pdf_m = visible_normal_pdf(oz, wo_h, hz, a)
+    cos_o = max(oz, 1e-300)
+    if reflection:
+        return f * d * g / (4.0 * cos_o), f * pdf_m / max(4.0 * wo_h, 1e-300)
+    denom = max((wo_h + eta * wi_h) ** 2, 1e-300)
+    t_fcos = abs(wi_h * wo_h) * (1.0 - f) * g * d / (cos_o * denom)
+    return t_fcos, (1.0 - f) * pdf_m * eta * eta * abs(wi_h) / denom
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _eval(rows, alpha, ior, wo, wi, f_cos, pdf):
+    for i in rows:
+        value, pdf[i] = _eval_one(alpha[i], ior[i], wo[i], wi[i])
+        f_cos[i, 0] = f_cos[i, 1] = f_cos[i, 2] = value
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _sample(rows, alpha, ior, wo, u, uc, wi, weight, pdf, delta):
+    for i in rows:
+        a = max(alpha[i], ALPHA_MIN)
+        smooth = alpha[i] <= 0
+        delta[i] = smooth
+        side = 1.0 if wo[i, 2] >= 0 else -1.0
+        eta = ior[i] if side > 0 else 1.0 / ior[i]
+        ox, oy, oz = wo[i, 0] * side, wo[i, 1] * side, wo[i, 2] * side
+        if smooth:
+            mx, my, mz = 0.0, 0.0, 1.0
+        else:
+            mx, my, mz = visible_normal(ox, oy, oz, a, u[i, 0], u[i, 1])
+        wo_m = ox * mx + oy * my + oz * mz
         f, cos_t, eta_ti = fresnel_dielectric(wo_m, eta)
-        choose_r = uc < f
-        wi_r = reflect(wo_f, m)
-        wi_t = (eta_ti * wo_m + cos_t)[:, None] * m - eta_ti[:, None] * wo_f
-        wi_f = np.where(choose_r[:, None], wi_r, normalize(wi_t))
-        valid = np.where(choose_r, wi_f[:, 2] > 0, wi_f[:, 2] < 0) & (wo_m > 0)
-        g1 = np.where(smooth, 1.0, smith_g1(wi_f, m, a))
-        weight = g1 * np.where(choose_r, 1.0, eta_ti * eta_ti)
-        _, pdf = self.eval(s, wo, wi_f * side[:, None])
-        pdf = np.where(smooth, 0.0, pdf)
-        return (
-            wi_f * side[:, None],
-            (weight * valid)[:, None] * np.ones((1, 3)),
-            np.where(valid, pdf, 0.0),
-            smooth,
-        )
+        choose_r = uc[i] < f
+        if choose_r:
+            ix, iy, iz = reflect(ox, oy, oz, mx, my, mz)
+        else:
+            c = eta_ti * wo_m + cos_t
+            ix, iy, iz = normalized(c * mx - eta_ti * ox, c * my - eta_ti * oy, c * mz - eta_ti * oz)
+        wi[i, 0], wi[i, 1], wi[i, 2] = ix * side, iy * side, iz * side
+        if not (((iz > 0) if choose_r else (iz < 0)) and wo_m > 0):
+            continue
+        g1 = 1.0 if smooth else smith_g1(iz, ix * mx + iy * my + iz * mz, a)
+        w = g1 * (1.0 if choose_r else eta_ti * eta_ti)
+        weight[i, 0] = weight[i, 1] = weight[i, 2] = w
+        if not smooth:
+            pdf[i] = _eval_one(alpha[i], ior[i], wo[i], wi[i])[1]

@@ -26,18 +26,11 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
-from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, register_material
-from workers.render.microfacet import (
-    ALPHA_MIN,
-    fresnel_dielectric,
-    ggx_d,
-    reflect,
-    sample_visible_normal,
-    smith_g1,
-    visible_normal_pdf,
-)
-from workers.render.sampling import INV_PI, normalize, square_to_cosine_hemisphere
+from workers.render import kernels as k
+from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.microfacet import fresnel_dielectric, reflect, sample_visible_normal, smith_g1
 from workers.scene import spec
 
 TABLE_COSINES = np.linspace(0.0, 1.0, 64)  # Mitsuba's MI_ROUGH_TRANSMITTANCE_RES nodes
@@ -45,16 +38,12 @@ TABLE_COSINES = np.linspace(0.0, 1.0, 64)  # Mitsuba's MI_ROUGH_TRANSMITTANCE_RE
 
 @dataclass(frozen=True)
 class Coat:
-    """A coat's transmittance from outside (smooth: None, i.e. 1 - F) and its internal reflectance."""
+    """A coat's transmittance from outside at `TABLE_COSINES` (smooth: None, i.e. 1 - F) and its internal
+    reflectance."""
 
     ior: float
     transmittance_table: np.ndarray | None
     internal_reflectance: float
-
-    def transmittance(self, cos: np.ndarray) -> np.ndarray:
-        if self.transmittance_table is None:
-            return 1.0 - fresnel_dielectric(cos, np.full(len(cos), self.ior))[0]
-        return np.interp(cos, TABLE_COSINES, self.transmittance_table)
 
 
 def _visible_normal_average(alpha: float, eta: float, cosines: np.ndarray, *, refract: bool, nodes: int):
@@ -94,76 +83,114 @@ def coat(alpha: float, ior: float) -> Coat:
     return Coat(ior, table, float(2.0 * np.mean(inside * cosines)))
 
 
-def _coat_groups(s: SurfaceBatch):
-    """(coat, row mask) for each (alpha, ior) present: one pass per coat, as a scene has few of them."""
-    todo = np.ones(len(s.alpha), bool)
+def _coats(s: SurfaceBatch, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of the batch the index of its coat (set on `rows`), and per coat its transmittance table and
+    internal reflectance; one pass per (alpha, ior) present, as a scene has few of them."""
+    index = np.zeros(len(s.alpha), np.int64)
+    tables, internal = [], []
+    todo = np.zeros(len(s.alpha), bool)
+    todo[rows] = True
     while todo.any():
         first = int(np.argmax(todo))
         rows = todo & (s.alpha == s.alpha[first]) & (s.ior == s.ior[first])
         todo &= ~rows
-        yield coat(float(s.alpha[first]), float(s.ior[first])), rows
-
-
-def _coat_response(s: SurfaceBatch, *cosines: np.ndarray):
-    """Per row: the coat's transmittance at each of `cosines`, and its internal reflectance."""
-    transmittances = [np.empty(len(s.alpha)) for _ in cosines]
-    internal = np.empty(len(s.alpha))
-    for c, rows in _coat_groups(s):
-        for t, cos in zip(transmittances, cosines, strict=True):
-            t[rows] = c.transmittance(cos[rows])
-        internal[rows] = c.internal_reflectance
-    return transmittances, internal
-
-
-def _spec_probability(s: SurfaceBatch, t_o: np.ndarray) -> np.ndarray:
-    diffuse_weight = t_o * s.base.mean(axis=1)
-    return np.clip((1.0 - t_o) / np.maximum(1.0 - t_o + diffuse_weight, 1e-12), 0.05, 1.0)
-
-
-def _coat_eval(s: SurfaceBatch, wo, wi):
-    """Rough coat: f*cos and its VNDF pdf (zero for the smooth coat, which is delta)."""
-    a = np.maximum(s.alpha, ALPHA_MIN)
-    h = normalize(wo + wi)
-    wo_h = np.einsum("ij,ij->i", wo, h)
-    f, _, _ = fresnel_dielectric(wo_h, s.ior)
-    g = smith_g1(wo, h, a) * smith_g1(wi, h, a)
-    f_cos = f * ggx_d(h, a) * g / (4.0 * np.maximum(wo[:, 2], 1e-300))
-    pdf = visible_normal_pdf(wo, h, a) / np.maximum(4.0 * wo_h, 1e-300)
-    rough = s.alpha > 0
-    return np.where(rough, f_cos, 0.0), np.where(rough, pdf, 0.0)
+        c = coat(float(s.alpha[first]), float(s.ior[first]))
+        index[rows] = len(tables)
+        smooth = c.transmittance_table is None  # the kernels compute 1 - F instead
+        tables.append(np.zeros(len(TABLE_COSINES)) if smooth else c.transmittance_table)
+        internal.append(c.internal_reflectance)
+    return index, np.array(tables).reshape(-1, len(TABLE_COSINES)), np.array(internal)
 
 
 @register_material("plastic")
-class Plastic(BSDF):
+class Plastic(CompiledBSDF):
     def parameters(self, material: spec.Plastic) -> MaterialParameters:
         return MaterialParameters(
             base=material.diffuse, alpha=material.roughness, ior=material.ior, roughness=material.roughness
         )
 
-    def eval(self, s: SurfaceBatch, wo, wi):
-        valid = (wo[:, 2] > 0) & (wi[:, 2] > 0)
-        cos_o, cos_i = np.clip(wo[:, 2], 0.0, 1.0), np.clip(wi[:, 2], 0.0, 1.0)
-        (t_o, t_i), internal = _coat_response(s, cos_o, cos_i)
-        spec_f, spec_pdf = _coat_eval(s, wo, wi)
-        base_f = s.base * (t_o * t_i * cos_i * INV_PI / ((1.0 - internal) * s.ior**2))[:, None]
-        p_spec = _spec_probability(s, t_o)
-        pdf = p_spec * spec_pdf + (1.0 - p_spec) * cos_i * INV_PI
-        return (spec_f[:, None] + base_f) * valid[:, None], np.where(valid, pdf, 0.0)
+    def eval_kernel(self, s: SurfaceBatch, wo, wi, rows, out):
+        _eval(rows, *contiguous(s.base, s.alpha, s.ior, wo, wi), *_coats(s, rows), *out)
 
-    def sample(self, s: SurfaceBatch, wo, u, uc):
-        a = np.maximum(s.alpha, ALPHA_MIN)
-        smooth = s.alpha <= 0
-        (t_o,), _ = _coat_response(s, np.clip(wo[:, 2], 0.0, 1.0))
-        p_spec = _spec_probability(s, t_o)
-        choose_spec = uc < p_spec
-        m = np.where(smooth[:, None], np.array([0.0, 0.0, 1.0]), sample_visible_normal(wo, a, u))
-        wi = np.where(choose_spec[:, None], reflect(wo, m), square_to_cosine_hemisphere(u))
-        valid = (wo[:, 2] > 0) & (wi[:, 2] > 0)
-        delta = smooth & choose_spec
-        # Smooth coat, specular chosen: the delta lobe alone, F / p_spec (F = 1 - T for a smooth coat).
-        delta_weight = ((1.0 - t_o) / p_spec)[:, None] * np.ones((1, 3))
+    def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
+        _sample(rows, *contiguous(s.base, s.alpha, s.ior, wo, u, uc), *_coats(s, rows), *out)
+
+
+@k.scalar
+def _transmittance(cos, alpha, ior, table):
+    """The coat's transmittance at `cos` in [0, 1]: 1 - F when smooth, else the table read linearly."""
+    if alpha <= 0:
+        return 1.0 - k.fresnel_dielectric(cos, ior)[0]
+    x = cos * (len(table) - 1)
+    j = min(int(x), len(table) - 2)
+    return table[j] + (x - j) * (table[j + 1] - table[j])
+
+
+@k.scalar
+def _spec_probability(t_o, base_mean):
+    return min(max((1.0 - t_o) / max(1.0 - t_o + t_o * base_mean, 1e-12), 0.05), 1.0)
+
+
+@k.scalar
+def _eval_one(base, alpha, ior, table, internal, ox, oy, oz, ix, iy, iz, f_cos):
+    """Writes f |cos wi| (3) into `f_cos` and returns the pdf, for one row with wo.z, wi.z > 0."""
+    cos_o, cos_i = min(oz, 1.0), min(iz, 1.0)
+    t_o = _transmittance(cos_o, alpha, ior, table)
+    t_i = _transmittance(cos_i, alpha, ior, table)
+    spec_f, spec_pdf = 0.0, 0.0
+    if alpha > 0:  # the rough coat (Walter et al. 2007); a smooth one is delta
+        a = max(alpha, k.ALPHA_MIN)
+        hx, hy, hz = k.normalized(ox + ix, oy + iy, oz + iz)
+        wo_h = ox * hx + oy * hy + oz * hz
+        wi_h = ix * hx + iy * hy + iz * hz
+        f = k.fresnel_dielectric(wo_h, ior)[0]
+        g = k.smith_g1(oz, wo_h, a) * k.smith_g1(iz, wi_h, a)
+        spec_f = f * k.ggx_d(hz, a) * g / (4.0 * max(oz, 1e-300))
+        spec_pdf = k.visible_normal_pdf(oz, wo_h, hz, a) / max(4.0 * wo_h, 1e-300)
+    diffuse = t_o * t_i * cos_i * k.INV_PI / ((1.0 - internal) * ior * ior)
+    for c in range(3):
+        f_cos[c] = spec_f + base[c] * diffuse
+    p_spec = _spec_probability(t_o, (base[0] + base[1] + base[2]) / 3.0)
+    return p_spec * spec_pdf + (1.0 - p_spec) * cos_i * k.INV_PI
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _eval(rows, base, alpha, ior, wo, wi, coat_index, tables, internal, f_cos, pdf):
+    for i in rows:
+        if wo[i, 2] > 0 and wi[i, 2] > 0:
+            j = coat_index[i]
+            pdf[i] = _eval_one(
+                base[i], alpha[i], ior[i], tables[j], internal[j], wo[i, 0], wo[i, 1], wo[i, 2],
+                wi[i, 0], wi[i, 1], wi[i, 2], f_cos[i],
+            )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _sample(rows, base, alpha, ior, wo, u, uc, coat_index, tables, internal, wi, weight, pdf, delta):
+    f_cos = np.empty(3)
+    for i in rows:
+        j = coat_index[i]
+        ox, oy, oz = wo[i, 0], wo[i, 1], wo[i, 2]
+        t_o = _transmittance(min(max(oz, 0.0), 1.0), alpha[i], ior[i], tables[j])
+        p_spec = _spec_probability(t_o, (base[i, 0] + base[i, 1] + base[i, 2]) / 3.0)
+        choose_spec = uc[i] < p_spec
+        smooth = alpha[i] <= 0
+        if choose_spec:
+            if smooth:
+                mx, my, mz = 0.0, 0.0, 1.0
+            else:
+                mx, my, mz = k.visible_normal(ox, oy, oz, max(alpha[i], k.ALPHA_MIN), u[i, 0], u[i, 1])
+            ix, iy, iz = k.reflect(ox, oy, oz, mx, my, mz)
+        else:
+            ix, iy, iz = k.cosine_hemisphere(u[i, 0], u[i, 1])
+        wi[i, 0], wi[i, 1], wi[i, 2] = ix, iy, iz
+        delta[i] = smooth and choose_spec
+        if not (oz > 0 and iz > 0):
+            continue
+        if delta[i]:  # the smooth coat's delta lobe alone: F / p_spec, with F = 1 - T
+            weight[i, 0] = weight[i, 1] = weight[i, 2] = (1.0 - t_o) / p_spec
+            continue
         # Otherwise the one-sample MIS mixture of both lobes.
-        f_cos, pdf = self.eval(s, wo, wi)
-        mixture_weight = f_cos / np.maximum(pdf, 1e-300)[:, None]
-        weight = np.where(delta[:, None], delta_weight, mixture_weight) * valid[:, None]
-        return wi, weight, np.where(valid & ~delta, pdf, 0.0), delta
+        pdf[i] = _eval_one(base[i], alpha[i], ior[i], tables[j], internal[j], ox, oy, oz, ix, iy, iz, f_cos)
+        for c in range(3):
+            weight[i, c] = f_cos[c] / max(pdf[i], 1e-300)

@@ -1,0 +1,267 @@
+"""The path tracer's per-bounce work between Embree calls, as compiled kernels over wavefront arrays.
+
+Each kernel is one pass over the live paths doing what took a dozen NumPy operations (and as many
+temporary (N, 3) arrays): surface points from hits, emission with its MIS weight, shading frames,
+shadow rays of next-event estimation, and the next segment's rays with Russian roulette and compaction.
+BSDFs and light selection are compiled in their own modules (`workers.render.bsdfs`,
+`workers.render.lights`); what stays in NumPy is what varies by plugin (textures, environment maps,
+aggregates, observers).
+
+Precision (`workers.render.kernels`): float64 arithmetic and arrays; Embree receives float32 rays.
+Kernels are serial, `nogil=True`: the renderer's threads run one work item each, and a kernel's result
+depends only on its inputs, so images are identical for a seed whatever the thread count.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from workers.render import kernels as k
+
+RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
+
+kernel = njit(cache=True, nogil=True, fastmath=False)
+
+
+@k.scalar
+def _offset(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
+    """A ray origin moved off the surface along ng, to the side `d` leaves by (no self-hits). The
+    distance is relative to `scale`: Embree works in float32, so its errors grow with the coordinates."""
+    eps = RAY_OFFSET * max(scale, 1e-30)
+    side = eps if dx * nx + dy * ny + dz * nz >= 0 else -eps
+    return px + nx * side, py + ny * side, pz + nz * side
+
+
+@kernel
+def offset_origins(position, ng, direction, scale):
+    """`_offset` per row; `scale` (N,) is the coordinate magnitude of each point's triangle."""
+    out = np.empty_like(position)
+    for i in range(len(position)):
+        p, n, d = position[i], ng[i], direction[i]
+        out[i, 0], out[i, 1], out[i, 2] = _offset(
+            p[0], p[1], p[2], n[0], n[1], n[2], d[0], d[1], d[2], scale[i]
+        )
+    return out
+
+
+@kernel
+def surface_points(o, d, t, prim, bu, bv, tri_ng, tri_ns, smooth, tri_uv, coordinate_scale, need_uv):
+    """Per hit: position o + t d, geometric normal, shading normal (interpolated on smooth triangles),
+    UV (when `need_uv`, else 0) and the coordinate magnitude for ray offsets."""
+    n = len(o)
+    position, ng, ns = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    uv, scale = np.zeros((n, 2)), np.empty(n)
+    for i in range(n):
+        tri = prim[i]
+        magnitude = coordinate_scale[tri]
+        for c in range(3):
+            position[i, c] = o[i, c] + t[i] * d[i, c]
+            ng[i, c] = tri_ng[tri, c]
+            magnitude = max(magnitude, abs(position[i, c]))
+        scale[i] = magnitude
+        b1, b2 = np.float64(bu[i]), np.float64(bv[i])
+        b0 = 1.0 - b1 - b2
+        if smooth[tri]:
+            sx = b0 * tri_ns[tri, 0, 0] + b1 * tri_ns[tri, 1, 0] + b2 * tri_ns[tri, 2, 0]
+            sy = b0 * tri_ns[tri, 0, 1] + b1 * tri_ns[tri, 1, 1] + b2 * tri_ns[tri, 2, 1]
+            sz = b0 * tri_ns[tri, 0, 2] + b1 * tri_ns[tri, 1, 2] + b2 * tri_ns[tri, 2, 2]
+            length = max(math.sqrt(sx * sx + sy * sy + sz * sz), 1e-300)
+            ns[i, 0], ns[i, 1], ns[i, 2] = sx / length, sy / length, sz / length
+        else:
+            ns[i] = ng[i]
+        if need_uv:
+            for c in range(2):
+                uv[i, c] = b0 * tri_uv[tri, 0, c] + b1 * tri_uv[tri, 1, c] + b2 * tri_uv[tri, 2, c]
+    return position, ng, ns, uv, scale
+
+
+@kernel
+def emitted_radiance(prim, d, ng, emission, two_sided):
+    """Radiance the hit triangles emit back along the rays `d` (front faces, or both sides)."""
+    n = len(prim)
+    out = np.zeros((n, 3))
+    for i in range(n):
+        tri = prim[i]
+        if two_sided[tri] or -(d[i, 0] * ng[i, 0] + d[i, 1] * ng[i, 1] + d[i, 2] * ng[i, 2]) > 0:
+            out[i] = emission[tri]
+    return out
+
+
+@kernel
+def add_emitter_hits(radiance, idx, beta, emitted, prim, t, d, ng, area_pdf, prev_pdf, prev_delta):
+    """Add the emission the paths' rays hit, weighted by MIS against light sampling (power heuristic),
+    whose pdf of the same point is area_pdf t^2 / |cos| (fully after delta scattering)."""
+    for i in range(len(idx)):
+        if max(emitted[i, 0], emitted[i, 1], emitted[i, 2]) <= 0:
+            continue
+        weight = 1.0
+        if not prev_delta[i]:
+            cos = d[i, 0] * ng[i, 0] + d[i, 1] * ng[i, 1] + d[i, 2] * ng[i, 2]
+            pdf_light = area_pdf[prim[i]] * t[i] * t[i] / max(abs(cos), 1e-300)
+            weight = k.power_heuristic(prev_pdf[i], pdf_light)
+        for c in range(3):
+            radiance[idx[i], c] += beta[i, c] * emitted[i, c] * weight
+
+
+@kernel
+def shading_frames(d, ns, two_sided):
+    """Frames (s, t, n) around the shading normals, flipped towards the viewer on two-sided surfaces, and
+    wo = -d in them."""
+    m = len(d)
+    fs, ft, nn, wo = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    for i in range(m):
+        nx, ny, nz = ns[i, 0], ns[i, 1], ns[i, 2]
+        ox, oy, oz = -d[i, 0], -d[i, 1], -d[i, 2]
+        if two_sided[i] and ox * nx + oy * ny + oz * nz < 0:
+            nx, ny, nz = -nx, -ny, -nz
+        s, t = k.frame(nx, ny, nz)
+        fs[i, 0], fs[i, 1], fs[i, 2] = s
+        ft[i, 0], ft[i, 1], ft[i, 2] = t
+        nn[i, 0], nn[i, 1], nn[i, 2] = nx, ny, nz
+        wo[i, 0] = ox * s[0] + oy * s[1] + oz * s[2]
+        wo[i, 1] = ox * t[0] + oy * t[1] + oz * t[2]
+        wo[i, 2] = ox * nx + oy * ny + oz * nz
+    return fs, ft, nn, wo
+
+
+@kernel
+def to_local_rows(rows, v, fs, ft, ns):
+    """World vectors `v` (one per entry of `rows`) in the frames of `rows`."""
+    out = np.empty((len(rows), 3))
+    for j in range(len(rows)):
+        i = rows[j]
+        for c, axis in enumerate((fs, ft, ns)):
+            out[j, c] = v[j, 0] * axis[i, 0] + v[j, 1] * axis[i, 1] + v[j, 2] * axis[i, 2]
+    return out
+
+
+@kernel
+def shadow_rays(rows, beta, f_cos, bsdf_pdf, lights, position, ng, scale):
+    """Next-event estimation at `rows` with the light samples `lights` (direction, distance, radiance,
+    pdf, delta; one per row): the MIS-weighted contribution beta f |cos| L w / pdf, and for the rows where
+    it is positive (`live`, indices into `rows`) a shadow ray stopping short of the light. Also returns
+    w / pdf per sample (0 where the pdf is)."""
+    direction, distance, light_radiance, light_pdf, light_delta = lights
+    m = len(rows)
+    light_scale = np.zeros(m)
+    contribution = np.empty((m, 3))
+    live = np.empty(m, np.int64)
+    origin, t_max = np.empty((m, 3)), np.empty(m)
+    count = 0
+    for j in range(m):
+        i = rows[j]
+        if light_pdf[j] > 0:
+            mis = 1.0 if light_delta[j] else k.power_heuristic(light_pdf[j], bsdf_pdf[j])
+            light_scale[j] = mis / max(light_pdf[j], 1e-300)
+        largest = 0.0
+        for c in range(3):
+            value = beta[i, c] * f_cos[j, c] * light_radiance[j, c] * light_scale[j]
+            contribution[count, c] = value
+            largest = max(largest, value)
+        if not largest > 0:
+            continue
+        p, n, dr = position[i], ng[i], direction[j]
+        origin[count, 0], origin[count, 1], origin[count, 2] = _offset(
+            p[0], p[1], p[2], n[0], n[1], n[2], dr[0], dr[1], dr[2], scale[i]
+        )
+        dist = distance[j]
+        t_max[count] = dist * (1 - 1e-5) - 2 * RAY_OFFSET * scale[i] if math.isfinite(dist) else math.inf
+        live[count] = j
+        count += 1
+    return live[:count], contribution[:count], origin[:count], t_max[:count], light_scale
+
+
+@kernel
+def add_unblocked(radiance, idx, contribution, blocked):
+    """radiance[idx] += contribution where the shadow ray is not blocked."""
+    for j in range(len(idx)):
+        if not blocked[j]:
+            for c in range(3):
+                radiance[idx[j], c] += contribution[j, c]
+
+
+@k.scalar
+def _roulette(beta, u):
+    """Russian roulette's factor for a path of throughput `beta` (3,) and uniform u: survive with
+    probability q = min(max(beta), 0.95), then scale by 1 / q; 0 for a terminated path."""
+    q = min(max(beta[0], beta[1], beta[2]), 0.95)
+    return 1.0 / max(q, 1e-300) if u < q else 0.0
+
+
+@kernel
+def roulette(beta, u):
+    """Russian roulette on whole paths (in place on `beta`); the rows that survive with a throughput > 0."""
+    keep = np.empty(len(beta), np.int64)
+    count = 0
+    for i in range(len(beta)):
+        factor = _roulette(beta[i], u[i])
+        for c in range(3):
+            beta[i, c] *= factor
+        if max(beta[i, 0], beta[i, 1], beta[i, 2]) > 0:
+            keep[count] = i
+            count += 1
+    return keep[:count]
+
+
+@kernel
+def next_paths(idx, beta, sampled, frames, position, ng, scale, u_roulette, use_roulette):
+    """The paths that continue from surface points: BSDF samples `sampled` (wi local, weight, pdf, delta)
+    turned to world rays offset off the surface, throughput times weight, Russian roulette where
+    `use_roulette`, and only the paths whose throughput stays > 0, compacted.
+    Returns (idx, origin, direction, beta, pdf, delta) of those."""
+    wi, weight, pdf, delta = sampled
+    fs, ft, ns = frames
+    n = len(idx)
+    out_idx, out_o, out_d = np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3))
+    out_beta, out_pdf, out_delta = np.empty((n, 3)), np.empty(n), np.empty(n, np.bool_)
+    count = 0
+    b = np.empty(3)
+    for i in range(n):
+        for c in range(3):
+            b[c] = beta[i, c] * weight[i, c]
+        if use_roulette:
+            factor = _roulette(b, u_roulette[i])
+            for c in range(3):
+                b[c] *= factor
+        if not max(b[0], b[1], b[2]) > 0:
+            continue
+        x, y, z = wi[i, 0], wi[i, 1], wi[i, 2]
+        dx = x * fs[i, 0] + y * ft[i, 0] + z * ns[i, 0]
+        dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
+        dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
+        p, nrm = position[i], ng[i]
+        out_o[count, 0], out_o[count, 1], out_o[count, 2] = _offset(
+            p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
+        )
+        out_d[count, 0], out_d[count, 1], out_d[count, 2] = dx, dy, dz
+        out_beta[count] = b
+        out_idx[count], out_pdf[count], out_delta[count] = idx[i], pdf[i], delta[i]
+        count += 1
+    return (
+        out_idx[:count],
+        out_o[:count],
+        out_d[:count],
+        out_beta[:count],
+        out_pdf[:count],
+        out_delta[:count],
+    )
+
+
+@kernel
+def take_paths(rows, paths):
+    """The wavefront arrays (idx, o, d, beta, prev_pdf, prev_delta, t_min, spread) at `rows`, in one pass."""
+    idx, o, d, beta, prev_pdf, prev_delta, t_min, spread = paths
+    m = len(rows)
+    out_o, out_d, out_beta = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    out_idx, out_pdf, out_delta = np.empty(m, np.int64), np.empty(m), np.empty(m, np.bool_)
+    out_t_min, out_spread = np.empty(m), np.empty(m)
+    for j in range(m):
+        i = rows[j]
+        for c in range(3):
+            out_o[j, c], out_d[j, c], out_beta[j, c] = o[i, c], d[i, c], beta[i, c]
+        out_idx[j], out_pdf[j], out_delta[j] = idx[i], prev_pdf[i], prev_delta[i]
+        out_t_min[j], out_spread[j] = t_min[i], spread[i]
+    return out_idx, out_o, out_d, out_beta, out_pdf, out_delta, out_t_min, out_spread
