@@ -6,9 +6,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from workers.render import kernels
+from workers.render.jit import njit
 from workers.render.sampling import luminance, square_to_uniform_sphere
 
 kernel = njit(cache=True, nogil=True, fastmath=False)

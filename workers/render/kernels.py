@@ -11,15 +11,15 @@ Conventions are those of the NumPy helpers of `workers.render.sampling` and `wor
 Compiled with `cache=True` (paid once per machine) and `fastmath=False`, so results do not depend on
 how the compiler vectorises a loop, and `nogil=True` kernels run in parallel from the renderer's threads.
 Numba's on-disk cache checks only the timestamp of the file a kernel is defined in, not of the functions
-it inlines from here: after editing this module, delete the `__pycache__/*.nbi|*.nbc` files of
-`workers/render` (or touch the modules whose kernels use it).
+it inlines from here; `workers.render.jit` keys the whole cache on every kernel source, so an edit here
+recompiles its users.
 """
 
 from __future__ import annotations
 
 import math
 
-from numba import njit
+from workers.render.jit import njit
 
 INV_PI = 1.0 / math.pi
 ALPHA_MIN = 1e-4  # as `workers.render.microfacet.ALPHA_MIN`

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from workers.render import kernels
 from workers.render.environment import ConstantEnvironment, EnvironmentMapLight
+from workers.render.jit import njit
 from workers.render.sampling import luminance, normalize
 from workers.scene import spec
 from workers.scene.compile import CompiledScene

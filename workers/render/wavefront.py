@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from workers.render import kernels as k
+from workers.render.jit import njit
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
 

@@ -17,7 +17,8 @@ mathematics per point in registers:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from workers.render.jit import njit
 
 TINY = 1e-300
 NEWTON_TOLERANCE = 1e-13

@@ -21,7 +21,9 @@ from enum import IntEnum
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from workers.render.jit import njit
 
 # OpenMP or TBB: both may be entered from several Python threads at once (an inference server's pool);
 # numba's fallback "workqueue" layer aborts the process when that happens.

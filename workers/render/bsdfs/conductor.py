@@ -3,9 +3,8 @@ f cos = F D G / (4 cos_o), sampled by visible normals (Heitz 2018), the weight t
 
 from __future__ import annotations
 
-from numba import njit
-
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.jit import njit
 from workers.render.kernels import (
     ALPHA_MIN,
     ggx_d,

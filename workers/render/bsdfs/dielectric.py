@@ -3,9 +3,8 @@
 
 from __future__ import annotations
 
-from numba import njit
-
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.jit import njit
 from workers.render.kernels import (
     ALPHA_MIN,
     fresnel_dielectric,

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
 
 from workers.render import kernels as k
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
+from workers.render.jit import njit
 from workers.render.microfacet import fresnel_dielectric, reflect, sample_visible_normal, smith_g1
 from workers.scene import spec
 
