@@ -83,3 +83,25 @@ def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, 
 
 def reflect(wo: np.ndarray, m: np.ndarray) -> np.ndarray:
     return 2.0 * np.einsum("ij,ij->i", wo, m)[:, None] * m - wo
+
+
+def single_scattering_albedo(alpha: float, eta: float, cosines: np.ndarray, *, refract: bool, nodes: int):
+    """Per cosine, E over visible normals m of G1(w, m) times F (reflection) or 1 - F (refraction), w the
+    reflected or refracted direction: the energy a single scattering sends back up or through. Gauss-Legendre
+    over the sampler's unit square; `eta` is the far side's index over the near side's."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    u = np.stack(np.meshgrid(0.5 * x + 0.5, 0.5 * x + 0.5), axis=-1).reshape(-1, 2)
+    weights = 0.25 * np.outer(w, w).ravel()
+    wi = np.repeat(np.stack([np.sqrt(1.0 - cosines**2), np.zeros_like(cosines), cosines], axis=1), len(u), 0)
+    u = np.tile(u, (len(cosines), 1))
+    a = np.full(len(u), alpha)
+    m = sample_visible_normal(wi, a, u)
+    wi_m = np.einsum("ij,ij->i", wi, m)
+    f, cos_t, eta_ti = fresnel_dielectric(wi_m, np.full(len(u), eta))
+    if refract:
+        out = (eta_ti * wi_m + cos_t)[:, None] * m - eta_ti[:, None] * wi
+        energy = np.where(out[:, 2] < 0, smith_g1(out, m, a) * (1.0 - f), 0.0)
+    else:
+        out = reflect(wi, m)
+        energy = np.where(out[:, 2] > 0, smith_g1(out, m, a) * f, 0.0)
+    return (energy * np.tile(weights, len(cosines))).reshape(len(cosines), -1).sum(axis=1)

@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from workers.render.bsdfs.plastic import _visible_normal_average
+from workers.render.microfacet import single_scattering_albedo
 
 COSINES = np.linspace(0.0, 1.0, 65) ** 2
 ROUGHNESSES = np.linspace(0.0, 1.0, 33)  # 2-D table nodes, perceptual roughness
@@ -37,7 +37,7 @@ def cosine_weighted_mean(table: np.ndarray) -> np.ndarray:
 
 
 def _albedo_at(alpha: float, eta: float) -> np.ndarray:
-    return _visible_normal_average(
+    return single_scattering_albedo(
         alpha, eta, np.maximum(COSINES, 1e-6), refract=False, nodes=QUADRATURE_NODES
     )
 

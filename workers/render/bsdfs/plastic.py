@@ -30,7 +30,7 @@ import numpy as np
 from workers.render import kernels as k
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.jit import njit
-from workers.render.microfacet import fresnel_dielectric, reflect, sample_visible_normal, smith_g1
+from workers.render.microfacet import fresnel_dielectric, single_scattering_albedo
 from workers.scene import spec
 
 TABLE_COSINES = np.linspace(0.0, 1.0, 64)  # Mitsuba's MI_ROUGH_TRANSMITTANCE_RES nodes
@@ -46,28 +46,6 @@ class Coat:
     internal_reflectance: float
 
 
-def _visible_normal_average(alpha: float, eta: float, cosines: np.ndarray, *, refract: bool, nodes: int):
-    """Per cosine, E over visible normals m of G1(w, m) times F (reflection) or 1 - F (refraction), w the
-    reflected or refracted direction: the energy a single scattering sends back up or through. Gauss-Legendre
-    over the sampler's unit square; `eta` is the far side's index over the near side's."""
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    u = np.stack(np.meshgrid(0.5 * x + 0.5, 0.5 * x + 0.5), axis=-1).reshape(-1, 2)
-    weights = 0.25 * np.outer(w, w).ravel()
-    wi = np.repeat(np.stack([np.sqrt(1.0 - cosines**2), np.zeros_like(cosines), cosines], axis=1), len(u), 0)
-    u = np.tile(u, (len(cosines), 1))
-    a = np.full(len(u), alpha)
-    m = sample_visible_normal(wi, a, u)
-    wi_m = np.einsum("ij,ij->i", wi, m)
-    f, cos_t, eta_ti = fresnel_dielectric(wi_m, np.full(len(u), eta))
-    if refract:
-        out = (eta_ti * wi_m + cos_t)[:, None] * m - eta_ti[:, None] * wi
-        energy = np.where(out[:, 2] < 0, smith_g1(out, m, a) * (1.0 - f), 0.0)
-    else:
-        out = reflect(wi, m)
-        energy = np.where(out[:, 2] > 0, smith_g1(out, m, a) * f, 0.0)
-    return (energy * np.tile(weights, len(cosines))).reshape(len(cosines), -1).sum(axis=1)
-
-
 @lru_cache(maxsize=256)
 def coat(alpha: float, ior: float) -> Coat:
     if alpha <= 0:
@@ -78,8 +56,8 @@ def coat(alpha: float, ior: float) -> Coat:
         f_inside = fresnel_dielectric(-mu, np.full(len(mu), ior))[0]
         return Coat(ior, None, float(mu_c**2 + (1.0 - mu_c) * np.sum(w * f_inside * mu)))
     cosines = np.maximum(TABLE_COSINES, 1e-6)
-    table = _visible_normal_average(alpha, ior, cosines, refract=True, nodes=32)
-    inside = _visible_normal_average(alpha, 1.0 / ior, cosines, refract=False, nodes=64)
+    table = single_scattering_albedo(alpha, ior, cosines, refract=True, nodes=32)
+    inside = single_scattering_albedo(alpha, 1.0 / ior, cosines, refract=False, nodes=64)
     return Coat(ior, table, float(2.0 * np.mean(inside * cosines)))
 
 
