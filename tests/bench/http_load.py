@@ -2,8 +2,8 @@
 asyncio streams, one connection per simulated client. httpx's async client spends about as much CPU per
 request as the server does, and on the shared 2-core machine that CPU is taken from the server measured.
 
-Only what the benches send and the job server answers is handled: a JSON body with Content-Length out,
-a Content-Length or chunked body back.
+Only what the benches send and the servers answer is handled: a body with Content-Length out, a
+Content-Length or chunked body back, and Server-Sent Events as the job server chunks them.
 """
 
 from __future__ import annotations
@@ -34,15 +34,24 @@ class Connection:
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
 
-    async def request(self, method: str, path: str, body: Any = None, headers: dict | None = None) -> Reply:
+    async def request(
+        self,
+        method: str,
+        path: str,
+        body: Any = None,
+        headers: dict | None = None,
+        content: bytes | None = None,
+        content_type: str = "application/json",
+    ) -> Reply:
+        """`body` is sent as JSON; `content` as it is, with `content_type`."""
         if self._writer is None:
             self._reader, self._writer = await asyncio.open_connection(self.host, self.port)
-        payload = b"" if body is None else json.dumps(body).encode()
+        payload = content if content is not None else None if body is None else json.dumps(body).encode()
         extra = "".join(f"{name}: {value}\r\n" for name, value in (headers or {}).items())
         head = f"{method} {path} HTTP/1.1\r\nHost: {self.host}:{self.port}\r\n{self.headers}{extra}"
-        if body is not None:
-            head += f"Content-Type: application/json\r\nContent-Length: {len(payload)}\r\n"
-        self._writer.write(head.encode() + b"\r\n" + payload)
+        if payload is not None:
+            head += f"Content-Type: {content_type}\r\nContent-Length: {len(payload)}\r\n"
+        self._writer.write(head.encode() + b"\r\n" + (payload or b""))
         try:
             reply = await self._read_reply()
         except (OSError, asyncio.IncompleteReadError):
@@ -51,6 +60,32 @@ class Connection:
         if reply.headers.get("connection", "").lower() == "close":
             await self.close()
         return reply
+
+    async def events(self, path: str, on_event) -> int:
+        """GET a Server-Sent Events stream and call `on_event(id, event, data)` for each event until the
+        server ends the stream (this connection is then closed); the HTTP status."""
+        assert self._writer is None, "a stream takes a connection of its own"
+        self._reader, self._writer = await asyncio.open_connection(self.host, self.port)
+        head = f"GET {path} HTTP/1.1\r\nHost: {self.host}:{self.port}\r\n{self.headers}"
+        self._writer.write(head.encode() + b"Accept: text/event-stream\r\n\r\n")
+        status = int((await self._reader.readuntil(b"\r\n")).split(b" ", 2)[1])
+        while await self._reader.readuntil(b"\r\n") != b"\r\n":
+            pass
+        fields: dict[str, str] = {}
+        try:
+            while size := int((await self._reader.readuntil(b"\r\n")).split(b";")[0], 16):
+                chunk = (await self._reader.readexactly(size + 2))[:-2].decode()
+                for line in chunk.split("\n"):  # the server sends whole events per chunk
+                    if line == "":
+                        if "data" in fields:
+                            on_event(int(fields["id"]), fields["event"], json.loads(fields["data"]))
+                        fields = {}
+                    elif not line.startswith(":"):
+                        name, _, value = line.partition(":")
+                        fields[name] = value.removeprefix(" ")
+        finally:
+            await self.close()
+        return status
 
     async def _read_reply(self) -> Reply:
         assert self._reader is not None
