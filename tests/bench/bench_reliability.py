@@ -73,24 +73,13 @@ def submissions(root: Path, database_url: str) -> BenchSection:
     schema = f"nbr_{uuid.uuid4().hex[:12]}"
     ports = [free_port() for _ in range(API_PROCESSES)]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")])}
-    servers = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "tests.bench.api_process",
-                str(port),
-                str(root / f"api{i}"),
-                str(root / "store"),
-                database_url,
-                schema,
-            ],
-            env=env,
-        )
-        for i, port in enumerate(ports)
-    ]
+    servers: list[subprocess.Popen] = []
     try:
-        for port in ports:
+        # One after the other: replicas starting together race on replacing the stored tokens (a
+        # primary-key violation in `store_tokens` on PostgreSQL fails one of them).
+        for i, port in enumerate(ports):
+            command = ["-m", "tests.bench.api_process", str(port), str(root / f"api{i}"), str(root / "store")]
+            servers.append(subprocess.Popen([sys.executable, *command, database_url, schema], env=env))
             _wait_ready(f"http://127.0.0.1:{port}", servers)
         phases = [
             ("saturation", asyncio.run(_load(ports, seeds_from=0, rate=None))),
