@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Annotated
 
 import ray
+import ray._private.ray_constants as ray_constants
 import typer
 import uvicorn
 
@@ -85,7 +86,7 @@ def serve_command(
         _, path = generated_admin_token(data_dir)
         typer.echo(f"admin token: {path}", err=True)
     typer.echo(f"dashboard: http://{f'[{host}]' if ':' in host else host}:{port}/ui", err=True)
-    ray_temp = _start_ray(data_dir)
+    ray_temp = start_ray(data_dir)
     inference = None
     if inference_port is not None:
         command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--host", host]
@@ -108,9 +109,9 @@ def serve_command(
             shutil.rmtree(ray_temp, ignore_errors=True)
 
 
-def _start_ray(data_dir: Path) -> Path | None:
-    """Join `RAY_ADDRESS`, or start a local cluster with its session files under the data dir (or, if that
-    path is too long for Ray's sockets, a private /tmp folder: returned, to be removed on exit).
+def start_ray(data_dir: Path) -> Path | None:
+    """Join `RAY_ADDRESS`, or start a local cluster on loopback with its session files under the data dir
+    (or, if that path is too long for Ray's sockets, a private /tmp folder: returned, to be removed on exit).
     """
     if os.environ.get("RAY_ADDRESS"):
         ray.init(address=os.environ["RAY_ADDRESS"], log_to_driver=False)
@@ -119,5 +120,17 @@ def _start_ray(data_dir: Path) -> Path | None:
     private = len(str(temp_dir)) > RAY_TEMP_DIR_MAX
     if private:
         temp_dir = Path(tempfile.mkdtemp(prefix="nbake-ray-", dir="/tmp"))
+    single_machine_ray()
     ray.init(address="local", include_dashboard=False, _temp_dir=str(temp_dir), log_to_driver=False)
     return temp_dir if private else None
+
+
+def single_machine_ray() -> None:
+    """Make the embedded cluster's node address 127.0.0.1, so its GCS, raylet, object manager and workers
+    listen on loopback only. Ray otherwise takes the address that routes outward as the node's (even a
+    `_node_ip_address="127.0.0.1"` is replaced by it) and its gRPC servers then bind every interface; its
+    single-machine mode (`RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0`, read once at import, hence both) keeps
+    loopback. No other node ever joins the embedded cluster, so nothing needs it reachable from outside.
+    """
+    os.environ[ray_constants.ENABLE_RAY_CLUSTERS_ENV_VAR] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False

@@ -40,6 +40,15 @@ class JobRepository:
 
     # ------------------------------------------------------------------ submission
 
+    def reusable(self, content_key: str) -> Job | None:
+        """The queued, running or succeeded job that `content_key` names, in one query. A repeat of
+        existing work is answered from this read alone, before any write transaction (on SQLite, before
+        waiting for the single writer) and before the work is planned: most of a burst of retries."""
+        query = select(Job).join(IdempotencyKey, IdempotencyKey.job_id == Job.id)
+        query = query.where(IdempotencyKey.key == content_key, Job.state.in_(list(REUSABLE)))
+        with self.db.reading() as session:
+            return session.scalars(query).one_or_none()
+
     def create(self, job: Job, content_key: str | None, header_key: str | None) -> tuple[Job, bool]:
         """Insert `job`, or return the job an idempotency key already names: (job, created).
 
@@ -47,12 +56,7 @@ class JobRepository:
         `header_key` reuses whatever job that key named and refuses a different request under it. Keys are
         inserted, never overwritten blindly: of concurrent identical submissions one inserts, the others
         hit the primary key, roll back, retry and find it.
-
-        A repeat of existing work without a header key is answered from a read alone, before any write
-        transaction (on SQLite, before waiting for the single writer): most of a burst of retries.
         """
-        if header_key is None and content_key is not None and (existing := self._reusable(content_key)):
-            return existing, False
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
@@ -62,14 +66,6 @@ class JobRepository:
                     raise
                 job = _fresh_copy(job)
         raise AssertionError("unreachable")
-
-    def _reusable(self, content_key: str) -> Job | None:
-        with self.db.reading() as session:
-            key = session.get(IdempotencyKey, content_key)
-            if key is None:
-                return None
-            job = session.scalars(select(Job).where(Job.id == key.job_id)).one_or_none()
-            return job if job is not None and job.state in REUSABLE else None
 
     def _create(
         self, session: Session, job: Job, content_key: str | None, header_key: str | None

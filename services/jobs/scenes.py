@@ -7,6 +7,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,22 +17,26 @@ from services.artifacts.assets import AssetNotFound, load_asset, materialize
 from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
 from services.jobs.errors import InvalidInput
-from services.jobs.identity import scene_hash
+from services.jobs.identity import scene_hash, sha256_of
 from services.jobs.tenants import Principal, Tenancy
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
-from workers.scene.io import load_scene, scene_from_dict
+from workers.scene.io import check_nesting, load_scene, scene_from_dict
 from workers.scene.spec import SceneSpec
 from workers.scene.stored import StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"
+RESOLVED_CACHE_SIZE = 512  # resolved scenes (a spec of a few KB each) kept for repeated submissions
 
 
 @dataclass(frozen=True)
 class ResolvedScene:
+    """Shared between the submissions that name the same scene: read it, never change it."""
+
     spec: SceneSpec
     ref: dict[str, str]  # {"source": "builtin" | "asset" | "inline", "name": ..., "asset_id": ...}
     content_hash: str
+    spec_json: dict[str, Any]  # spec.model_dump(mode="json"), as stored in the job row
 
 
 def scene_field(error: SceneError) -> str:
@@ -40,17 +46,39 @@ def scene_field(error: SceneError) -> str:
 
 class SceneResolver:
     """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused.
-    With `tenancy`, an asset resolves only for a caller whose tenant sees it."""
+    With `tenancy`, an asset resolves only for a caller whose tenant sees it.
+
+    Resolutions are cached: a built-in name and an asset id (content-addressed, never rewritten) always
+    resolve to the same scene, and an inline scene is keyed by the hash of its canonical JSON. A repeated
+    submission then costs no validation, no store read and no hashing of the scene (they were 2 of a
+    submission's 8 ms on SQLite). The tenant check comes first, so the cache never answers for an asset
+    the caller does not see.
+    """
 
     def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path, tenancy: Tenancy | None = None):
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
         self.tenancy = tenancy
+        self._resolved: OrderedDict[str, ResolvedScene] = OrderedDict()
+        self._resolved_lock = threading.Lock()
 
     def resolve(self, scene: str | dict[str, Any], principal: Principal | None = None) -> ResolvedScene:
         """InvalidInput naming the field for an unknown name or asset (another tenant's included) and for
         any problem in the scene."""
         if isinstance(scene, str) and not self._visible(scene, principal):  # before anything is read
             raise InvalidInput(f"no asset {scene!r}; upload it with POST /v1/assets first", "scene")
+        key = scene if isinstance(scene, str) else _inline_key(scene)
+        with self._resolved_lock:
+            if (found := self._resolved.get(key)) is not None:
+                self._resolved.move_to_end(key)
+                return found
+        resolved = self._resolve(scene)
+        with self._resolved_lock:
+            self._resolved[key] = resolved
+            while len(self._resolved) > RESOLVED_CACHE_SIZE:
+                self._resolved.popitem(last=False)
+        return resolved
+
+    def _resolve(self, scene: str | dict[str, Any]) -> ResolvedScene:
         try:
             if isinstance(scene, dict):
                 spec = scene_from_dict(scene)
@@ -58,7 +86,7 @@ class SceneResolver:
                     raise SceneError(
                         field, f"an inline scene cannot name files ({path!r}): upload it as an asset"
                     )
-                return ResolvedScene(spec, {"source": "inline", "name": spec.name}, self._hash(spec, {}))
+                return _resolved(spec, {"source": "inline", "name": spec.name}, {})
             if scene.startswith(ASSET_PREFIX):
                 return self._asset(scene)
             if scene not in BUILTIN_SCENES:
@@ -67,7 +95,7 @@ class SceneResolver:
                     f"{scene!r} is neither an asset id (sha256:...) nor a built-in scene ({known})", "scene"
                 )
             spec = get_builtin(scene)
-            return ResolvedScene(spec, {"source": "builtin", "name": scene}, self._hash(spec, {}))
+            return _resolved(spec, {"source": "builtin", "name": scene}, {})
         except SceneError as error:
             raise InvalidInput(error.problem, scene_field(error)) from None
 
@@ -105,7 +133,7 @@ class SceneResolver:
         spec, _ = load_scene(scene_file)
         files = {entry.name: entry.digest for entry in asset.files}
         ref = {"source": "asset", "name": asset.scene_name, "asset_id": asset_id}
-        return ResolvedScene(spec, ref, self._hash(spec, files))
+        return _resolved(spec, ref, files)
 
     def _materialized(self, asset_id: str, asset=None) -> tuple[Path, Path]:
         """(folder, scene file); unpacked into a temporary folder and renamed, so readers never see half."""
@@ -121,6 +149,16 @@ class SceneResolver:
                 shutil.rmtree(staging, ignore_errors=True)
         return folder, folder / asset.scene_file
 
-    @staticmethod
-    def _hash(spec: SceneSpec, files: dict[str, str]) -> str:
-        return scene_hash(spec.model_dump(mode="json"), files)
+
+def _inline_key(scene: dict[str, Any]) -> str:
+    """The cache key of an inline scene: its canonical JSON's hash (bounded in depth before it is walked)."""
+    try:
+        check_nesting(scene, "scene")
+    except SceneError as error:
+        raise InvalidInput(error.problem, scene_field(error)) from None
+    return "inline:" + sha256_of(scene)
+
+
+def _resolved(spec: SceneSpec, ref: dict[str, str], files: dict[str, str]) -> ResolvedScene:
+    spec_json = spec.model_dump(mode="json")
+    return ResolvedScene(spec, ref, scene_hash(spec_json, files), spec_json)

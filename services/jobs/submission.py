@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from services.jobs.errors import InvalidInput
 from services.jobs.identity import code_version, idempotency_key
 from services.jobs.repository import JobRepository
-from services.jobs.scenes import SceneResolver, scene_field
+from services.jobs.scenes import ResolvedScene, SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
 from services.jobs.tenants import DEFAULT_TENANT, Principal
@@ -98,35 +98,22 @@ class Submitter:
         except ValueError as error:
             raise InvalidInput(str(error), "config") from None
         scene = self.scenes.resolve(request.scene, principal)
-        try:
-            triangles = scene_triangles(scene.spec)  # before anything is built, here or in a child
-            plan = self._plan(kind.name, scene, config, in_process=_small(scene.spec, triangles))
-        except SceneError as error:
-            raise InvalidInput(error.problem, scene_field(error)) from None
-        except ValueError as error:
-            raise InvalidInput(str(error), "config") from None
-        plan.items.extend(
-            PlanItem(
-                name="scene import", choice=note, reason="what the scene's importer defaulted or ignored"
-            )
-            for note in scene.spec.notes
-        )
-        if plan.estimated_seconds > self.max_job_seconds:
-            raise InvalidInput(
-                f"the plan estimates {plan.estimated_seconds:.3g} s ({plan.summary}), over the limit of "
-                f"{self.max_job_seconds:g} s (max_job_seconds): lower the config's sizes",
-                "config",
-            )
         resolved = config.model_dump(mode="json")
         code = code_version()
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
+        content_key = None if request.force else f"{principal.tenant}/content:{key}"  # per tenant
+        header = _header_key(header_key)
+        header = header and f"{principal.tenant}/{header}"
+        if header is None and content_key is not None and (existing := self.jobs.reusable(content_key)):
+            return existing, False  # the same work exists: validated and planned when it was submitted
+        plan = self._checked_plan(kind.name, scene, config, resolved)
         job = Job(
             id=f"job-{uuid.uuid4().hex}",
             tenant=principal.tenant,
             kind=kind.name,
             state=JobState.QUEUED,
             scene_ref=scene.ref,
-            scene=scene.spec.model_dump(mode="json"),
+            scene=scene.spec_json,
             scene_hash=scene.content_hash,
             preset=request.preset,
             config=resolved,
@@ -134,19 +121,42 @@ class Submitter:
             priority=request.priority,
             code_version=code,
             idempotency_key=key,
-            plan=plan.model_dump(mode="json"),
+            plan=plan,
             attempts=0,
             max_attempts=self.max_attempts,
             cancel_requested=False,
             last_event_seq=0,
             created_at=utcnow(),
         )
-        content_key = None if request.force else f"{principal.tenant}/content:{key}"
-        header = _header_key(header_key)
-        return self.jobs.create(job, content_key, header and f"{principal.tenant}/{header}")
+        return self.jobs.create(job, content_key, header)
 
-    def _plan(self, kind_name: str, scene, config, in_process: bool) -> Plan:
-        key = (kind_name, scene.content_hash, json.dumps(config.model_dump(mode="json"), sort_keys=True))
+    def _checked_plan(self, kind_name: str, scene: ResolvedScene, config, resolved: dict) -> dict[str, Any]:
+        """The plan as stored in the job row; InvalidInput when the scene is refused or the plan's estimate
+        exceeds `max_job_seconds`."""
+        try:
+            triangles = scene_triangles(scene.spec)  # before anything is built, here or in a child
+            plan = self._plan(kind_name, scene, config, resolved, in_process=_small(scene.spec, triangles))
+        except SceneError as error:
+            raise InvalidInput(error.problem, scene_field(error)) from None
+        except ValueError as error:
+            raise InvalidInput(str(error), "config") from None
+        if plan.estimated_seconds > self.max_job_seconds:
+            raise InvalidInput(
+                f"the plan estimates {plan.estimated_seconds:.3g} s ({plan.summary}), over the limit of "
+                f"{self.max_job_seconds:g} s (max_job_seconds): lower the config's sizes",
+                "config",
+            )
+        stored = plan.model_dump(mode="json")  # a copy: the cached plan stays as planned
+        stored["items"].extend(
+            PlanItem(
+                name="scene import", choice=note, reason="what the scene's importer defaulted or ignored"
+            ).model_dump(mode="json")
+            for note in scene.spec.notes
+        )
+        return stored
+
+    def _plan(self, kind_name: str, scene: ResolvedScene, config, resolved: dict, in_process: bool) -> Plan:
+        key = (kind_name, scene.content_hash, json.dumps(resolved, sort_keys=True))
         with self._plans_lock:
             if key in self._plans:
                 self._plans.move_to_end(key)

@@ -14,29 +14,14 @@ import httpx
 import pytest
 
 from tests.integration.test_api_server import NBAKE, free_port
+from tests.support.sockets import listeners, process_tree
 
 PARENT = """
 import subprocess, sys
-server = subprocess.Popen(sys.argv[1:])
+server = subprocess.Popen(sys.argv[2:], stderr=open(sys.argv[1], "w"))
 print(server.pid, flush=True)
 server.wait()
 """
-
-
-def descendants(pid: int) -> set[int]:
-    """`pid` and every process below it (from /proc, Linux)."""
-    found, frontier = {pid}, [pid]
-    while frontier:
-        current = frontier.pop()
-        try:
-            children = Path(f"/proc/{current}/task/{current}/children").read_text().split()
-        except OSError:
-            continue
-        for child in map(int, children):
-            if child not in found:
-                found.add(child)
-                frontier.append(child)
-    return found
 
 
 def alive(pid: int) -> bool:
@@ -49,12 +34,12 @@ def alive(pid: int) -> bool:
 
 @pytest.mark.slow  # a real `nbake serve` with its Ray cluster: about a minute on the shared 2-core machine
 def test_a_killed_parent_takes_the_server_and_its_ray_cluster_with_it(tmp_path):
-    port = free_port()
+    port, log = free_port(), tmp_path / "server.log"
     command = [NBAKE, "serve", "--port", str(port), "--grpc-port", str(free_port())]
     command += ["--data-dir", str(tmp_path / "data"), "--log-level", "warning"]
     env = {**os.environ, "NBAKE_TOKENS": "t:admin"}
     parent = subprocess.Popen(
-        [sys.executable, "-c", PARENT, *command], stdout=subprocess.PIPE, text=True, env=env
+        [sys.executable, "-c", PARENT, str(log), *command], stdout=subprocess.PIPE, text=True, env=env
     )
     server = int(parent.stdout.readline())
     tree: set[int] = set()
@@ -68,9 +53,11 @@ def test_a_killed_parent_takes_the_server_and_its_ray_cluster_with_it(tmp_path):
                 pass
             assert time.monotonic() < deadline and parent.poll() is None, "the server did not start"
             time.sleep(0.5)
-        tree = descendants(server)
+        tree = process_tree(server)
         names = {Path(f"/proc/{pid}/comm").read_text().strip() for pid in tree if alive(pid)}
         assert {"gcs_server", "raylet"} <= names, names  # the server's own Ray cluster
+        exposed = [found for found in listeners(tree) if not found.is_loopback]
+        assert not exposed, f"`nbake serve` on 127.0.0.1 listens beyond loopback: {exposed}"
         parent.kill()
         parent.wait()
         deadline = time.monotonic() + 90
@@ -78,6 +65,7 @@ def test_a_killed_parent_takes_the_server_and_its_ray_cluster_with_it(tmp_path):
             time.sleep(0.5)
         survivors = {pid: Path(f"/proc/{pid}/comm").read_text().strip() for pid in tree if alive(pid)}
         assert not survivors, f"still running after their parent died: {survivors}"
+        assert f"the parent process {parent.pid} exited" in log.read_text()  # the server says why it stopped
     finally:
         for pid in tree | {server}:  # only processes this test started
             if alive(pid):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-TARGETS = ("scene", "archive", "wire")  # the targets of tests/fuzz/targets.py
+TARGETS = ("scene", "archive", "wire", "last_event_id")  # the targets of tests/fuzz/targets.py
 # The scene target starts at about 2.2 GB resident (torch, Numba, usd-core and pygltflib are imported by the
 # scene loaders); the limit catches an input that more than doubles it, as an alias bomb would.
 RSS_LIMIT_MB = 5120

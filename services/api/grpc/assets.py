@@ -14,6 +14,7 @@ from neuralbake.v1 import assets_pb2, assets_pb2_grpc
 
 from services.api.grpc.auth import principal
 from services.api.grpc.messages import asset_message
+from services.api.grpc.streams import StreamTracker
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, UploadError
 from services.artifacts.uploads import ingest_upload, load_asset, save_asset
 
@@ -22,16 +23,16 @@ if TYPE_CHECKING:  # annotations only: the inference service reuses this package
 
 
 class AssetServicer(assets_pb2_grpc.AssetServiceServicer):
-    def __init__(self, services: Services):
-        self.svc = services
+    def __init__(self, services: Services, streams: StreamTracker):
+        self.svc, self.streams = services, streams
 
     def UploadAsset(self, request_iterator: Iterator[assets_pb2.UploadAssetRequest], context):
         limits = self.svc.settings.upload_limits
         work = self.svc.settings.data_dir
         parts: list[tuple[str, BinaryIO]] = []
         received = 0
-        with ExitStack() as spools:
-            for chunk in request_iterator:
+        with self.streams.track("UploadAsset"), ExitStack() as spools:
+            for chunk in request_iterator:  # raises once the client has gone: the spools are closed
                 received += len(chunk.data)
                 if received > limits.max_total_bytes:
                     raise UploadError(

@@ -71,7 +71,7 @@ def start_grpc_server(services: Services, host: str, port: int) -> GrpcServer:
     )
     streams = StreamTracker(services.metrics.registry)
     jobs_pb2_grpc.add_JobServiceServicer_to_server(JobServicer(services, streams), server)
-    assets_pb2_grpc.add_AssetServiceServicer_to_server(AssetServicer(services), server)
+    assets_pb2_grpc.add_AssetServiceServicer_to_server(AssetServicer(services, streams), server)
     artifacts_pb2_grpc.add_ArtifactServiceServicer_to_server(ArtifactServicer(services, streams), server)
     checker = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(checker, server)

@@ -1,6 +1,7 @@
-"""Server streams that stop when their caller does: a stream's work runs only while its call is active
-(the client has not cancelled, disconnected or run out of deadline), and the number of streams doing
-work is exported as `nbake_grpc_active_streams{method}` beside the service's other metrics.
+"""Streams that stop when their caller does: a stream's work runs only while its call is active (the
+client has not cancelled, disconnected or run out of deadline), and the number of streams doing work
+(server streams and the client stream of an upload) is exported as `nbake_grpc_active_streams{method}`
+beside the service's other metrics.
 """
 
 from __future__ import annotations
