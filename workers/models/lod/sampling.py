@@ -21,7 +21,7 @@ import torch
 
 from workers.models.lod.config import LodConfig
 from workers.models.lod.grid import LodGrid
-from workers.models.lod.segments import boundary_pair_rows, box_exit_rows
+from workers.models.lod.segments import boundary_pair_rows, box_exit_rows, roulette_survivors
 from workers.render.bsdf import eval_bsdf, sample_bsdf
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
@@ -115,7 +115,7 @@ def throughput_estimates(
     n = len(wi)
     value = np.zeros((n, 3))
     live = np.arange(n)
-    o, d, beta, lo, hi = pairs.p_o, -pairs.wo, np.ones((n, 3)), pairs.lo, pairs.hi
+    o, d, beta, lo, hi = pairs.p_o, -pairs.wo, np.ones((n, 3)), pairs.lo, pairs.hi  # beta: float64, owned
     for _ in range(max_bounces):
         if len(live) == 0:
             break
@@ -130,12 +130,10 @@ def throughput_estimates(
         u = rng.random((len(live), 4))
         sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
         d = sh.to_world(sampled)
-        q = np.minimum(max3(weight), RR_MAX_SURVIVAL)  # albedo-based Russian roulette
-        beta = beta * weight / np.maximum(q, 1e-300)[:, None]
         o = tracer.offset(sh.position, sh.ng, d, sh.scale)
         hits = tracer.rays.intersect(o, d)
-        keep = np.flatnonzero(
-            (u[:, 3] < q) & hits.found & (hits.t < box_exit(lo, hi, o, d)) & (max3(beta) > 0)
+        keep = roulette_survivors(
+            beta, _f64(weight), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, _f64(d), RR_MAX_SURVIVAL
         )
         live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
         hits = hits.take(keep)
@@ -181,6 +179,10 @@ class LodSource:
             "app_wi": _tensor(wi),
             "app_value": _tensor(value),
         }
+
+
+def _f64(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, np.float64)
 
 
 def _tensor(array: np.ndarray) -> torch.Tensor:

@@ -27,6 +27,14 @@ def _exit_distance(lo, hi, i, o0, o1, o2, d0, d1, d2):
     return max(t, 0.0)
 
 
+@njit(cache=True, nogil=True, fastmath=False, inline="always")
+def _max3(a, b, c):
+    """The largest of three, NaN if any is NaN (as `workers.render.sampling.max3`)."""
+    if math.isnan(a) or math.isnan(b) or math.isnan(c):
+        return math.nan
+    return max(a, b, c)
+
+
 @kernel
 def box_exit_rows(lo, hi, origins, directions):
     """(N,) exit distances of rays inside boxes (N, 3)."""
@@ -63,3 +71,25 @@ def boundary_pair_rows(grid_lo, extent, resolutions, level, cells, grow, wo, u_f
         for a in range(3):
             p_i[i, a] = p_o[i, a] - t * wo[i, a]
     return lo, hi, p_o, p_i, length
+
+
+@kernel
+def roulette_survivors(beta, weight, u_survive, prim, t, lo, hi, origins, directions, max_survival):
+    """Albedo-based Russian roulette after a BSDF sample: beta *= weight / q with q = min(max(weight),
+    max_survival) (in place), and the rows whose path goes on: survived, hit the asset, inside the voxel
+    box, with a non-zero throughput."""
+    keep = np.empty(len(beta), np.int64)
+    n_keep = 0
+    for i in range(len(beta)):
+        q = _max3(weight[i, 0], weight[i, 1], weight[i, 2])
+        q = q if q < max_survival or math.isnan(q) else max_survival
+        scale = 1.0 / max(q, 1e-300)
+        for c in range(3):
+            beta[i, c] = beta[i, c] * weight[i, c] * scale
+        if not (u_survive[i] < q and prim[i] >= 0 and _max3(beta[i, 0], beta[i, 1], beta[i, 2]) > 0):
+            continue
+        o, d = origins[i], directions[i]
+        if t[i] < _exit_distance(lo, hi, i, o[0], o[1], o[2], d[0], d[1], d[2]):
+            keep[n_keep] = i
+            n_keep += 1
+    return keep[:n_keep]
