@@ -23,6 +23,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from workers.render.jit import njit
+
 TRIANGLE_CHUNK = 1 << 16
 OVERLAP_SLACK = 1e-9  # relative to the voxel size: closed boxes survive float64 rounding
 
@@ -210,58 +212,74 @@ def boundary_points(
     Directions need not be unit length; `t` is in units of the given direction.
     """
     origins, directions = check_rays(origins, directions)
-    n, r = len(origins), grid.resolution
+    n = len(origins)
     t_near, t_far = clip_to_box(grid, origins, directions, t_max)
     out = BoundaryPoints(
         np.zeros((n, max_points, 3)), np.zeros((n, max_points)), np.zeros(n, np.int64), t_near, t_far,
         np.zeros(n, bool),
     )  # fmt: skip
-    live = np.flatnonzero(t_far >= t_near)
     if max_points < 1:
         raise ValueError(f"max_points must be at least 1, got {max_points}")
-    o, d = origins[live], directions[live]
-    t_cur, t_end = t_near[live], t_far[live]
-    step = np.where(d > 0, 1, -1).astype(np.int64)
-    cell = start_cell(grid, o, d, t_cur)
-    previous = np.zeros(len(live), bool)  # whether the voxel before t_cur is occupied
-    safe_d = np.where(d != 0, d, 1.0)
-    rows = live
-    while len(rows):
-        # Next plane crossing per axis, and the first of them (capped by the segment's end).
-        t_axis = np.where(d != 0, (grid.plane(cell + (step > 0)) - o) / safe_d, np.inf)
-        t_next = np.minimum(t_axis.min(1), t_end)
-        entered = t_next > t_cur  # a voxel entered for a positive length, not just touched
-        inside_now = np.all((cell >= 0) & (cell < r), axis=1)
-        occupied = np.zeros(len(rows), bool)
-        occupied[inside_now] = grid.occupied[tuple(cell[inside_now].T)]
-        occupied &= entered & inside_now
-        record = entered & (previous | occupied)
-        _record(out, rows, record, o, d, t_cur)
-        previous = np.where(entered, occupied, previous)
-        t_cur = np.where(entered, t_next, t_cur)
-        cell = cell + step * (t_axis <= t_next[:, None])
-        finished = (t_cur >= t_end) | ~np.all((cell >= 0) & (cell < r), axis=1)
-        full = out.count[rows] >= max_points
-        _record(out, rows, finished & previous & ~full, o, d, t_cur)
-        out.truncated[rows[full & ~(finished & ~previous)]] = True
-        keep = ~finished & ~full
-        rows, o, d, t_cur, t_end = rows[keep], o[keep], d[keep], t_cur[keep], t_end[keep]
-        step, cell, previous, safe_d = step[keep], cell[keep], previous[keep], safe_d[keep]
+    live = np.flatnonzero(t_far >= t_near)
+    cells = start_cell(grid, origins[live], directions[live], t_near[live])
+    _walk_rays(
+        _f64(grid.lo), _f64(grid.size), grid.occupied, origins, directions, live, cells, t_near, t_far,
+        out.points, out.t, out.count, out.truncated,
+    )  # fmt: skip
     return out
 
 
-def _record(out: BoundaryPoints, rows, mask, o, d, t) -> None:
-    """Append the point at t to each masked ray that still has room."""
-    sel = np.flatnonzero(mask)
-    if len(sel) == 0:
-        return
-    target = rows[sel]
-    slot = out.count[target]
-    room = slot < out.points.shape[1]
-    sel, target, slot = sel[room], target[room], slot[room]
-    out.points[target, slot] = o[sel] + t[sel, None] * d[sel]
-    out.t[target, slot] = t[sel]
-    out.count[target] += 1
+@njit(cache=True, nogil=True, fastmath=False)
+def _walk_rays(
+    lo, size, occupied, origins, directions, live, cells, t_near, t_far, points, t, count, truncated
+):
+    """The walk of `boundary_points`, one ray at a time from its start cell; writes each ray's points."""
+    r, max_points = occupied.shape[0], points.shape[1]
+    t_axis = np.empty(3)
+    for j in range(len(live)):
+        i = live[j]
+        o, d, cell = origins[i], directions[i], cells[j].copy()
+        t_cur, t_end = t_near[i], t_far[i]
+        previous = False  # whether the voxel before t_cur is occupied
+        while True:
+            # Next plane crossing per axis, and the first of them (capped by the segment's end).
+            for a in range(3):
+                plane = lo[a] + (cell[a] + (1 if d[a] > 0 else 0)) * size[a]
+                t_axis[a] = (plane - o[a]) / d[a] if d[a] != 0 else np.inf
+            t_next = min(t_axis[0], t_axis[1], t_axis[2], t_end)
+            entered = t_next > t_cur  # a voxel entered for a positive length, not just touched
+            inside = 0 <= cell[0] < r and 0 <= cell[1] < r and 0 <= cell[2] < r
+            occupied_now = entered and inside and occupied[cell[0], cell[1], cell[2]]
+            if entered and (previous or occupied_now):
+                _record(points, t, count, i, o, d, t_cur)
+            if entered:
+                previous, t_cur = occupied_now, t_next
+            for a in range(3):
+                if t_axis[a] <= t_next:
+                    cell[a] += 1 if d[a] > 0 else -1
+            finished = t_cur >= t_end or not (0 <= cell[0] < r and 0 <= cell[1] < r and 0 <= cell[2] < r)
+            full = count[i] >= max_points
+            if finished and previous and not full:
+                _record(points, t, count, i, o, d, t_cur)
+            if full and not (finished and not previous):
+                truncated[i] = True
+            if finished or full:
+                break
+
+
+@njit(cache=True, nogil=True, fastmath=False, inline="always")
+def _record(points, t, count, i, o, d, t_at) -> None:
+    """Append the point at t_at to ray i if it still has room."""
+    k = count[i]
+    if k < points.shape[1]:
+        for a in range(3):
+            points[i, k, a] = o[a] + t_at * d[a]
+        t[i, k] = t_at
+        count[i] = k + 1
+
+
+def _f64(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, np.float64)
 
 
 def coarsen(occupied: np.ndarray) -> np.ndarray:

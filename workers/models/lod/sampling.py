@@ -21,6 +21,7 @@ import torch
 
 from workers.models.lod.config import LodConfig
 from workers.models.lod.grid import LodGrid
+from workers.models.lod.segments import boundary_pair_rows, box_exit_rows, roulette_survivors
 from workers.render.bsdf import eval_bsdf, sample_bsdf
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
@@ -46,10 +47,10 @@ def asset_tracer(scene: CompiledScene, names: list[str]) -> PathTracer:
 
 def box_exit(lo: np.ndarray, hi: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Distance at which rays starting inside (or on) boxes (N, 3) leave them (>= 0)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(directions > 0, (hi - origins) / directions, (lo - origins) / directions)
-    t = np.where(directions != 0, t, np.inf)
-    return np.maximum(t.min(1), 0.0)
+    shape = np.shape(origins)
+    return box_exit_rows(
+        *(np.ascontiguousarray(np.broadcast_to(a, shape), np.float64) for a in (lo, hi, origins, directions))
+    )
 
 
 @dataclass
@@ -78,19 +79,15 @@ def boundary_pairs(
     """One segment per voxel (level, cell) with the density of Sec. 5.1 (module docstring); `wo` fixes
     the directions instead of drawing them."""
     n = len(cells)
-    size = grid.extent / np.asarray(grid.resolutions)[level]
-    lo = grid.lo + cells * size[:, None] - grow * size[:, None]
-    hi = lo + (1 + 2 * grow) * size[:, None]
     if wo is None:
         wo = square_to_uniform_sphere(rng.random((n, 2)))
-    weights = np.abs(wo)
-    cumulative = np.cumsum(weights / weights.sum(1, keepdims=True), axis=1)
-    axis = np.minimum((rng.random((n, 1)) > cumulative).sum(1), 2)
-    p_o = lo + rng.random((n, 3)) * (hi - lo)
-    rows = np.arange(n)
-    p_o[rows, axis] = np.where(wo[rows, axis] > 0, hi[rows, axis], lo[rows, axis])
-    length = box_exit(lo, hi, p_o, -wo)
-    return BoundaryPairs(p_o, p_o - length[:, None] * wo, wo, lo, hi, length)
+    u_face, u_point = rng.random(n), rng.random((n, 3))
+    box = np.asarray(grid.lo, np.float64), float(grid.extent), np.asarray(grid.resolutions, np.float64)
+    voxels = np.asarray(level, np.int64), np.asarray(cells, np.int64), float(grow)
+    lo, hi, p_o, p_i, length = boundary_pair_rows(
+        *box, *voxels, np.ascontiguousarray(wo, np.float64), u_face, u_point
+    )
+    return BoundaryPairs(p_o, p_i, wo, lo, hi, length)
 
 
 def sample_voxels(grid: LodGrid, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -118,7 +115,7 @@ def throughput_estimates(
     n = len(wi)
     value = np.zeros((n, 3))
     live = np.arange(n)
-    o, d, beta, lo, hi = pairs.p_o, -pairs.wo, np.ones((n, 3)), pairs.lo, pairs.hi
+    o, d, beta, lo, hi = pairs.p_o, -pairs.wo, np.ones((n, 3)), pairs.lo, pairs.hi  # beta: float64, owned
     for _ in range(max_bounces):
         if len(live) == 0:
             break
@@ -133,12 +130,10 @@ def throughput_estimates(
         u = rng.random((len(live), 4))
         sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
         d = sh.to_world(sampled)
-        q = np.minimum(max3(weight), RR_MAX_SURVIVAL)  # albedo-based Russian roulette
-        beta = beta * weight / np.maximum(q, 1e-300)[:, None]
         o = tracer.offset(sh.position, sh.ng, d, sh.scale)
         hits = tracer.rays.intersect(o, d)
-        keep = np.flatnonzero(
-            (u[:, 3] < q) & hits.found & (hits.t < box_exit(lo, hi, o, d)) & (max3(beta) > 0)
+        keep = roulette_survivors(
+            beta, _f64(weight), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, _f64(d), RR_MAX_SURVIVAL
         )
         live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
         hits = hits.take(keep)
@@ -184,6 +179,10 @@ class LodSource:
             "app_wi": _tensor(wi),
             "app_value": _tensor(value),
         }
+
+
+def _f64(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, np.float64)
 
 
 def _tensor(array: np.ndarray) -> torch.Tensor:

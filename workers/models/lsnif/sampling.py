@@ -16,12 +16,13 @@ import numpy as np
 import torch
 
 from workers.models.lsnif.config import LsnifConfig
+from workers.models.lsnif.hit_labels import hit_geometry
 from workers.models.lsnif.network import network_inputs
 from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
 from workers.render.region_rays import rays_from_bounding_sphere
-from workers.render.sampling import coordinate_frame, dot, square_to_cosine_hemisphere, to_world
+from workers.render.sampling import coordinate_frame, square_to_cosine_hemisphere, to_world
 from workers.render.voxels import VoxelGrid, voxelize
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import CompiledScene
@@ -56,36 +57,28 @@ class ObjectReference:
         self.face_normals = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
         self.material_ids = material_ids  # scene material id of each of the object's materials
         self.materials = materials
+        self._normals = _f64(np.zeros((0, 3)) if mesh.normals is None else mesh.normals)
+        self._uvs = _f64(np.zeros((0, 2)) if mesh.uvs is None else mesh.uvs)
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Labels:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, albedo: bool = True) -> Labels:
+        """Labels of the rays' closest hits. Normals face the ray: thin two-sided geometry (leaves,
+        strands) is hit from both sides, and a winding-signed label would ask the sign-sensitive cosine
+        loss for a sign the ray's inputs barely show; the path tracer orients normals towards the ray
+        anyway. `albedo=False` leaves albedos at zero (rays that only look for surface points)."""
+        origins = np.ascontiguousarray(origins, np.float64)
+        directions = np.ascontiguousarray(directions, np.float64)
         hits = self.rays.intersect(origins, directions)
-        n, found = len(origins), hits.found
-        labels = Labels(
-            found, np.where(found, hits.t, np.inf), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3)),
-            np.zeros((n, 3)), np.zeros(n, np.int64),
+        found = hits.found
+        position, ng, ns, uv = hit_geometry(
+            origins, directions, np.asarray(hits.prim, np.int64), _f64(hits.t), _f64(hits.u), _f64(hits.v),
+            self.mesh.faces, self.face_normals, self._normals, self._uvs,
         )  # fmt: skip
-        sel = np.flatnonzero(found)
-        prim = hits.prim[sel]
-        b1, b2 = hits.u[sel].astype(np.float64)[:, None], hits.v[sel].astype(np.float64)[:, None]
-        corners = self.mesh.faces[prim]
-        labels.position[sel] = origins[sel] + hits.t[sel, None] * directions[sel]
-        # Normals face the ray: thin two-sided geometry (leaves, strands) is hit from both sides, and a
-        # winding-signed label would ask the sign-sensitive cosine loss for a sign the ray's inputs barely
-        # show. The path tracer orients normals towards the ray anyway.
-        side = np.where(dot(self.face_normals[prim], directions[sel]) > 0, -1.0, 1.0)[:, None]
-        labels.geometric_normal[sel] = side * self.face_normals[prim]
-        if self.mesh.normals is None:
-            labels.normal[sel] = labels.geometric_normal[sel]
-        else:
-            ns = self.mesh.normals[corners]
-            ns = (1 - b1 - b2) * ns[:, 0] + b1 * ns[:, 1] + b2 * ns[:, 2]
-            labels.normal[sel] = side * ns / np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
-        uv = np.zeros((len(sel), 2))
-        if self.mesh.uvs is not None:
-            uvs = self.mesh.uvs[corners]
-            uv = (1 - b1 - b2) * uvs[:, 0] + b1 * uvs[:, 1] + b2 * uvs[:, 2]
-        labels.albedo[sel] = self.materials.surfaces(self.material_ids[labels.material[sel]], uv).base
-        return labels
+        material = np.zeros(len(origins), np.int64)
+        base = np.zeros((len(origins), 3))
+        if albedo and found.any():
+            sel = np.flatnonzero(found)
+            base[sel] = self.materials.surfaces(self.material_ids[material[sel]], uv[sel]).base
+        return Labels(found, np.where(found, hits.t, np.inf), position, ng, ns, base, material)
 
 
 def cosine_about(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -106,7 +99,7 @@ def training_rays(
         if remaining <= 0:
             break
         probe_o, probe_d = rays_from_bounding_sphere(grid.bounds, 2 * remaining + 64, rng)
-        labels = reference.intersect(probe_o, probe_d)
+        labels = reference.intersect(probe_o, probe_d, albedo=False)
         sel = np.flatnonzero(labels.hit)[:remaining]
         if len(sel) == 0:
             continue
@@ -185,3 +178,7 @@ class ObjectRaySource:
         rng = batch_rng(self.seed, index)
         origins, directions = training_rays(prepared.grid, prepared.reference, lsnif.batch_size, rng)
         return label_batch(prepared.grid, lsnif.max_points, prepared.reference, origins, directions)
+
+
+def _f64(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, np.float64)

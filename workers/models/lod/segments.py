@@ -1,0 +1,95 @@
+"""Compiled per-row work of the lod sample source: where rays leave boxes, and the boundary pairs of
+Sec. 5.1 (`workers.models.lod.sampling`), each one pass over the batch instead of a dozen NumPy passes.
+
+float64 throughout, like `workers.render.kernels`; serial, `nogil` and cached on disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from workers.render.jit import njit
+
+kernel = njit(cache=True, nogil=True, fastmath=False)
+
+
+@njit(cache=True, nogil=True, fastmath=False, inline="always")
+def _exit_distance(lo, hi, i, o0, o1, o2, d0, d1, d2):
+    """Distance along (d0, d1, d2) at which a ray from (o0, o1, o2), inside box i, leaves it (>= 0)."""
+    t = math.inf
+    for axis, o, d in ((0, o0, d0), (1, o1, d1), (2, o2, d2)):
+        if d > 0:
+            t = min(t, (hi[i, axis] - o) / d)
+        elif d < 0:
+            t = min(t, (lo[i, axis] - o) / d)
+    return max(t, 0.0)
+
+
+@njit(cache=True, nogil=True, fastmath=False, inline="always")
+def _max3(a, b, c):
+    """The largest of three, NaN if any is NaN (as `workers.render.sampling.max3`)."""
+    if math.isnan(a) or math.isnan(b) or math.isnan(c):
+        return math.nan
+    return max(a, b, c)
+
+
+@kernel
+def box_exit_rows(lo, hi, origins, directions):
+    """(N,) exit distances of rays inside boxes (N, 3)."""
+    out = np.empty(len(origins))
+    for i in range(len(origins)):
+        o, d = origins[i], directions[i]
+        out[i] = _exit_distance(lo, hi, i, o[0], o[1], o[2], d[0], d[1], d[2])
+    return out
+
+
+@kernel
+def boundary_pair_rows(grid_lo, extent, resolutions, level, cells, grow, wo, u_face, u_point):
+    """Grown boxes, entry points p_o (a face picked by |wo . n|, a uniform point on it), exit points p_i
+    along -wo and segment lengths of one pair per voxel (level, cell)."""
+    n = len(cells)
+    lo, hi = np.empty((n, 3)), np.empty((n, 3))
+    p_o, p_i, length = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
+    for i in range(n):
+        size = extent / resolutions[level[i]]
+        w0, w1, w2 = abs(wo[i, 0]), abs(wo[i, 1]), abs(wo[i, 2])
+        total = w0 + w1 + w2
+        c0 = w0 / total
+        c1 = c0 + w1 / total
+        c2 = c1 + w2 / total
+        u = u_face[i]
+        face = min(int(u > c0) + int(u > c1) + int(u > c2), 2)
+        for a in range(3):
+            lo[i, a] = grid_lo[a] + cells[i, a] * size - grow * size
+            hi[i, a] = lo[i, a] + (1 + 2 * grow) * size
+            p_o[i, a] = lo[i, a] + u_point[i, a] * (hi[i, a] - lo[i, a])
+        p_o[i, face] = hi[i, face] if wo[i, face] > 0 else lo[i, face]
+        t = _exit_distance(lo, hi, i, p_o[i, 0], p_o[i, 1], p_o[i, 2], -wo[i, 0], -wo[i, 1], -wo[i, 2])
+        length[i] = t
+        for a in range(3):
+            p_i[i, a] = p_o[i, a] - t * wo[i, a]
+    return lo, hi, p_o, p_i, length
+
+
+@kernel
+def roulette_survivors(beta, weight, u_survive, prim, t, lo, hi, origins, directions, max_survival):
+    """Albedo-based Russian roulette after a BSDF sample: beta *= weight / q with q = min(max(weight),
+    max_survival) (in place), and the rows whose path goes on: survived, hit the asset, inside the voxel
+    box, with a non-zero throughput."""
+    keep = np.empty(len(beta), np.int64)
+    n_keep = 0
+    for i in range(len(beta)):
+        q = _max3(weight[i, 0], weight[i, 1], weight[i, 2])
+        q = q if q < max_survival or math.isnan(q) else max_survival
+        scale = 1.0 / max(q, 1e-300)
+        for c in range(3):
+            beta[i, c] = beta[i, c] * weight[i, c] * scale
+        if not (u_survive[i] < q and prim[i] >= 0 and _max3(beta[i, 0], beta[i, 1], beta[i, 2]) > 0):
+            continue
+        o, d = origins[i], directions[i]
+        if t[i] < _exit_distance(lo, hi, i, o[0], o[1], o[2], d[0], d[1], d[2]):
+            keep[n_keep] = i
+            n_keep += 1
+    return keep[:n_keep]
