@@ -64,7 +64,7 @@ HARD = {"cornell_variable": {"sphere_roughness": (0.0, 0.15)}, "mirror_variable"
 # The default preset made lighter so that minutes of training on the shared 2-core CPU are hundreds of
 # steps; a constant rate, since a run is cut by time, not by a step count a decay could end at. beta 2.2
 # (p_s 0.9 at equal losses, not the paper's 0.99): with 0.99 a 30 CPU s run renders 35 generations, so
-# the chains take 35 steps in 11 dimensions; at 0.9 they take about 120 (active / uniform DSSIM 1.28 ->
+# the chains take 35 steps in 11 dimensions; at 0.9 about 110 (active / uniform DSSIM 1.28 ->
 # 1.10 on cornell_variable, 1.27 -> 1.01 on mirror_variable, one seed, 256-spp references).
 OVERRIDES = {
     "mlp": {"width": 64, "depth": 3},
