@@ -1,17 +1,20 @@
 """The `explore` kind end to end through the job driver's `run_job` (no Ray actor): plan, train by active
 exploration, export, report. A short job's artifact serves `:render` at named variable values through the
-inference service's loader, and bad values are errors naming the field; the example job's network (slow)
+inference service's loader, and bad values are errors naming the field; a job stopped mid-training resumes
+(chains, store and all) to the uninterrupted job's weights bit for bit; the example job's network (slow)
 beats a black renderer at every fixed configuration and 1-spp path tracing of the report's view."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.support.jobs import run_kind_job
+from tests.support.jobs import assert_resumes_to_the_uninterrupted_weights, run_kind_job
 from tests.support.quality import report_failures
+from workers.models.explore import artifact
 from workers.models.explore.evaluate import configurations, reference_images
 from workers.models.explore.source import PatchSource, PatchSourceConfig
 from workers.models.registry import QUERY, RENDER, get_inference, get_kind
@@ -28,7 +31,13 @@ SCENE = KIND.example.scene
 CONFIG = KIND.resolve_config("quick", KIND.example.overrides)
 
 
-SHORT = {"bootstrap": 4, "train": {"steps": 30}, "evaluation_configurations": 1}
+# a checkpoint at step 15, after the bootstrap: the chains sit somewhere and steps reuse stored patches
+SHORT = {
+    "bootstrap": 4,
+    "train": {"steps": 30, "checkpoint_every": 15, "progress_every": 5},
+    "evaluation_configurations": 1,
+}
+SHORT_TRAIN = KIND.resolve_config("quick", SHORT).train
 
 
 def run(folder: Path, overrides: dict) -> Path:
@@ -37,9 +46,30 @@ def run(folder: Path, overrides: dict) -> Path:
     return folder / "out"
 
 
+@dataclass
+class ShortRun:
+    outcome: object
+    events: list
+
+
+def run_short(folder: Path, cancel_after_step: int | None = None) -> ShortRun:
+    events: list = []
+    _, outcome = run_kind_job(
+        "explore", get_builtin(SCENE), folder, SHORT, seed=SEED, events=events,
+        cancel_after_step=cancel_after_step,
+    )  # fmt: skip
+    return ShortRun(outcome, events)
+
+
 @pytest.fixture(scope="module")
 def short_job(tmp_path_factory) -> Path:
     return run(tmp_path_factory.mktemp("explore-short"), SHORT)
+
+
+def test_a_job_stopped_mid_training_resumes_to_the_uninterrupted_weights(short_job, tmp_path):
+    assert_resumes_to_the_uninterrupted_weights(
+        run_short, short_job.parent, tmp_path, SHORT_TRAIN, ["checkpoints/{final}", f"out/{artifact.WEIGHTS}"]
+    )
 
 
 def test_the_plan_names_the_variables_what_is_static_and_the_cost():

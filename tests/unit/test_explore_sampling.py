@@ -4,6 +4,7 @@ target, greedy chains (Fig. 5.6), the Adam step-norm oracle, the reuse probabili
 from __future__ import annotations
 
 import copy
+import json
 
 import numpy as np
 import pytest
@@ -177,6 +178,27 @@ def test_the_store_never_evicts_a_chains_current_patch():
     store.unpin(first)
     store.add({"x": torch.ones(1)}, large=False)
     assert first not in store.patches
+
+
+def test_the_store_restores_from_its_state_by_rendering_its_requests_again():
+    def render(requests):
+        return [{"x": torch.full((1,), float(r))} for r in requests]
+
+    store = PatchStore(capacity=3)
+    first = store.add(render([7])[0], large=True, request=7)
+    store.pin(first)
+    for r in range(5):
+        store.add(render([r])[0], large=r % 2 == 0, request=r)
+    store.set_weight(first, 0.25)
+    state = json.loads(json.dumps(store.state(lambda r: r)))  # as a checkpoint holds it
+
+    restored = PatchStore(capacity=3)
+    restored.restore(state, int, render)
+    assert list(restored.patches) == list(store.patches) == [first, 4, 5]
+    assert all(torch.equal(restored.patches[i]["x"], store.patches[i]["x"]) for i in store.patches)
+    assert (restored.weights, restored.large, restored.pins) == (store.weights, store.large, store.pins)
+    assert restored.add(render([9])[0], large=False, request=9) == store.next_id
+    assert first in restored.patches  # still pinned: a chain's current patch survives the resume
 
 
 def test_the_store_draws_by_loss_and_uniformly_when_every_loss_is_zero():

@@ -90,6 +90,47 @@ def test_resume_equals_an_uninterrupted_run_bit_for_bit(tmp_path):
     assert store.load(12) == reference_store.load(12)  # weights, Adam's state, RNG states, loop position
 
 
+class ShuffledBatches(InProcessBatches):
+    """A `ResumableStream`: which batch comes next depends on a counter the stream keeps, not only on
+    its position (as an active-exploration trainer's choices depend on its chains)."""
+
+    def __init__(self, spec: SourceSpec) -> None:
+        super().__init__(spec)
+        self.drawn = 0
+
+    def __next__(self):
+        self.drawn += 1
+        self.position += 1
+        return self.source.batch(self.drawn * 7 % 5)
+
+    def state_files(self) -> dict[str, bytes]:
+        return {"stream-drawn": str(self.drawn).encode()}
+
+    def restore(self, files: dict[str, bytes]) -> None:
+        self.drawn = int(files["stream-drawn"])
+
+
+def test_a_streams_own_state_is_checkpointed_and_restored(tmp_path):
+    reference = small_mlp()
+    train(reference, mse, ShuffledBatches(SPEC), CONFIG, CheckpointStore(str(tmp_path / "reference")))
+    store = CheckpointStore(str(tmp_path / "resumed"))
+    with pytest.raises(Interrupted):
+        train(small_mlp(), mse, ShuffledBatches(SPEC), CONFIG, store, interrupt_at(10))
+    assert store.load(8)["stream-drawn"] == b"8"
+    resumed = small_mlp(seed=99)
+    train(resumed, mse, ShuffledBatches(SPEC), CONFIG, store)
+    assert_same_weights(reference, resumed)
+
+
+def test_a_streams_files_must_be_named_as_its_own(tmp_path):
+    class Stray(ShuffledBatches):
+        def state_files(self) -> dict[str, bytes]:
+            return {"loop.json": b"{}"}
+
+    with pytest.raises(ValueError, match="stream-"):
+        train(small_mlp(), mse, Stray(SPEC), CONFIG, CheckpointStore(str(tmp_path)))
+
+
 def test_one_phase_is_the_textbook_adam_loop_bit_for_bit():
     """The loop adds checkpoints, progress and checks around plain Adam, and changes none of its arithmetic
     (the phase machinery included): the same weights and losses as a hand-written loop, on CPU."""

@@ -4,8 +4,9 @@ A step runs one or more phases, each a loss descended by its own named Adam with
 schedule, clipping and grad scaler: one phase for a kind that fits one network, two alternating ones for
 a GAN's discriminator and generator. The learning rate is a pure function of the step (no scheduler
 object carrying state), and a checkpoint holds the weights, every optimizer's state and grad scaler, the
-RNG states, the next batch index and each phase's latest loss; resuming from step k and running to n
-therefore repeats the uninterrupted run exactly (bit for bit on CPU).
+RNG states, the next batch index and each phase's latest loss, and the batch stream's own state when it
+has any (`ResumableStream`: an active-exploration trainer's chains and patch store); resuming from step k
+and running to n therefore repeats the uninterrupted run exactly (bit for bit on CPU).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import torch
 from pydantic import BaseModel, Field
@@ -27,6 +28,21 @@ from workers.runtime.sources import Batch
 
 LossFunction = Callable[[torch.nn.Module, Batch], torch.Tensor]
 MAIN_PHASE = "main"  # the one phase of `train`
+STREAM_FILE_PREFIX = "stream-"  # the names of a `ResumableStream`'s files in a checkpoint
+
+
+@runtime_checkable
+class ResumableStream(Protocol):
+    """A batch stream whose next batches depend on more than its position (a trainer that chooses its
+    samples from what it has seen): its state goes into every checkpoint beside the model's."""
+
+    def state_files(self) -> dict[str, bytes]:
+        """The stream's state now, as named files (names start with `STREAM_FILE_PREFIX`)."""
+        ...
+
+    def restore(self, files: dict[str, bytes]) -> None:
+        """Return to the state `state_files` gave (`files` is the whole checkpoint)."""
+        ...
 
 
 class TrainingDiverged(RuntimeError):
@@ -266,6 +282,13 @@ class _ProgressMeter:
         return progress
 
 
+def _stream_files(stream: ResumableStream) -> dict[str, bytes]:
+    files = stream.state_files()
+    if stray := sorted(name for name in files if not name.startswith(STREAM_FILE_PREFIX)):
+        raise ValueError(f"a stream's checkpoint files are named {STREAM_FILE_PREFIX}*, got {stray}")
+    return files
+
+
 def train(
     model: torch.nn.Module,
     loss_fn: LossFunction,
@@ -307,9 +330,13 @@ def train_phases(
     adams = {o.phase.name: o.adam for o in optimizers}
     scalers = {o.phase.name: o.scaler for o in optimizers}
     loop = training_state.LoopState()
+    resumable = isinstance(batches, ResumableStream)
     if checkpoints is not None and (latest := checkpoints.latest()) is not None:
-        loop = training_state.decode(checkpoints.load(latest), model, adams, scalers)
+        files = checkpoints.load(latest)
+        loop = training_state.decode(files, model, adams, scalers)
         loop.restore_rng()
+        if resumable:
+            batches.restore(files)
     batches.seek(loop.batch_position)
     step, best_loss, losses = loop.step, loop.best_loss, dict(loop.losses)
     meter = _ProgressMeter(config.steps)
@@ -327,7 +354,8 @@ def train_phases(
         meter.count(batch)
         if checkpoints is not None and (step % config.checkpoint_every == 0 or step == config.steps):
             state = training_state.LoopState.capture(step, batches.position, best_loss, losses)
-            checkpoints.save(step, training_state.encode(model, adams, scalers, state))
+            files = training_state.encode(model, adams, scalers, state)
+            checkpoints.save(step, files | (_stream_files(batches) if resumable else {}))
         if on_progress is not None and (step % config.progress_every == 0 or step == config.steps):
             on_progress(meter.event(step, losses, optimizers[0].lr(step - 1, config.steps)))
 

@@ -13,15 +13,20 @@ The same loop with large steps only, every proposal accepted and no resolution s
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
 
 Everything random comes from (seed, iteration), and the patches from requests that carry their seeds, so
-a run is reproducible for a seed. Seeking to another iteration (a resumed job) restarts the chains, the
-store and the bootstrap at that iteration's resolution: the exploration state is not checkpointed.
+a run is reproducible for a seed. The exploration is part of the training runtime's checkpoints (a
+`ResumableStream`): the chains' states and current patches, the store (ids, requests, weights, pins), the
+two loss averages and the counters go into `stream-exploration.json`, and a resumed job renders the
+stored patches again from their requests, so it continues exactly as the uninterrupted one (there is no
+random state to carry: each iteration's generator is seeded by (seed, iteration)). Seeking to an
+iteration with no such state restarts the chains, the store and the bootstrap there.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -33,13 +38,14 @@ from workers.models.explore.exploration import greedy, large_step, propose
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.oracle import adam_step_norm
 from workers.models.explore.reuse import MovingAverage, PatchStore, reuse_probability
-from workers.models.explore.source import render_seed, request_for
+from workers.models.explore.source import PatchRequest, render_seed, request_for
 from workers.nn.ssim import ssim_map
 from workers.runtime.samplers import Renders
 from workers.runtime.sources import Batch
 from workers.runtime.threads import torch_threads
 
 PATCH_KEYS = ("features", "emission", "target")
+STATE_FILE = "stream-exploration.json"  # the exploration's part of a training checkpoint
 
 
 def patch_losses(
@@ -117,6 +123,35 @@ class Explorer:
         if index != self.position:
             self._restart(index)
 
+    def state_files(self) -> dict[str, bytes]:
+        """The exploration's state for a checkpoint (`workers.runtime.training.ResumableStream`)."""
+        state = {
+            "position": self.position,
+            "generations": self.generations,
+            "counts": self.counts,
+            "loss_new": self.loss_new.value,
+            "loss_existing": self.loss_existing.value,
+            "chains": [[None if c.state is None else c.state.tolist(), c.patch_id] for c in self.chains],
+            "store": self.store.state(asdict),
+        }
+        return {STATE_FILE: json.dumps(state).encode()}
+
+    def restore(self, files: dict[str, bytes]) -> None:
+        """Return to a checkpoint's exploration state, rendering its stored patches again; a checkpoint
+        without one (written before exploration was checkpointed) leaves `seek` to restart."""
+        if STATE_FILE not in files:
+            return
+        if self.renders is None:
+            raise RuntimeError("the explorer restores through `open(renders)`: it renders its store again")
+        state = json.loads(files[STATE_FILE])
+        self._restart(state["position"])
+        self.generations, self.counts = state["generations"], state["counts"]
+        self.loss_new.value, self.loss_existing.value = state["loss_new"], state["loss_existing"]
+        for chain, (chain_state, patch_id) in zip(self.chains, state["chains"], strict=True):
+            chain.state = None if chain_state is None else np.array(chain_state, dtype=np.float64)
+            chain.patch_id = patch_id
+        self.store.restore(state["store"], _request, self.renders.map)
+
     def reuse_probability(self) -> float:
         """p_s now; both averages start from the fresh patches' one at the end of the bootstrap."""
         new = self.loss_new.value
@@ -157,7 +192,8 @@ class Explorer:
         ]
         patches = self.renders.map(requests)
         ids = [
-            self.store.add(patch, is_large) for patch, is_large in zip(patches, large.tolist(), strict=True)
+            self.store.add(patch, is_large, request=request)
+            for patch, is_large, request in zip(patches, large.tolist(), requests, strict=True)
         ]
         judged = [k for k, chain in enumerate(self.chains) if not uniform and chain.patch_id is not None]
         currents = [self.store.patches[self.chains[k].patch_id] for k in judged]
@@ -240,6 +276,10 @@ class Explorer:
             "final_resolution": float(self.config.resolution(self.position)),
             "stored_patches": float(len(self.store)),
         }
+
+
+def _request(fields: dict) -> PatchRequest:
+    return PatchRequest(**{**fields, "v": tuple(fields["v"])})
 
 
 def _stack(members: list[tuple[int, Batch, bool]], reused: bool) -> Batch:

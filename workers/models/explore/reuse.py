@@ -5,11 +5,16 @@ After the bootstrap a step reuses stored patches with probability p_s = sigmoid(
 only (small steps are biased towards high loss). Reused patches are drawn in proportion to their last loss,
 refreshed whenever they are trained. The store evicts the oldest patch no chain currently sits on, so a
 chain's current sample is never lost.
+
+Each patch keeps the request it was rendered from, so the store's state (`state`, `restore`) is a few
+numbers per patch: a resumed job renders the same patches again instead of checkpointing their pixels.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -49,21 +54,24 @@ class PatchStore:
         self.weights: dict[int, float] = {}
         self.large: dict[int, bool] = {}
         self.pins: dict[int, int] = {}
+        self.requests: dict[int, Any] = {}
         self.next_id = 0
 
     def __len__(self) -> int:
         return len(self.patches)
 
-    def add(self, patch: Batch, large: bool, weight: float = 1.0) -> int:
-        """Store a patch, evicting the oldest unpinned ones beyond capacity; returns its id."""
+    def add(self, patch: Batch, large: bool, weight: float = 1.0, request: Any = None) -> int:
+        """Store a patch (rendered from `request`), evicting the oldest unpinned ones beyond capacity;
+        returns its id."""
         patch_id = self.next_id
         self.next_id += 1
         self.patches[patch_id], self.weights[patch_id], self.large[patch_id] = patch, weight, large
+        self.requests[patch_id] = request
         for old in list(self.patches):
             if len(self.patches) <= self.capacity:
                 break
             if self.pins.get(old, 0) == 0 and old != patch_id:
-                del self.patches[old], self.weights[old], self.large[old]
+                del self.patches[old], self.weights[old], self.large[old], self.requests[old]
         return patch_id
 
     def pin(self, patch_id: int) -> None:
@@ -85,3 +93,29 @@ class PatchStore:
         total = weights.sum()
         p = weights / total if total > 0 else None
         return [int(i) for i in rng.choice(ids, size=n, replace=True, p=p)]
+
+    def state(self, encode_request: Callable[[Any], Any]) -> dict:
+        """Everything but the pixels, JSON-ready: ids in storage order, their requests (as
+        `encode_request` writes them), weights, step kinds and pins."""
+        return {
+            "next_id": self.next_id,
+            "patches": [
+                [i, encode_request(self.requests[i]), self.weights[i], self.large[i]] for i in self.patches
+            ],
+            "pins": [[i, n] for i, n in self.pins.items()],
+        }
+
+    def restore(
+        self,
+        state: dict,
+        decode_request: Callable[[Any], Any],
+        render: Callable[[Sequence[Any]], list[Batch]],
+    ) -> None:
+        """Return to `state`, rendering every stored patch again from its request (in one `render` call)."""
+        requests = [decode_request(encoded) for _, encoded, _, _ in state["patches"]]
+        patches = render(requests)
+        self.patches, self.weights, self.large, self.requests = OrderedDict(), {}, {}, {}
+        for (i, _, weight, large), request, patch in zip(state["patches"], requests, patches, strict=True):
+            self.patches[i], self.weights[i], self.large[i], self.requests[i] = patch, weight, large, request
+        self.pins = {i: n for i, n in state["pins"]}
+        self.next_id = state["next_id"]
