@@ -69,7 +69,7 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
     name, env = next(iter(held_out_lightings(config.lighting, SEED).items()))
     cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
     tracer = relit_tracer(ref.compiled(), cube)
-    full, indirect = truth(view, cube, tracer, config.test_spp, SEED)
+    full, indirect = truth(view, cube, tracer, config.test_spp, SEED, config.max_depth)
     for k in (k for k in K_SWEEP if k <= config.n_wavelets):
         frames = [
             render_frame(

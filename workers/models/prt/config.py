@@ -97,7 +97,9 @@ class PrtConfig(TrainedKindConfig):
     image_size: int = Field(48, ge=4, le=4096, description="side of training and test views")
     rows_per_view: int = Field(512, ge=1, description="pixels per training view whose transport is stored")
     row_spp: int = Field(128, ge=1, le=1 << 16, description="paths per stored pixel")
-    test_spp: int = Field(64, ge=1, le=1 << 16, description="paths per pixel of the test views' rows")
+    test_spp: int = Field(
+        256, ge=1, le=1 << 16, description="paths per pixel of the held-out truth, per lighting (`evaluate`)"
+    )
     max_depth: int = Field(8, ge=3, le=64)
     probe_spp: int = Field(4, ge=1, le=256, description="plan: paths per pixel of the indirect-light probe")
     lighting: LightingConfig = LightingConfig()
