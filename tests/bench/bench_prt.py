@@ -8,7 +8,8 @@ held-out lightings (HDRIs and procedural maps never trained on), against the tri
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
 Then frame time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
-`ABLATION_STEPS` steps each (the traced data is shared: only the network changes).
+`ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
+`PRT_BENCH_SCENES` (comma-separated) narrows the scenes.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
-SCENES = ("env_lit_objects", "glossy_row")
+SCENES = tuple(os.environ.get("PRT_BENCH_SCENES", "env_lit_objects,glossy_row").split(","))
 SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
@@ -118,7 +119,7 @@ def run() -> list[BenchSection]:
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
             k_sweep(folder / "out", scene, sweep)
-        for label, overrides in ABLATION:
+        for label, overrides in ABLATION if ABLATION_STEPS else ():
             folder = Path(tmp) / f"ablation-{len(ablation.rows)}"
             merged = {**overrides, "train": {"steps": ABLATION_STEPS}}
             _, outcome = run_kind_job(

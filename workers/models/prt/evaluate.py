@@ -4,9 +4,9 @@ trained on. The ground truth is path-traced per lighting at `test_spp` with impo
 lighting: indirect as binned transport (`transport`, traced under the lighting's own sampler) dotted with
 it, direct as a render. Rows traced once with the lighting-independent sampler would serve every lighting,
 but under a sun they are far noisier: at 64 spp their indirect was 15-25 dB PSNR from a 1024-spp reference
-on env_lit_objects, which capped what a perfect model could score. The model's frame is its own path-traced direct light at
-`evaluation_spp` plus predicted indirect (`frame`). The trivial baseline is the same direct light with no
-indirect at all."""
+on env_lit_objects, which capped what a perfect model could score. The model's frame is its own
+path-traced direct light at `evaluation_spp` plus predicted indirect (`frame`). The trivial baseline is
+the same direct light with no indirect at all."""
 
 from __future__ import annotations
 
