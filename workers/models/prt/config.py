@@ -104,9 +104,11 @@ class PrtConfig(TrainedKindConfig):
     probe_spp: int = Field(4, ge=1, le=256, description="plan: paths per pixel of the indirect-light probe")
     lighting: LightingConfig = LightingConfig()
     cameras: CamerasConfig = CamerasConfig()
+    # lr 0.003 (default preset, env_lit_objects, 500 steps, held-out indirect against importance-sampled
+    # truth): 19.1 dB against 16.1 at lr 0.01 (no indirect: 12.7); quick keeps its measured 0.01.
     train: TrainConfig = TrainConfig(
         steps=2000,
-        schedule=Schedule(lr=0.01, kind="cosine", final_lr_fraction=0.05),
+        schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
         checkpoint_every=500,
         progress_every=20,
     )
@@ -152,7 +154,12 @@ PRESETS: dict[str, dict] = {
         "max_depth": 5,
         "lighting": {"test_procedural": 1, "map_width": 64},
         "cameras": {"train_views": 8, "near_views": 1, "far_views": 1},
-        "train": {"steps": 300, "checkpoint_every": 100, "progress_every": 20},
+        "train": {
+            "steps": 300,
+            "schedule": {"lr": 0.01, "kind": "cosine", "final_lr_fraction": 0.05},
+            "checkpoint_every": 100,
+            "progress_every": 20,
+        },
         "evaluation_spp": 4,
         "reference_spp": 32,
     },
