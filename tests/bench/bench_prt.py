@@ -8,7 +8,8 @@ held-out lightings (HDRIs and procedural maps never trained on), against the tri
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
 Then frame time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
-`ABLATION_STEPS` steps each (the traced data is shared: only the network changes).
+`ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
+`PRT_BENCH_SCENES` (comma-separated) narrows the scenes.
 """
 
 from __future__ import annotations
@@ -22,18 +23,21 @@ import numpy as np
 from tests.bench.common import BenchSection
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
-from workers.models.prt.data import test_views
+from workers.models.prt.data import test_views, transport_tracer
 from workers.models.prt.evaluate import truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.probe import modelled_objects
 from workers.models.prt.source import unit_mean
+from workers.models.prt.transport import trace_rows
+from workers.models.prt.views import pixel_rays
 from workers.nn.metrics import flip, psnr
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
-SCENES = ("env_lit_objects", "glossy_row")
+SCENES = tuple(os.environ.get("PRT_BENCH_SCENES", "env_lit_objects,glossy_row").split(","))
 SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
@@ -58,6 +62,39 @@ def equal_error_seconds(report: Report) -> float:
     return float(np.exp(np.interp(target, errors[order], seconds[order])))
 
 
+def target_noise(scene: str, section: BenchSection, pixels: int = 256, reference_spp: int = 1024) -> None:
+    """How noisy ground truth is, before any network: on `pixels` pixels of a far view, PSNR against a
+    `reference_spp` render importance-sampled per lighting of (a) training targets, rows traced once with
+    the lighting-independent sampler at `row_spp` and dotted with the lighting, (b) the held-out truth at
+    `test_spp` (`evaluate.truth`'s estimator), and (c) the trivial baseline of no indirect light."""
+    config = get_kind_config(PRESET)
+    ref = SceneRef(get_builtin(scene))
+    tracer = transport_tracer(ref, config)
+    view = next(v for v in test_views(ref, config, SEED) if v.name.startswith("far"))
+    modelled = np.flatnonzero(view.inputs.modelled(np.asarray(modelled_objects(ref, config))))
+    rng = np.random.default_rng(SEED)
+    pick = rng.choice(modelled, min(pixels, len(modelled)), replace=False)
+    origins, directions = (a[pick] for a in pixel_rays(view.camera))
+    size, depth = config.cube_size, config.max_depth
+    rows = trace_rows(tracer, origins, directions, config.row_spp, size, rng, depth)
+    as_image = lambda b: b.reshape(-1, 1, 3)  # noqa: E731
+    for name, env in held_out_lightings(config.lighting, SEED).items():
+        cube = unit_mean(lighting_cube(env, size, config.lighting.map_width))
+        lit = relit_tracer(ref.compiled(), cube)
+
+        def indirect(spp: int, lit=lit, cube=cube) -> np.ndarray:
+            traced = trace_rows(lit, origins, directions, spp, size, rng, depth)
+            return traced.radiance(cube, ("indirect",))
+
+        reference = as_image(indirect(reference_spp))
+        section.add(
+            scene=scene, lighting=name,
+            rows_psnr=psnr(reference, as_image(rows.radiance(cube, ("indirect",)))),
+            truth_psnr=psnr(reference, as_image(indirect(config.test_spp))),
+            zero_psnr=psnr(reference, 0 * reference),
+        )  # fmt: skip
+
+
 def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
     artifact = load(folder)
     config = artifact.config
@@ -69,7 +106,7 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
     name, env = next(iter(held_out_lightings(config.lighting, SEED).items()))
     cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
     tracer = relit_tracer(ref.compiled(), cube)
-    full, indirect = truth(view, cube, tracer, config.test_spp, SEED)
+    full, indirect = truth(view, cube, tracer, config.test_spp, SEED, config.max_depth)
     for k in (k for k in K_SWEEP if k <= config.n_wavelets):
         frames = [
             render_frame(
@@ -93,9 +130,11 @@ def run() -> list[BenchSection]:
     lightings = BenchSection("prt per held-out lighting (never trained on)")
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
     sweep = BenchSection("prt time per frame and error against K (Table 2 on this CPU)")
+    noise = BenchSection(f"prt ground-truth noise: indirect PSNR against {1024}-spp importance sampling")
     ablation = BenchSection(f"prt ablation on env_lit_objects, {ABLATION_STEPS} steps each (Tables 3, 6)")
     with tempfile.TemporaryDirectory(prefix="bench-prt-") as tmp:
         for scene in SCENES:
+            target_noise(scene, noise)
             folder = Path(tmp) / scene
             _, outcome = run_kind_job("prt", get_builtin(scene), folder, preset=PRESET, seed=SEED)
             if outcome.state != "succeeded":
@@ -118,7 +157,7 @@ def run() -> list[BenchSection]:
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
             k_sweep(folder / "out", scene, sweep)
-        for label, overrides in ABLATION:
+        for label, overrides in ABLATION if ABLATION_STEPS else ():
             folder = Path(tmp) / f"ablation-{len(ablation.rows)}"
             merged = {**overrides, "train": {"steps": ABLATION_STEPS}}
             _, outcome = run_kind_job(
@@ -129,7 +168,10 @@ def run() -> list[BenchSection]:
             ablation.add(variant=label, stored_bytes=size, **{k: m[k] for k in FIGURES[:5]})
     timing.notes.append("equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP")
     sweep.notes.append("frame_s: G-buffer + network + direct light; network_s: selection and network only")
-    return [quality, lightings, timing, sweep, ablation]
+    noise.notes.append(
+        "rows_psnr: training targets (row_spp, lighting-independent sampler); truth_psnr: test_spp"
+    )
+    return [noise, quality, lightings, timing, sweep, ablation]
 
 
 def get_kind_config(preset: str):

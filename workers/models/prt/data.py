@@ -2,8 +2,8 @@
 
 - The training set: for each training view, `rows_per_view` pixels that see geometry, their G-buffer
   inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from.
-- The test set: every pixel of the near and far held-out views with indirect rows, so the indirect ground
-  truth under any held-out lighting is a dot product.
+- The test set: the near and far held-out views and their G-buffers (their ground truth depends on the
+  lighting: `evaluate.truth` path-traces it importance-sampled per held-out lighting).
 - The box of the hash grid: what the camera sees from every view, padded.
 
 Everything is a function of (scene, config, seed).
@@ -20,7 +20,7 @@ import torch
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
 from workers.models.prt.lighting import relit_tracer, uniform_cube
-from workers.models.prt.transport import TransportRows, trace_rows
+from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays, trajectory_cameras
 from workers.nn.haar import cubemap_wavelets
 from workers.render.integrator import PathTracer
@@ -45,7 +45,6 @@ class TestView:
     name: str  # "near_0", "far_1", ...
     camera: Camera
     inputs: SurfaceInputs  # every pixel, row-major
-    rows: TransportRows  # indirect
 
 
 _cache: dict[tuple, object] = {}
@@ -170,16 +169,10 @@ def test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
 
 def _build_test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
     tracer = transport_tracer(scene, config)
-    rng = np.random.default_rng([seed, 16])
     views = []
     by_split = cameras(scene, config)
     for split in (NEAR, FAR):
         for number, camera in enumerate(by_split[split]):
-            origins, directions = pixel_rays(camera)
-            rows = trace_rows(
-                tracer, origins, directions, config.test_spp, config.cube_size, rng, config.max_depth
-            )
-            views.append(
-                TestView(f"{split}_{number}", camera, surface_inputs(tracer, origins, directions), rows)
-            )
+            inputs = surface_inputs(tracer, *pixel_rays(camera))
+            views.append(TestView(f"{split}_{number}", camera, inputs))
     return views

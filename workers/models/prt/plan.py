@@ -74,7 +74,8 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         ),
     ]
     test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2
-    paths = rows * config.row_spp + test_pixels * config.test_spp
+    lightings = len(config.lighting.test_hdris) + config.lighting.test_procedural
+    paths = rows * config.row_spp + 2 * lightings * test_pixels * config.test_spp  # indirect and direct
     pairs = (
         config.train.steps
         * config.pixels_per_step
