@@ -1,7 +1,8 @@
 """Generation quality without a pretrained network: the sliced Wasserstein distance between Laplacian-
 pyramid patches of generated and path-traced slab views (Karras et al. 2018's SWD, after Rabin et al.
 2011), measured on held-out instances (their own seed stream) rendered under the same labels; and the
-conditioning: how the generated density's mean height follows the strand length parameter.
+conditioning: how the generated density's mean height follows the strand length parameter and its
+vertical opacity the strand density parameter.
 """
 
 from __future__ import annotations
@@ -77,9 +78,9 @@ def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
     }
 
 
-def mean_height(model: MesoGAN, structure: Tensor, seed: int, heights: int = 16) -> float:
-    """The density-weighted mean height of the slab generated for `structure` (normalised (3,)): the
-    measure of strand length the conditioning test reads (a longer pile puts density higher)."""
+def density_profile(model: MesoGAN, structure: Tensor, seed: int, heights: int = 16) -> Tensor:
+    """Density (R^2 texels, `heights`) of the slab generated for `structure` (normalised (3,)) at the
+    level-0 texels of the training window and `heights` evenly spaced heights in the slab."""
     config = model.config
     window = Window.centred(config.plane_resolution, config.texel)
     generator = torch.Generator().manual_seed(seed)
@@ -93,14 +94,34 @@ def mean_height(model: MesoGAN, structure: Tensor, seed: int, heights: int = 16)
         f = features[:, None].expand(-1, heights, -1)
         hh = h[None].expand(len(features), -1)
         density, _ = model.decoder.density(f, hh * HEIGHT_TO_RADIANS, torch.zeros_like(hh))
-    return float((density * hh).sum() / density.sum().clamp(min=1e-12))
+    return density
+
+
+def mean_height(density: Tensor) -> float:
+    """The density-weighted mean height of a profile: a longer pile puts density higher."""
+    h = (torch.arange(density.shape[-1]) + 0.5) / density.shape[-1]
+    return float((density * h).sum() / density.sum().clamp(min=1e-12))
+
+
+def vertical_opacity(density: Tensor) -> float:
+    """Mean over texels of 1 - transmittance of a vertical ray through the slab (unit height): a denser
+    pile hides more of the skin."""
+    return float((1 - torch.exp(-density.mean(-1))).mean())
 
 
 def structure_response(model: MesoGAN, seeds: int = 4) -> dict[str, float]:
-    """Mean generated height at the shortest and the longest trained strand length (other parameters at
-    the middle of their ranges), averaged over `seeds` instances."""
-    short, long = torch.tensor([0.0, 0.5, 0.5]), torch.tensor([1.0, 0.5, 0.5])
+    """Mean generated height at the shortest and the longest trained strand length, and vertical opacity
+    at the lowest and the highest trained density (other parameters at the middle of their ranges),
+    averaged over `seeds` instances: the conditioning figures (a structure label moves geometry its way)."""
+    probes = {
+        "mean_height_short": ([0.0, 0.5, 0.5], mean_height),
+        "mean_height_long": ([1.0, 0.5, 0.5], mean_height),
+        "opacity_sparse": ([0.5, 0.0, 0.5], vertical_opacity),
+        "opacity_dense": ([0.5, 1.0, 0.5], vertical_opacity),
+    }
     return {
-        "mean_height_short": float(np.mean([mean_height(model, short, s) for s in range(seeds)])),
-        "mean_height_long": float(np.mean([mean_height(model, long, s) for s in range(seeds)])),
+        name: float(
+            np.mean([measure(density_profile(model, torch.tensor(s), seed)) for seed in range(seeds)])
+        )
+        for name, (s, measure) in probes.items()
     }
