@@ -24,7 +24,7 @@ from tests.support.jobs import run_kind_job
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
-from workers.models.mesogan.evaluate import generation_scores, held_out_views
+from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.run import TRIANGLE_BYTES, covered_pixels
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
@@ -121,7 +121,12 @@ def run() -> list[BenchSection]:
                 model=f"{name}, {steps} steps",
                 **generation_scores(ablation(name, overrides, steps), held_out),
             )
-    return [curve, memory, quality]
+    conditioning = BenchSection(
+        "mesogan conditioning: vertical opacity at the lowest / highest density label, mean height at the "
+        "shortest / longest length label (others mid-range, 4 seeds)"
+    )
+    conditioning.add(model="trained", **structure_response(model))
+    return [curve, memory, quality, conditioning]
 
 
 ABLATIONS = {
