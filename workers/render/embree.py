@@ -6,6 +6,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from workers.render import heap
 from workers.render.intersector import Hits
 
 
@@ -13,6 +14,7 @@ class RayScene:
     """One Embree scene over world-space triangles (T, 3, 3)."""
 
     def __init__(self, positions: np.ndarray, robust: bool = True):
+        heap.keep_freed_arrays()  # each query allocates arrays of about 1 MB, as the tracer's bounces do
         self._scene = rtcore_scene.EmbreeScene(robust=robust)
         TriangleMesh(self._scene, np.ascontiguousarray(positions, dtype=np.float32))
         # Embree builds its BVH lazily on the first query: build it now, once, not inside a worker thread.

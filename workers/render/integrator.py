@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from workers.render import wavefront
+from workers.render import heap, wavefront
 from workers.render.aggregate import Aggregate, AggregateEvents
 from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import RayScene
@@ -146,6 +146,7 @@ class PathTracer:
         `primary` (default: the same) answers the first segment of paths and `first_hits`, as a
         rasteriser would for camera rays. `aggregate` scatters light in voxels beside the surfaces
         (`workers.render.aggregate`); `aggregate_next_event` samples lights from its scattering voxels."""
+        heap.keep_freed_arrays()
         self.scene = scene
         self.aggregate = aggregate
         self.aggregate_next_event = aggregate_next_event

@@ -255,7 +255,8 @@ def _sample_lights(p, u_select, u, lights):
             direction[i, 0], direction[i, 1], direction[i, 2] = dx, dy, dz
             distance[i] = dist
             if (cos_l > 0 or lights.two_sided[which]) and abs(cos_l) > 1e-12 and dist > 0:
-                radiance[i] = lights.tri_emission[which]
+                for c in range(3):
+                    radiance[i, c] = lights.tri_emission[which, c]
                 pdf[i] = select / lights.areas[which] * dist * dist / max(abs(cos_l), 1e-300)
         elif k == POINT:
             pos = lights.point_position[which]
@@ -272,8 +273,9 @@ def _sample_lights(p, u_select, u, lights):
                 radiance[i, c] = lights.point_intensity[which, c] * scale
             pdf[i], delta[i] = select, True
         elif k == DIRECTIONAL:
-            direction[i] = lights.dir_to_light[which]
-            radiance[i] = lights.dir_irradiance[which]
+            for c in range(3):
+                direction[i, c] = lights.dir_to_light[which, c]
+                radiance[i, c] = lights.dir_irradiance[which, c]
             pdf[i], delta[i] = select, True
         else:
             pdf[i] = select

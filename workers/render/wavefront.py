@@ -71,7 +71,8 @@ def surface_points(o, d, t, prim, bu, bv, tri_ng, tri_ns, smooth, tri_uv, coordi
             length = max(math.sqrt(sx * sx + sy * sy + sz * sz), 1e-300)
             ns[i, 0], ns[i, 1], ns[i, 2] = sx / length, sy / length, sz / length
         else:
-            ns[i] = ng[i]
+            for c in range(3):
+                ns[i, c] = ng[i, c]
         if need_uv:
             for c in range(2):
                 uv[i, c] = b0 * tri_uv[tri, 0, c] + b1 * tri_uv[tri, 1, c] + b2 * tri_uv[tri, 2, c]
@@ -86,7 +87,8 @@ def emitted_radiance(prim, d, ng, emission, two_sided):
     for i in range(n):
         tri = prim[i]
         if two_sided[tri] or -(d[i, 0] * ng[i, 0] + d[i, 1] * ng[i, 1] + d[i, 2] * ng[i, 2]) > 0:
-            out[i] = emission[tri]
+            for c in range(3):
+                out[i, c] = emission[tri, c]
     return out
 
 
@@ -237,7 +239,8 @@ def next_paths(idx, beta, sampled, frames, position, ng, scale, u_roulette, use_
             p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
         )
         out_d[count, 0], out_d[count, 1], out_d[count, 2] = dx, dy, dz
-        out_beta[count] = b
+        for c in range(3):
+            out_beta[count, c] = b[c]
         out_idx[count], out_pdf[count], out_delta[count] = idx[i], pdf[i], delta[i]
         count += 1
     return (
