@@ -194,6 +194,18 @@ def _scratch(n_dims, dtype):
     )
 
 
+@njit(cache=True, inline="always")
+def _level_in_slot(slot, n_levels):
+    """The level a parallel loop works on in its `slot`-th turn: even levels first, then odd ones.
+
+    Numba's parallel loops hand each thread a contiguous range of turns. In level order two threads
+    would get the coarse levels (dense, cache-resident, cheap) and the fine hashed ones (4 MB blocks,
+    slow); interleaved, each gets a mix and they finish together.
+    """
+    half = (n_levels + 1) // 2
+    return 2 * slot if slot < half else 2 * (slot - half) + 1
+
+
 @njit(parallel=True, cache=True)
 def grid_forward(x, table, starts, scales, sides, primes, rules, sizes, lookup_starts, lookup, out):
     """out[n, l * F + f] = sum over corners c of w_c(x_n) * table[start_l + row_c, f].
@@ -206,7 +218,7 @@ def grid_forward(x, table, starts, scales, sides, primes, rules, sizes, lookup_s
     n_levels, n_features = starts.shape[0], table.shape[1]
     n_chunks = (n_points + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
     for task in prange(n_levels * n_chunks):
-        level, chunk = task // n_chunks, task % n_chunks
+        level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
         start = starts[level]
         scratch = _scratch(n_dims, table.dtype)
         rows, weights = scratch[6], scratch[7]
@@ -238,7 +250,8 @@ def grid_backward_table(
     n_points, n_dims = x.shape
     n_features = grad_table.shape[1]
     prefetched = 0.0
-    for level in prange(starts.shape[0]):
+    for slot in prange(starts.shape[0]):
+        level = _level_in_slot(slot, starts.shape[0])
         start = starts[level]
         scratch = _scratch(n_dims, grad_table.dtype)
         rows, weights = scratch[6], scratch[7]
