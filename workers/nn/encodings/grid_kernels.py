@@ -281,30 +281,41 @@ def grid_backward_table(
 def grid_backward_input(
     x, table, grad_out, starts, scales, sides, primes, rules, sizes, lookup_starts, lookup, grad_x
 ):
-    """grad_x[n, j] = sum_l scale_l * sum_c (d w_c / d f_j) <table[row_c], grad_out[n, l]>."""
+    """grad_x[n, j] = sum_l scale_l * sum_c (d w_c / d f_j) <table[row_c], grad_out[n, l]>.
+
+    Level-major like `grid_forward` (one level's block of the table in cache at a time): each
+    (level, chunk) task writes its levels' terms to `terms` [L, N, d], then a pass over points adds
+    them to grad_x in level order, so the sums do not depend on the thread count.
+    """
     n_points, n_dims = x.shape
-    n_features = table.shape[1]
+    n_levels, n_features = starts.shape[0], table.shape[1]
     n_chunks = (n_points + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
-    for chunk in prange(n_chunks):
+    terms = np.empty((n_levels, n_points, n_dims), table.dtype)
+    for task in prange(n_levels * n_chunks):
+        level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
+        rule, start = rules[level], starts[level]
         lower, upper = np.empty(n_dims, np.int64), np.empty(n_dims, np.int64)
         w_lower, w_upper = np.empty(n_dims, table.dtype), np.empty(n_dims, table.dtype)
         keys = np.empty(1 << n_dims, np.int64)
         weights = np.empty(1 << n_dims, table.dtype)
         along = np.empty(n_dims, table.dtype)
         for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
-            for level in range(starts.shape[0]):
-                rule = rules[level]
-                _level_pairs(x, n, scales[level], sides[level], rule, primes, lower, upper, w_lower, w_upper)
-                _corners(rule, lower, upper, w_lower, w_upper, keys, weights)
-                along[:] = 0
-                for corner in range(1 << n_dims):
-                    row = _row(keys[corner], level, rule, sizes, lookup_starts, lookup)
-                    if row < 0:
-                        continue
-                    dot = table.dtype.type(0.0)
-                    for f in range(n_features):
-                        dot += table[starts[level] + row, f] * grad_out[n, level * n_features + f]
-                    for dim in range(n_dims):
-                        along[dim] += _corner_slope(corner, dim, w_lower, w_upper) * dot
+            _level_pairs(x, n, scales[level], sides[level], rule, primes, lower, upper, w_lower, w_upper)
+            _corners(rule, lower, upper, w_lower, w_upper, keys, weights)
+            along[:] = 0
+            for corner in range(1 << n_dims):
+                row = _row(keys[corner], level, rule, sizes, lookup_starts, lookup)
+                if row < 0:
+                    continue
+                dot = table.dtype.type(0.0)
+                for f in range(n_features):
+                    dot += table[start + row, f] * grad_out[n, level * n_features + f]
                 for dim in range(n_dims):
-                    grad_x[n, dim] += along[dim] * scales[level]
+                    along[dim] += _corner_slope(corner, dim, w_lower, w_upper) * dot
+            for dim in range(n_dims):
+                terms[level, n, dim] = along[dim] * scales[level]
+    for chunk in prange(n_chunks):
+        for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
+            for level in range(n_levels):
+                for dim in range(n_dims):
+                    grad_x[n, dim] += terms[level, n, dim]
