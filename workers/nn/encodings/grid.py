@@ -208,7 +208,7 @@ class _GridInterpolation(torch.autograd.Function):
         ctx.save_for_backward(x, table)
         ctx.geometry, ctx.blocks, ctx.index = geometry, blocks, index
         if _uses_kernels(x, table):
-            out = table.new_zeros(n_points, geometry.n_levels * n_features)
+            out = table.new_empty(n_points, geometry.n_levels * n_features)  # the kernel writes every entry
             points = x.detach().numpy()
             arguments = _KernelArguments.of(geometry, blocks, index, points.dtype)
             grid_kernels.grid_forward(points, table.detach().numpy(), *arguments, out.numpy())
