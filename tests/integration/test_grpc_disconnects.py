@@ -28,7 +28,9 @@ from neuralbake.v1 import artifacts_pb2, artifacts_pb2_grpc, assets_pb2, assets_
 from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
 method, target, token, *args = sys.argv[1:]
 metadata = (("authorization", f"Bearer {token}"),)
-channel = grpc.insecure_channel(target)
+# No BDP probing: the receive window stays at HTTP/2's 64 KiB, so the server cannot push the whole file into
+# the client's buffers and finish its stream before it is counted.
+channel = grpc.insecure_channel(target, options=[("grpc.http2.bdp_probe", 0)])
 if method == "WatchJob":
     request = jobs_pb2.WatchJobRequest(job_id=args[0])
     stream = jobs_pb2_grpc.JobServiceStub(channel).WatchJob(request, metadata=metadata)
