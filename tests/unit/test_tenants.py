@@ -169,10 +169,14 @@ def test_a_token_revoked_on_another_replica_is_refused_once_its_cached_read_expi
             with pytest.raises(Forbidden):  # the scope is checked on the cached answer too
                 authorize(other, secret, "admin", "")
         assert sum(reads) == 1  # one read for six checks
-        authorize(other, "configured-read", "read", "")
+        for replica in (db, other):
+            authorize(replica, "configured-read", "read", "")
 
         revoke_token(db, row.id)
         store_tokens(db, {})  # the configured token is left out at a restart of the first replica
+        for token in (secret, "configured-read"):  # refused at once there
+            with pytest.raises(Unauthorized, match="unknown token"):
+                authorize(db, token, "read", "")
         now[0] += TOKEN_CACHE_S / 2
         assert authorize(other, secret, "read", "").tenant == "acme"  # the documented bound: still trusted
         now[0] += TOKEN_CACHE_S / 2
