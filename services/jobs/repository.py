@@ -55,18 +55,25 @@ class JobRepository:
         with self.db.reading() as session:
             return session.scalars(_REUSABLE_JOB, {"key": content_key}).one_or_none()
 
-    def create(self, job: Job, content_key: str | None, header_key: str | None) -> tuple[Job, bool]:
+    def create(
+        self, job: Job, content_key: str | None, header_key: str | None, absent: bool = False
+    ) -> tuple[Job, bool]:
         """Insert `job`, or return the job an idempotency key already names: (job, created).
 
         `content_key` (None with `force`) reuses a queued, running or succeeded job with the same work;
         `header_key` reuses whatever job that key named and refuses a different request under it. Keys are
         inserted, never overwritten blindly: of concurrent identical submissions one inserts, the others
         hit the primary key, roll back, retry and find it.
+
+        `absent`: the caller has just found no job under `content_key` (`reusable`), so the first attempt
+        inserts the key without reading it first, a round trip less. If it is there after all (failed work
+        this job takes over, or a concurrent identical submission), that insert fails and the retry reads it.
         """
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
-                    return self._create(session, job, content_key, header_key)
+                    read = not (absent and attempt == 0)
+                    return self._create(session, job, content_key, header_key, read)
             except IntegrityError:
                 if attempt == INSERT_ATTEMPTS - 1:
                     raise
@@ -74,7 +81,7 @@ class JobRepository:
         raise AssertionError("unreachable")
 
     def _create(
-        self, session: Session, job: Job, content_key: str | None, header_key: str | None
+        self, session: Session, job: Job, content_key: str | None, header_key: str | None, read_key: bool
     ) -> tuple[Job, bool]:
         request_hash = job.idempotency_key
         if header_key is not None and (row := _locked_key(session, header_key)) is not None:
@@ -83,7 +90,7 @@ class JobRepository:
                     "this Idempotency-Key was used for a different request; use a new key", "Idempotency-Key"
                 )
             return self._job(session, row.job_id), False
-        content = _locked_key(session, content_key) if content_key is not None else None
+        content = _locked_key(session, content_key) if content_key is not None and read_key else None
         if content is not None and (existing := self._job(session, content.job_id)).state in REUSABLE:
             if header_key is not None:
                 session.add(IdempotencyKey(key=header_key, job_id=existing.id, request_hash=request_hash))

@@ -128,7 +128,7 @@ class Submitter:
             last_event_seq=0,
             created_at=utcnow(),
         )
-        return self.jobs.create(job, content_key, header)
+        return self.jobs.create(job, content_key, header, absent=header is None and content_key is not None)
 
     def _checked_plan(self, kind_name: str, scene: ResolvedScene, config, resolved: dict) -> dict[str, Any]:
         """The plan as stored in the job row; InvalidInput when the scene is refused or the plan's estimate
