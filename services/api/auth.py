@@ -5,8 +5,16 @@ Configured tokens come from `NBAKE_TOKENS=token:scope,...` and/or a tokens file 
 tenant; the configured set replaces the stored configured ones at every start (so removing a token revokes
 it). With none configured, an admin token is generated into `<data_dir>/admin-token` (mode 0600) and reused
 on later starts. An admin creates tenants' tokens through `POST /v1/tokens` (`nbake tokens create`); they
-last until revoked, and a revoked token is refused from the next request on (every request reads the
-database).
+last until revoked.
+
+A token read from the database is trusted for `TOKEN_CACHE_S` (1 s) by the process that read it, so a burst
+of requests costs one database read per token and second, not one each (it was a third of a repeated
+submission's round trips). A revoked token is refused from the next request on by the process that revoked
+it (it drops its own cached entry), and within `TOKEN_CACHE_S` by every other one: API replicas, the gRPC
+server, the inference service. Why a time bound and not an exact check: an exact answer on every replica
+needs a database read on every request (what the cache removes), and a push (PostgreSQL LISTEN/NOTIFY)
+needs the same bound anyway for the notifications a dropped listener connection misses; a second is well
+under the time it takes to notice a leak and run `nbake tokens revoke`.
 """
 
 from __future__ import annotations
@@ -15,12 +23,18 @@ import hashlib
 import os
 import re
 import secrets
+import threading
+import time
+import weakref
+from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy import delete, select
+from starlette.concurrency import run_in_threadpool
 
 from services.jobs.db import Database
 from services.jobs.errors import Conflict, InvalidInput, JobServiceError
@@ -31,6 +45,8 @@ SCOPES = ("read", "submit", "admin")  # each scope includes the ones before it
 ADMIN_TOKEN_FILE = "admin-token"
 CONFIGURED, CREATED = "configured", "created"
 SECRET_PREFIX = "nbk_"  # created tokens: easy to recognise in a leaked log or a secret scanner
+TOKEN_CACHE_S = 1.0  # how long a process trusts a token it read: the bound on a revocation elsewhere
+TOKEN_CACHE_SIZE = 4096  # tokens remembered per process (only valid ones: an unknown token is always read)
 
 
 class Unauthorized(JobServiceError):
@@ -93,6 +109,59 @@ def _token_id() -> str:
     return f"tok-{secrets.token_hex(8)}"
 
 
+class TokenCache:
+    """token hash -> the Principal it was read as, each trusted for `ttl_s` after the read. `generation`
+    counts the drops: a read that began before one is not cached (it may predate the revocation)."""
+
+    def __init__(self, ttl_s: float = TOKEN_CACHE_S, clock: Callable[[], float] = time.monotonic):
+        self.ttl_s, self.clock = ttl_s, clock
+        self.generation = 0
+        self._entries: OrderedDict[str, tuple[Principal, float]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, digest: str) -> Principal | None:
+        with self._lock:
+            found = self._entries.get(digest)
+            if found is None:
+                return None
+            if self.clock() >= found[1]:
+                del self._entries[digest]
+                return None
+            self._entries.move_to_end(digest)
+            return found[0]
+
+    def put(self, digest: str, principal: Principal, generation: int) -> None:
+        """Remember what a read begun at `generation` found."""
+        with self._lock:
+            if generation != self.generation:
+                return
+            self._entries[digest] = (principal, self.clock() + self.ttl_s)
+            self._entries.move_to_end(digest)
+            while len(self._entries) > TOKEN_CACHE_SIZE:
+                self._entries.popitem(last=False)
+
+    def drop(self, digest: str | None = None) -> None:
+        """Forget one token (its revocation here), or all of them (the configured set replaced)."""
+        with self._lock:
+            self.generation += 1
+            if digest is None:
+                self._entries.clear()
+            else:
+                self._entries.pop(digest, None)
+
+
+_caches: weakref.WeakKeyDictionary[Database, TokenCache] = weakref.WeakKeyDictionary()
+_caches_lock = threading.Lock()
+
+
+def token_cache(db: Database) -> TokenCache:
+    """The tokens this process read from `db` (one cache per Database object: per server instance)."""
+    with _caches_lock:
+        if (cache := _caches.get(db)) is None:
+            cache = _caches[db] = TokenCache()
+        return cache
+
+
 def store_tokens(db: Database, tokens: dict[str, str]) -> None:
     """Replace the stored configured tokens with `tokens` (of the default tenant), hashed; created tokens
     stay. Replicas starting together take turns (otherwise both delete, both insert, and one fails)."""
@@ -107,6 +176,7 @@ def store_tokens(db: Database, tokens: dict[str, str]) -> None:
             for h, scope in hashes.items()
             if h not in taken
         )
+    token_cache(db).drop()  # a configured token left out of `tokens` is revoked
 
 
 def create_token(db: Database, tenant: str, scope: str, name: str = "") -> tuple[ApiToken, str]:
@@ -147,6 +217,7 @@ def revoke_token(db: Database, token_id: str) -> ApiToken:
         if row.source != CREATED:
             raise Conflict(f"{token_id} is configured: remove it from NBAKE_TOKENS and restart", "token_id")
         session.delete(row)
+    token_cache(db).drop(row.token_hash)
     return row
 
 
@@ -155,13 +226,22 @@ def authorize(db: Database, token: str | None, scope: str, missing: str) -> Prin
     APIs check tokens here so they agree on every answer; `missing` tells how that API expects the token."""
     if token is None:
         raise Unauthorized(missing)
-    with db.reading() as session:
-        stored = session.get(ApiToken, token_hash(token))
-    if stored is None:
-        raise Unauthorized("unknown token")  # never issued, or revoked
-    if SCOPES.index(stored.scope) < SCOPES.index(scope):
-        raise Forbidden(f"this token has scope {stored.scope!r}; this needs {scope!r}")
-    return Principal(stored.tenant, stored.scope)
+    cache, digest = token_cache(db), token_hash(token)
+    if (principal := cache.get(digest)) is None:
+        generation = cache.generation
+        with db.reading() as session:
+            stored = session.get(ApiToken, digest)
+        if stored is None:
+            raise Unauthorized("unknown token")  # never issued, or revoked
+        principal = Principal(stored.tenant, stored.scope)
+        cache.put(digest, principal, generation)
+    return in_scope(principal, scope)
+
+
+def in_scope(principal: Principal, scope: str) -> Principal:
+    if SCOPES.index(principal.scope) < SCOPES.index(scope):
+        raise Forbidden(f"this token has scope {principal.scope!r}; this needs {scope!r}")
+    return principal
 
 
 _bearer = HTTPBearer(
@@ -171,14 +251,17 @@ _bearer = HTTPBearer(
 
 
 def require(scope: str):
-    """A dependency that lets a request through only with a token holding `scope` (or a wider one)."""
+    """A dependency that lets a request through only with a token holding `scope` (or a wider one). A token
+    read in the last `TOKEN_CACHE_S` is checked on the event loop; only a database read takes a thread."""
 
-    def check(
+    async def check(
         request: Request, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
     ) -> Principal:
         token = None if credentials is None else credentials.credentials
         db: Database = request.app.state.services.db
-        return authorize(db, token, scope, "send `Authorization: Bearer <token>`")
+        if token is not None and (cached := token_cache(db).get(token_hash(token))) is not None:
+            return in_scope(cached, scope)
+        return await run_in_threadpool(authorize, db, token, scope, "send `Authorization: Bearer <token>`")
 
     return check
 

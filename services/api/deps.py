@@ -9,7 +9,7 @@ from fastapi import Depends, Request
 from services.api.services import Services
 
 
-def _services(request: Request) -> Services:
+async def _services(request: Request) -> Services:  # async: a plain def would cost a thread hop
     return request.app.state.services
 
 

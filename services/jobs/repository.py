@@ -10,9 +10,9 @@ from collections.abc import Iterable, Sequence
 from datetime import timedelta
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import bindparam, func, or_, select, update
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
 from services.jobs.db import Database
 from services.jobs.errors import Conflict, InvalidInput, JobNotFound
@@ -21,6 +21,14 @@ from services.jobs.tables import Event, IdempotencyKey, Job, utcnow
 
 INSERT_ATTEMPTS = 3  # concurrent identical submissions on PostgreSQL: the loser retries and finds the winner
 REUSABLE = (JobState.QUEUED, JobState.RUNNING, JobState.SUCCEEDED)
+# Built once (a repeated submission runs nothing else): the scene, the largest column, is left unread (no
+# answer shows it), and the states are plain comparisons (an IN list is re-expanded at every execution).
+_REUSABLE_JOB = (
+    select(Job)
+    .options(defer(Job.scene, raiseload=True))
+    .join(IdempotencyKey, IdempotencyKey.job_id == Job.id)
+    .where(IdempotencyKey.key == bindparam("key"), or_(*(Job.state == state for state in REUSABLE)))
+)
 
 
 def encode_cursor(seq: int) -> str:
@@ -44,23 +52,28 @@ class JobRepository:
         """The queued, running or succeeded job that `content_key` names, in one query. A repeat of
         existing work is answered from this read alone, before any write transaction (on SQLite, before
         waiting for the single writer) and before the work is planned: most of a burst of retries."""
-        query = select(Job).join(IdempotencyKey, IdempotencyKey.job_id == Job.id)
-        query = query.where(IdempotencyKey.key == content_key, Job.state.in_(list(REUSABLE)))
         with self.db.reading() as session:
-            return session.scalars(query).one_or_none()
+            return session.scalars(_REUSABLE_JOB, {"key": content_key}).one_or_none()
 
-    def create(self, job: Job, content_key: str | None, header_key: str | None) -> tuple[Job, bool]:
+    def create(
+        self, job: Job, content_key: str | None, header_key: str | None, absent: bool = False
+    ) -> tuple[Job, bool]:
         """Insert `job`, or return the job an idempotency key already names: (job, created).
 
         `content_key` (None with `force`) reuses a queued, running or succeeded job with the same work;
         `header_key` reuses whatever job that key named and refuses a different request under it. Keys are
         inserted, never overwritten blindly: of concurrent identical submissions one inserts, the others
         hit the primary key, roll back, retry and find it.
+
+        `absent`: the caller has just found no job under `content_key` (`reusable`), so the first attempt
+        inserts the key without reading it first, a round trip less. If it is there after all (failed work
+        this job takes over, or a concurrent identical submission), that insert fails and the retry reads it.
         """
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
-                    return self._create(session, job, content_key, header_key)
+                    read = not (absent and attempt == 0)
+                    return self._create(session, job, content_key, header_key, read)
             except IntegrityError:
                 if attempt == INSERT_ATTEMPTS - 1:
                     raise
@@ -68,7 +81,7 @@ class JobRepository:
         raise AssertionError("unreachable")
 
     def _create(
-        self, session: Session, job: Job, content_key: str | None, header_key: str | None
+        self, session: Session, job: Job, content_key: str | None, header_key: str | None, read_key: bool
     ) -> tuple[Job, bool]:
         request_hash = job.idempotency_key
         if header_key is not None and (row := _locked_key(session, header_key)) is not None:
@@ -77,14 +90,15 @@ class JobRepository:
                     "this Idempotency-Key was used for a different request; use a new key", "Idempotency-Key"
                 )
             return self._job(session, row.job_id), False
-        content = _locked_key(session, content_key) if content_key is not None else None
+        content = _locked_key(session, content_key) if content_key is not None and read_key else None
         if content is not None and (existing := self._job(session, content.job_id)).state in REUSABLE:
             if header_key is not None:
                 session.add(IdempotencyKey(key=header_key, job_id=existing.id, request_hash=request_hash))
             return existing, False
-        session.add(job)
-        session.flush()
-        self._append(session, job, "state", {"state": job.state, "message": "submitted"})
+        submitted = self._event(job, "state", {"state": job.state, "message": "submitted"})
+        session.add(job)  # numbered first, so its row goes in as it stays: no UPDATE after the INSERT
+        session.flush()  # before the rows that refer to it (no ORM relationship orders the tables)
+        session.add(submitted)
         if content is not None:  # the work failed or was cancelled before: this job takes the key over
             content.job_id = job.id
         elif content_key is not None:
@@ -268,10 +282,15 @@ class JobRepository:
             raise JobNotFound(f"no job {job_id!r}", "job_id")
         return job
 
+    @classmethod
+    def _append(cls, session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
+        session.add(cls._event(job, kind, data))
+
     @staticmethod
-    def _append(session: Session, job: Job, kind: str, data: dict[str, Any]) -> None:
+    def _event(job: Job, kind: str, data: dict[str, Any]) -> Event:
+        """The job's next event (its number taken)."""
         job.last_event_seq += 1
-        session.add(Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow()))
+        return Event(job_id=job.id, seq=job.last_event_seq, type=kind, data=data, time=utcnow())
 
 
 def _steps_back(latest: dict[str, Any] | None, progress: dict[str, Any]) -> bool:
@@ -284,6 +303,7 @@ def _locked_key(session: Session, key: str) -> IdempotencyKey | None:
 
 
 def _fresh_copy(job: Job) -> Job:
-    """A new, unsaved Job with the same column values (the old instance belongs to a rolled-back session)."""
+    """A new, unsaved Job with the same column values (the old instance belongs to a rolled-back session) and
+    no event yet (the rolled-back attempt had numbered its first one)."""
     columns = {c.key: getattr(job, c.key) for c in Job.__table__.columns if c.key not in ("seq",)}
-    return Job(**columns)
+    return Job(**columns | {"last_event_seq": 0})

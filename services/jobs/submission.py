@@ -10,6 +10,8 @@ import math
 import threading
 import uuid
 from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -38,6 +40,7 @@ MAX_IDEMPOTENCY_HEADER = 255
 # process 10 s to start there (and more to import a kind). Larger scenes and any mesh file go to a child.
 IN_PROCESS_TRIANGLES = 200_000
 PLAN_CACHE_SIZE = 1024  # plans are a few KB; repeated submissions of the same work skip the planning
+CREATING_WAIT_S = 30.0  # an identical submission waits this long at most for the first one to finish
 
 
 class JobRequest(BaseModel):
@@ -73,6 +76,8 @@ class Submitter:
         self.max_job_seconds = max_job_seconds
         self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
         self._plans_lock = threading.Lock()
+        self._creating: dict[str, threading.Event] = {}  # content keys being created by this process
+        self._creating_lock = threading.Lock()
 
     def submit(
         self, request: JobRequest, header_key: str | None = None, principal: Principal | None = None
@@ -104,31 +109,60 @@ class Submitter:
         content_key = None if request.force else f"{principal.tenant}/content:{key}"  # per tenant
         header = _header_key(header_key)
         header = header and f"{principal.tenant}/{header}"
-        if header is None and content_key is not None and (existing := self.jobs.reusable(content_key)):
+        reusing = header is None and content_key is not None
+        if reusing and (existing := self.jobs.reusable(content_key)):
             return existing, False  # the same work exists: validated and planned when it was submitted
-        plan = self._checked_plan(kind.name, scene, config, resolved)
-        job = Job(
-            id=f"job-{uuid.uuid4().hex}",
-            tenant=principal.tenant,
-            kind=kind.name,
-            state=JobState.QUEUED,
-            scene_ref=scene.ref,
-            scene=scene.spec_json,
-            scene_hash=scene.content_hash,
-            preset=request.preset,
-            config=resolved,
-            seed=request.seed,
-            priority=request.priority,
-            code_version=code,
-            idempotency_key=key,
-            plan=plan,
-            attempts=0,
-            max_attempts=self.max_attempts,
-            cancel_requested=False,
-            last_event_seq=0,
-            created_at=utcnow(),
-        )
-        return self.jobs.create(job, content_key, header)
+        with self._first(content_key if reusing else None) as first:
+            if not first and (existing := self.jobs.reusable(content_key)):
+                return existing, False  # an identical submission of this process has just made it
+            plan = self._checked_plan(kind.name, scene, config, resolved)
+            job = Job(
+                id=f"job-{uuid.uuid4().hex}",
+                tenant=principal.tenant,
+                kind=kind.name,
+                state=JobState.QUEUED,
+                scene_ref=scene.ref,
+                scene=scene.spec_json,
+                scene_hash=scene.content_hash,
+                preset=request.preset,
+                config=resolved,
+                seed=request.seed,
+                priority=request.priority,
+                code_version=code,
+                idempotency_key=key,
+                plan=plan,
+                attempts=0,
+                max_attempts=self.max_attempts,
+                cancel_requested=False,
+                last_event_seq=0,
+                created_at=utcnow(),
+            )
+            return self.jobs.create(job, content_key, header, absent=reusing)
+
+    @contextmanager
+    def _first(self, content_key: str | None) -> Iterator[bool]:
+        """Whether this is the first submission in this process creating the work `content_key` names. A
+        later identical one waits for it (at most `CREATING_WAIT_S`) and then reads its job, instead of
+        racing it into the database: there the loser waits on the key's index for the first to commit, then
+        fails, rolls back and retries (a repeat arriving while the work is new, in the load bench)."""
+        if content_key is None:
+            yield True
+            return
+        with self._creating_lock:
+            running = self._creating.get(content_key)
+            first = running is None
+            if first:
+                running = self._creating[content_key] = threading.Event()
+        if not first:
+            running.wait(CREATING_WAIT_S)
+            yield False
+            return
+        try:
+            yield True
+        finally:
+            with self._creating_lock:
+                del self._creating[content_key]
+            running.set()
 
     def _checked_plan(self, kind_name: str, scene: ResolvedScene, config, resolved: dict) -> dict[str, Any]:
         """The plan as stored in the job row; InvalidInput when the scene is refused or the plan's estimate

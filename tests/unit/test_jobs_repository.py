@@ -77,11 +77,14 @@ def test_migrations_create_exactly_the_models(db):
             assert connection.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
 
 
-def test_identical_concurrent_submissions_make_one_job(db):
+@pytest.mark.parametrize("absent", [False, True])  # the key read first, or inserted straight away
+def test_identical_concurrent_submissions_make_one_job(db, absent):
     jobs = JobRepository(db)
     with ThreadPoolExecutor(8) as pool:
         results = list(
-            pool.map(lambda _: jobs.create(new_job("sha256:same"), "content:sha256:same", None), range(24))
+            pool.map(
+                lambda _: jobs.create(new_job("sha256:same"), "content:sha256:same", None, absent), range(24)
+            )
         )
     assert sum(created for _, created in results) == 1
     assert len({job.id for job, _ in results}) == 1
@@ -95,9 +98,13 @@ def test_a_failed_job_does_not_block_resubmission_but_a_running_one_does(db):
     assert jobs.create(new_job(), "content:sha256:k", None)[0].id == first.id
     jobs.claim(first.id, "me", 30)
     jobs.transition(first.id, JobState.FAILED, message="failed", error="boom")
-    second, created = jobs.create(new_job(), "content:sha256:k", None)
-    assert created and second.id != first.id
-    assert jobs.create(new_job(), "content:sha256:k", None)[0].id == second.id
+    for absent in (False, True):  # read first, or told nothing reuses the key (a failed job does not)
+        second, created = jobs.create(new_job(), "content:sha256:k", None, absent=absent)
+        assert created and second.id != first.id
+        assert [e.seq for e in jobs.events_after(second.id, 0)] == [1]  # a retried insert numbers anew
+        assert jobs.create(new_job(), "content:sha256:k", None)[0].id == second.id
+        jobs.request_cancel(second.id)
+        first = second
 
 
 def test_event_sequence_is_gapless_under_concurrent_writers(db):

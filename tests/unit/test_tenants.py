@@ -1,7 +1,7 @@
 """Tenancy in the job database, on real SQLite and real PostgreSQL: migration 0002 puts everything that
 existed into the default tenant, identical work of two tenants is two jobs, another tenant's job, artifact
 or asset is not found, and tokens are stored hashed, survive restarts when created, and stop working the
-moment they are revoked."""
+moment they are revoked on the replica that revokes them, and within `TOKEN_CACHE_S` on every other."""
 
 from __future__ import annotations
 
@@ -11,16 +11,20 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 from alembic import command
 from alembic.config import Config
-from sqlalchemy import text
+from sqlalchemy import event, text
 
 from services.api.auth import (
+    TOKEN_CACHE_S,
     Forbidden,
+    TokenCache,
     Unauthorized,
     authorize,
     create_token,
     list_tokens,
     revoke_token,
     store_tokens,
+    token_cache,
+    token_hash,
 )
 from services.artifacts.artifacts import ArtifactNotFound
 from services.artifacts.assets import AssetNotFound
@@ -147,6 +151,52 @@ def test_tokens_are_hashed_kept_across_restarts_and_revoked_at_once(db):  # noqa
         authorize(db, secret, "read", "")
     with pytest.raises(InvalidInput):
         create_token(db, "Not A Tenant", "read")
+
+
+def test_a_token_revoked_on_another_replica_is_refused_once_its_cached_read_expires(db):  # noqa: F811
+    """Each process trusts a token it read for `TOKEN_CACHE_S`: requests in between read no database, and a
+    revocation on another replica (or a configured token dropped at its restart) holds after that bound."""
+    other = Database(db.url.render_as_string(hide_password=False), db.schema)  # a second API replica
+    now = [0.0]
+    token_cache(other).clock = lambda: now[0]
+    reads = []
+    event.listen(other.engine, "before_cursor_execute", lambda *args: reads.append("api_tokens" in args[2]))
+    try:
+        store_tokens(db, {"configured-read": "read"})
+        row, secret = create_token(db, "acme", "submit")
+        for _ in range(3):
+            assert authorize(other, secret, "read", "") == Principal("acme", "submit")
+            with pytest.raises(Forbidden):  # the scope is checked on the cached answer too
+                authorize(other, secret, "admin", "")
+        assert sum(reads) == 1  # one read for six checks
+        for replica in (db, other):
+            authorize(replica, "configured-read", "read", "")
+
+        revoke_token(db, row.id)
+        store_tokens(db, {})  # the configured token is left out at a restart of the first replica
+        for token in (secret, "configured-read"):  # refused at once there
+            with pytest.raises(Unauthorized, match="unknown token"):
+                authorize(db, token, "read", "")
+        now[0] += TOKEN_CACHE_S / 2
+        assert authorize(other, secret, "read", "").tenant == "acme"  # the documented bound: still trusted
+        now[0] += TOKEN_CACHE_S / 2
+        for token in (secret, "configured-read"):
+            with pytest.raises(Unauthorized, match="unknown token"):
+                authorize(other, token, "read", "")
+    finally:
+        other.dispose()
+
+
+def test_a_token_read_before_its_revocation_is_not_cached_after_it():
+    """A read and a revocation in the same process race: the read began first, the revocation dropped the
+    cached entry, then the read would put the token back for another `TOKEN_CACHE_S`."""
+    cache, digest = TokenCache(), token_hash("secret")
+    began = cache.generation
+    cache.drop(digest)  # the revocation, between the read and its caching
+    cache.put(digest, Principal("acme", "read"), began)
+    assert cache.get(digest) is None
+    cache.put(digest, Principal("acme", "read"), cache.generation)  # a read begun after it is cached
+    assert cache.get(digest) == Principal("acme", "read")
 
 
 def test_replicas_starting_together_store_the_configured_tokens_once(db):  # noqa: F811
