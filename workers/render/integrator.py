@@ -23,6 +23,7 @@ from workers.render import heap, wavefront
 from workers.render.aggregate import Aggregate, AggregateEvents
 from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import RayScene
+from workers.render.environment import NO_MAP, EnvironmentMapLight
 from workers.render.intersector import Hits, Intersector
 from workers.render.lights import LightSample, LightSampler
 from workers.render.materials import MaterialTable
@@ -39,6 +40,7 @@ from workers.render.wavefront import RAY_OFFSET
 from workers.scene.compile import CompiledScene
 
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
+_NO_ROWS, _NO_ROWS3 = np.zeros(0), np.zeros((0, 3))  # per-row environment values the lat-long kernels skip
 
 
 @dataclass
@@ -340,16 +342,7 @@ class PathTracer:
 
             miss = np.flatnonzero(~found if events is None else ~found & ~events.found)
             if len(miss) and (env is not None or observer is not None):
-                dm = paths.d[miss]
-                weight = np.where(
-                    paths.prev_delta[miss],
-                    1.0,
-                    power_heuristic(paths.prev_pdf[miss], self.lights.pdf_environment(dm)),
-                )
-                if env is not None:
-                    radiance[paths.idx[miss]] += paths.beta[miss] * env.radiance(dm) * weight[:, None]
-                if observer is not None:
-                    observer.on_escape(paths.idx[miss], dm, paths.beta[miss] * weight[:, None])
+                self._escape(paths, miss, radiance, observer)
 
             roulette = segment >= rr_depth
             scattered = None
@@ -371,6 +364,22 @@ class PathTracer:
                 paths = _Paths.concatenate(paths, scattered.paths)
         np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return TraceResult(radiance, bounces, rays_traced)
+
+    def _escape(self, paths: _Paths, miss: np.ndarray, radiance: np.ndarray, observer) -> None:
+        """The environment's radiance seen by the escaped paths `miss` (MIS-weighted), and the observer's
+        escape events."""
+        env = self.lights.environment
+        env_map = env.tables if isinstance(env, EnvironmentMapLight) else NO_MAP
+        if env_map is NO_MAP:
+            le, env_pdf = self.lights.environment_lookup(paths.d[miss])
+        else:
+            le, env_pdf = _NO_ROWS3, _NO_ROWS
+        weight = wavefront.add_escapes(
+            radiance if env is not None else np.zeros_like(radiance), miss, paths.idx, paths.beta, paths.d,
+            paths.prev_pdf, paths.prev_delta, env_map, self.lights.env_prob, _f64(le), _f64(env_pdf),
+        )  # fmt: skip
+        if observer is not None:
+            observer.on_escape(paths.idx[miss], paths.d[miss], paths.beta[miss] * weight[:, None])
 
     def _scatter_at_surfaces(
         self,

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from workers.render import kernels as k
+from workers.render.environment import direction_lookup
 from workers.render.jit import njit
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
@@ -106,6 +107,29 @@ def add_emitter_hits(radiance, idx, beta, emitted, prim, t, d, ng, area_pdf, pre
             weight = k.power_heuristic(prev_pdf[i], pdf_light)
         for c in range(3):
             radiance[idx[i], c] += beta[i, c] * emitted[i, c] * weight
+
+
+@kernel
+def add_escapes(radiance, rows, idx, beta, d, prev_pdf, prev_delta, env_map, env_prob, env_radiance, env_pdf):
+    """Add the environment's radiance to the paths `rows` whose rays escaped, weighted by MIS against light
+    sampling (power heuristic; fully after delta scattering); returns the weights. The radiance and the
+    light-sampling pdf (selection included) come from the lat-long map `env_map` (`env_prob` the map's
+    selection probability) or, without one (`NO_MAP`), from `env_radiance`, `env_pdf` per row."""
+    weights = np.empty(len(rows))
+    for j in range(len(rows)):
+        i = rows[j]
+        if env_map.image.shape[0] > 0:
+            r, g, b, pdf = direction_lookup(d[i, 0], d[i, 1], d[i, 2], env_map)
+            pdf *= env_prob
+        else:
+            r, g, b, pdf = env_radiance[j, 0], env_radiance[j, 1], env_radiance[j, 2], env_pdf[j]
+        weight = 1.0 if prev_delta[i] else k.power_heuristic(prev_pdf[i], pdf)
+        weights[j] = weight
+        p = idx[i]
+        radiance[p, 0] += beta[i, 0] * r * weight
+        radiance[p, 1] += beta[i, 1] * g * weight
+        radiance[p, 2] += beta[i, 2] * b * weight
+    return weights
 
 
 @kernel
