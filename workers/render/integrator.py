@@ -527,30 +527,26 @@ class PathTracer:
         return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, wo_local)
 
     def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
-        """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
+        """Add light-sampled direct lighting (MIS-weighted) at every vertex; returns shadow rays. Vertices
+        with only delta lobes sample lights too and get nothing from them (`eval_bsdf` is 0 there, so they
+        cast no shadow ray): cheaper than gathering the other rows apart."""
         if self.lights.count == 0:
             return 0
-        delta = sh.surf.is_delta
-        every = not delta.any()
-        rows = np.arange(len(idx)) if every else np.flatnonzero(~delta)
-        if len(rows) == 0:
-            return 0
-        sel = slice(None) if every else rows  # a view, not a gather, when every vertex samples lights
-        ls = self.lights.sample(sh.position[sel], u[sel, 0], u[sel, 1:3])
+        rows = np.arange(len(idx))
+        ls = self.lights.sample(sh.position, u[:, 0], u[:, 1:3])
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
-        f_cos, bsdf_pdf = eval_bsdf(sh.surf if every else sh.surf.take(rows), sh.wo_local[sel], wi_local)
+        f_cos, bsdf_pdf = eval_bsdf(sh.surf, sh.wo_local, wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)
         live, contribution, origin, t_max, light_scale = wavefront.shadow_rays(
             rows, beta, _f64(f_cos), _f64(bsdf_pdf), lights, sh.position, sh.ng, sh.scale
         )
         if len(live) == 0:
             return 0
-        at = rows[live]
         blocked = self._occluded(origin, ls.direction[live], t_max)
-        wavefront.add_unblocked(radiance, idx[at], contribution, blocked)
+        wavefront.add_unblocked(radiance, idx[live], contribution, blocked)
         if observer is not None:
-            weight = beta[at] * f_cos[live] * light_scale[live, None]
-            _observe_environment_samples(observer, idx[at], ls, live, weight, blocked)
+            weight = beta[live] * f_cos[live] * light_scale[live, None]
+            _observe_environment_samples(observer, idx[live], ls, live, weight, blocked)
         return len(live)
 
 
