@@ -68,6 +68,8 @@ def run() -> list[BenchSection]:
     for name, obj in LSNIF_SCENES:
         source, size = lsnif_source(name, obj)
         seconds = seconds_per_batch(source)
-        section.add(source="lsnif", scene=f"{name}/{obj}", batch=size, batch_s=seconds, samples_per_s=size / seconds)
+        section.add(
+            source="lsnif", scene=f"{name}/{obj}", batch=size, batch_s=seconds, samples_per_s=size / seconds
+        )
     section.notes.append("samples: voxel pairs (lod) or training rays (lsnif) per batch")
     return [section]

@@ -209,6 +209,7 @@ class LightSampler:
             radiance, pdf = env.radiance(directions), env.pdf(directions)
         return radiance, pdf * self.env_prob
 
+
 class _LightTables(NamedTuple):
     """The light list as the arrays `_sample_lights` reads (a tuple: one typed argument)."""
 

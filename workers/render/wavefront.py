@@ -28,7 +28,7 @@ kernel = njit(cache=True, nogil=True, fastmath=False)
 
 
 @k.scalar
-def _offset(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
+def offset_one(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
     """A ray origin moved off the surface along ng, to the side `d` leaves by (no self-hits). The
     distance is relative to `scale`: Embree works in float32, so its errors grow with the coordinates."""
     eps = RAY_OFFSET * max(scale, 1e-30)
@@ -42,7 +42,7 @@ def offset_origins(position, ng, direction, scale):
     out = np.empty_like(position)
     for i in range(len(position)):
         p, n, d = position[i], ng[i], direction[i]
-        out[i, 0], out[i, 1], out[i, 2] = _offset(
+        out[i, 0], out[i, 1], out[i, 2] = offset_one(
             p[0], p[1], p[2], n[0], n[1], n[2], d[0], d[1], d[2], scale[i]
         )
     return out
@@ -190,7 +190,7 @@ def shadow_rays(rows, beta, f_cos, bsdf_pdf, lights, position, ng, scale):
         if not largest > 0:
             continue
         p, n, dr = position[i], ng[i], direction[j]
-        origin[count, 0], origin[count, 1], origin[count, 2] = _offset(
+        origin[count, 0], origin[count, 1], origin[count, 2] = offset_one(
             p[0], p[1], p[2], n[0], n[1], n[2], dr[0], dr[1], dr[2], scale[i]
         )
         dist = distance[j]
@@ -259,7 +259,7 @@ def next_paths(idx, beta, sampled, frames, position, ng, scale, u_roulette, use_
         dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
         dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
         p, nrm = position[i], ng[i]
-        out_o[count, 0], out_o[count, 1], out_o[count, 2] = _offset(
+        out_o[count, 0], out_o[count, 1], out_o[count, 2] = offset_one(
             p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
         )
         out_d[count, 0], out_d[count, 1], out_d[count, 2] = dx, dy, dz
@@ -292,3 +292,22 @@ def take_paths(rows, paths):
         out_idx[j], out_pdf[j], out_delta[j] = idx[i], prev_pdf[i], prev_delta[i]
         out_t_min[j], out_spread[j] = t_min[i], spread[i]
     return out_idx, out_o, out_d, out_beta, out_pdf, out_delta, out_t_min, out_spread
+
+
+@kernel
+def rays_leaving(wi, fs, ft, ns, position, ng, scale):
+    """Rays leaving surface points along local directions `wi` (one per row): world directions in the frames
+    (fs, ft, ns) and origins offset off the surface to the side they leave by."""
+    n = len(wi)
+    origins, directions = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        x, y, z = wi[i, 0], wi[i, 1], wi[i, 2]
+        dx = x * fs[i, 0] + y * ft[i, 0] + z * ns[i, 0]
+        dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
+        dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
+        p, nrm = position[i], ng[i]
+        origins[i, 0], origins[i, 1], origins[i, 2] = offset_one(
+            p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
+        )
+        directions[i, 0], directions[i, 1], directions[i, 2] = dx, dy, dz
+    return origins, directions
