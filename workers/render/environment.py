@@ -131,7 +131,8 @@ def _guide(cdf: np.ndarray) -> np.ndarray:
 
 @kernels.scalar
 def _lat_long(dx, dy, dz, rotation):
-    """Lat-long (u, v) of world direction d in the map's frame (`workers.scene.envmaps.direction_to_uv`)."""
+    """Lat-long (u, v) of world direction d in the map's frame (`workers.scene.envmaps.direction_to_uv`),
+    and sin(theta) (theta = pi v, from the direction: no third inverse-trigonometric call)."""
     x = dx * rotation[0, 0] + dy * rotation[1, 0] + dz * rotation[2, 0]
     y = dx * rotation[0, 1] + dy * rotation[1, 1] + dz * rotation[2, 1]
     z = dx * rotation[0, 2] + dy * rotation[1, 2] + dz * rotation[2, 2]
@@ -140,7 +141,7 @@ def _lat_long(dx, dy, dz, rotation):
     u = math.atan2(x, -z) / (2.0 * math.pi) % 1.0
     if u >= 1.0:  # -tiny % 1.0 rounds to 1.0
         u = 0.0
-    return u, math.acos(min(max(y, -1.0), 1.0)) / math.pi
+    return u, math.acos(min(max(y, -1.0), 1.0)) / math.pi, math.sqrt(x * x + z * z)
 
 
 @kernels.scalar
@@ -166,11 +167,10 @@ def _bilinear(image, u, v):
 @kernels.scalar
 def direction_lookup(dx, dy, dz, env):
     """Radiance along a world direction and the solid-angle pdf of `sample_one` drawing it."""
-    u, v = _lat_long(dx, dy, dz, env.rotation)
+    u, v, sin_theta = _lat_long(dx, dy, dz, env.rotation)
     height, width = env.image.shape[0], env.image.shape[1]
     col = min(int(u * width), width - 1)
     row = min(int(v * height), height - 1)
-    sin_theta = math.sin(v * math.pi)
     pdf = env.texel_pdf[row, col] / sin_theta if sin_theta > 1e-12 else 0.0
     r, g, b = _bilinear(env.image, u, v)
     return r, g, b, pdf
@@ -189,9 +189,9 @@ def sample_one(u0, u1, env):
     lower = cdf[col - 1] if col > 0 else 0.0
     frac_u = min(max((u1 - lower) / max(cdf[col] - lower, 1e-300), 0.0), 1.0 - 1e-12)
     u, v = (col + frac_u) / width, (row + frac_v) / height
-    phi, theta = 2.0 * math.pi * u, math.pi * v
-    sin_theta = math.sin(theta)
-    lx, ly, lz = sin_theta * math.sin(phi), math.cos(theta), -sin_theta * math.cos(phi)
+    phi, cos_theta = 2.0 * math.pi * u, math.cos(math.pi * v)
+    sin_theta = math.sqrt(max(1.0 - cos_theta * cos_theta, 0.0))  # theta in [0, pi]: sin >= 0
+    lx, ly, lz = sin_theta * math.sin(phi), cos_theta, -sin_theta * math.cos(phi)
     rot = env.rotation
     dx = rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz
     dy = rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz
