@@ -119,7 +119,7 @@ def _cdf(prob: np.ndarray) -> np.ndarray:
     total = prob.sum()
     if not total > 0:
         prob = np.ones_like(prob)
-    cdf = np.cumsum(prob) / prob.sum()
+    cdf = np.minimum(np.cumsum(prob) / prob.sum(), 1.0)  # rounding must not lift an entry above the last
     cdf[-1] = 1.0
     return cdf
 
