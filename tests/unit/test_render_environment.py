@@ -56,4 +56,3 @@ def test_sample_frequencies_follow_the_texel_probabilities():
     expected = n * (weights / weights.sum()).ravel()
     chi2 = ((counts - expected) ** 2 / expected).sum()
     assert chi2 < 127 + 5 * np.sqrt(2 * 127)  # 127 degrees of freedom, 5 sigma
-
