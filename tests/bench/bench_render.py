@@ -7,6 +7,8 @@
 3. At equal error: MSE x time is constant in spp for an unbiased Monte Carlo estimator, so the
    ratio of MSE x time (against a high-spp Mitsuba reference) is the ratio of the times each
    renderer needs to reach the same error.
+   Also in one thread, as thread CPU time: on a shared machine the other processes' load enters the
+   wall-clock figures (and each renderer differently) but not these.
 4. The first-run cost of the compiled kernels (Numba, cached on disk): a fresh process with an empty cache
    renders a tiny image twice; the first render's extra time is the compilation, paid once per machine.
    Every other figure is measured with the cache warm, after a warm-up render.
@@ -25,9 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from tests.bench.common import BenchSection, median_seconds
+from workers.render.camera import PinholeCamera
 from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
-from workers.render.render import RenderSettings, render
+from workers.render.render import RenderSettings, plan_render, render, render_item
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 
@@ -40,17 +43,56 @@ def raw_embree_rays_per_second(
     positions: np.ndarray, bounds: np.ndarray, threads: int, batch: int = 1 << 16, batches: int = 16
 ) -> float:
     rays = RayScene(positions)
-    rng = np.random.default_rng(0)
-    lo, hi = bounds
-    origins = rng.uniform(lo + 0.025 * (hi - lo), hi - 0.025 * (hi - lo), (batches, batch, 3))
-    directions = rng.normal(size=(batches, batch, 3))
-    directions /= np.linalg.norm(directions, axis=-1, keepdims=True)
+    origins, directions = (a.reshape(batches, batch, 3) for a in incoherent_rays(bounds, batches * batch))
 
     def run():
         with ThreadPoolExecutor(threads) as pool:
             list(pool.map(lambda i: rays.intersect(origins[i], directions[i]), range(batches)))
 
     return batch * batches / median_seconds(run, repeats=5)
+
+
+def incoherent_rays(bounds: np.ndarray, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Origins uniform inside the scene's bounds (less a 2.5% margin), directions uniform on the sphere."""
+    rng = np.random.default_rng(seed)
+    lo, hi = bounds
+    origins = rng.uniform(lo + 0.025 * (hi - lo), hi - 0.025 * (hi - lo), (n, 3))
+    directions = rng.normal(size=(n, 3))
+    return origins, directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+
+
+def median_cpu_seconds(fn, repeats: int = 5) -> float:
+    """Median thread CPU time of `fn` (after one untimed run)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.thread_time()
+        fn()
+        times.append(time.thread_time() - t0)
+    return float(np.median(times))
+
+
+def one_thread_cpu(name: str, scene) -> dict:
+    """Raw Embree and our tracer in this thread, as rays per CPU second (128x128, 16 spp)."""
+    origins, directions = incoherent_rays(scene.bounds, 1 << 16)
+    rays = RayScene(scene.positions)
+    embree = len(origins) / median_cpu_seconds(lambda: rays.intersect(origins, directions))
+    tracer = PathTracer(scene)
+    settings = RenderSettings(spp=16, width=128, height=128, threads=1)
+    camera = PinholeCamera(tracer.scene.spec.camera, settings.width, settings.height)
+    plan = plan_render(camera, settings)
+    traced = []
+
+    def render_items():
+        traced.append(
+            sum(render_item(tracer, camera, settings, plan, *item).rays_traced for item in plan.items)
+        )
+
+    seconds = median_cpu_seconds(render_items, repeats=3)
+    ours = traced[-1] / seconds
+    return dict(
+        scene=name, embree_mrays_per_cpu_s=embree / 1e6, ours_mrays_per_cpu_s=ours / 1e6, ratio=ours / embree
+    )
 
 
 def relative_mse(image: np.ndarray, reference: np.ndarray) -> float:
@@ -106,6 +148,11 @@ def run() -> list[BenchSection]:
     )
     throughput.notes.append("target: ratio >= 0.5 of raw Embree inside the path tracer")
 
+    cpu = BenchSection("The same in one thread, rays per thread CPU second (128x128, 16 spp)")
+    for name, scene in compiled.items():
+        cpu.add(**one_thread_cpu(name, scene))
+    cpu.notes.append("thread CPU time: load from other processes on the machine does not enter it")
+
     jit = BenchSection("First-run cost: compiling the kernels (fresh process, empty Numba cache)")
     for name in SCENES:
         jit.add(scene=name, compile_s=first_run_seconds(name))
@@ -118,7 +165,7 @@ def run() -> list[BenchSection]:
     peer.notes.append("ratios > 1 mean we are slower; equal-error ratio = (MSE x time) ours / Mitsuba")
     peer.notes.append("Mitsuba time includes scene loading (PLY export excluded), as a user would pay it")
     peer.notes.append("target: equal-error ratio <= 1 / 1.5 on every scene")
-    return [throughput, jit, peer]
+    return [throughput, cpu, jit, peer]
 
 
 def against_mitsuba(peer: BenchSection, name: str, compiled, workdir: Path) -> None:

@@ -9,7 +9,8 @@ that read and write their rows of the whole batch in place (`eval_rows`, `sample
 
 Conventions, in the local shading frame (z = normal): `wo` points to the camera (or previous vertex),
 `wi` towards the light; both unit. `eval` returns f(wo, wi) * |cos(wi)| and the solid-angle pdf of
-`sample` producing wi; delta lobes are never returned by `eval`. `sample` returns wi, the weight
+`sample` producing wi; delta lobes are never returned by `eval` (so a surface with only delta lobes evaluates
+to 0, and the path tracer samples lights there with no shadow ray). `sample` returns wi, the weight
 f |cos| / pdf (what a path's throughput is multiplied by), the pdf (0 for delta lobes) and a delta flag.
 Transmission carries the 1/eta^2 radiance scaling. Two-sided families see wo.z > 0 (the caller flips the
 frame); the others (dielectrics) see both sides and use the sign of wo.z to know which side they are on.
@@ -48,11 +49,6 @@ class SurfaceBatch:
             self.extra[idx, : rows.extra.shape[1]] = rows.extra
 
     @property
-    def is_delta(self) -> np.ndarray:
-        """Surfaces with only delta lobes, for which next-event estimation is pointless."""
-        return (self.alpha <= 0) & _registry.delta_when_smooth[self.family]
-
-    @property
     def two_sided(self) -> np.ndarray:
         """Surfaces that look the same from both sides (the shading frame is flipped towards wo)."""
         return _registry.two_sided[self.family]
@@ -73,7 +69,6 @@ class BSDF(ABC):
     """A family of BSDFs over `SurfaceBatch` rows of its own code (module docstring: conventions)."""
 
     two_sided: ClassVar[bool] = True
-    delta_when_smooth: ClassVar[bool] = False  # alpha = 0 leaves only delta lobes (no light sampling)
 
     @abstractmethod
     def parameters(self, material: Any) -> MaterialParameters:
@@ -159,7 +154,6 @@ class _Registry:
         self.families: list[BSDF] = []
         self.codes: dict[str, int] = {}
         self.two_sided = np.zeros(0, bool)
-        self.delta_when_smooth = np.zeros(0, bool)
 
     def add(self, name: str, family: BSDF) -> None:
         """Register `family` under `name`; registering a name again replaces it under the same code."""
@@ -171,7 +165,6 @@ class _Registry:
             self.codes[name] = len(self.families)
             self.families.append(family)
         self.two_sided = np.array([f.two_sided for f in self.families])
-        self.delta_when_smooth = np.array([f.delta_when_smooth for f in self.families])
 
 
 _registry = _Registry()

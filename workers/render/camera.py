@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from workers.render.jit import njit
 from workers.render.sampling import normalize
 from workers.scene.spec import Camera
 
@@ -27,8 +28,24 @@ class PinholeCamera:
         self.spread = math.atan(2.0 * tan_half / self.height)
 
     def rays(self, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rays through continuous pixel coordinates (px right, py down, in pixels)."""
-        x = 2.0 * px / self.width - 1.0
-        y = 1.0 - 2.0 * py / self.height
-        d = self.forward + x[:, None] * self.right + y[:, None] * self.up
-        return np.broadcast_to(self.origin, d.shape).copy(), normalize(d)
+        """Rays through continuous pixel coordinates (px right, py down, in pixels); one compiled pass."""
+        return _rays(
+            np.ascontiguousarray(px, np.float64), np.ascontiguousarray(py, np.float64), self.width,
+            self.height, self.origin, self.forward, self.right, self.up,
+        )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _rays(px, py, width, height, origin, forward, right, up):
+    n = len(px)
+    origins, directions = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        x = 2.0 * px[i] / width - 1.0
+        y = 1.0 - 2.0 * py[i] / height
+        dx = forward[0] + x * right[0] + y * up[0]
+        dy = forward[1] + x * right[1] + y * up[1]
+        dz = forward[2] + x * right[2] + y * up[2]
+        length = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-30)
+        origins[i, 0], origins[i, 1], origins[i, 2] = origin[0], origin[1], origin[2]
+        directions[i, 0], directions[i, 1], directions[i, 2] = dx / length, dy / length, dz / length
+    return origins, directions

@@ -23,6 +23,7 @@ from workers.render import heap, wavefront
 from workers.render.aggregate import Aggregate, AggregateEvents
 from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import RayScene
+from workers.render.environment import NO_MAP, EnvironmentMapLight
 from workers.render.intersector import Hits, Intersector
 from workers.render.lights import LightSample, LightSampler
 from workers.render.materials import MaterialTable
@@ -39,6 +40,7 @@ from workers.render.wavefront import RAY_OFFSET
 from workers.scene.compile import CompiledScene
 
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
+_NO_ROWS, _NO_ROWS3 = np.zeros(0), np.zeros((0, 3))  # per-row environment values the lat-long kernels skip
 
 
 @dataclass
@@ -340,16 +342,7 @@ class PathTracer:
 
             miss = np.flatnonzero(~found if events is None else ~found & ~events.found)
             if len(miss) and (env is not None or observer is not None):
-                dm = paths.d[miss]
-                weight = np.where(
-                    paths.prev_delta[miss],
-                    1.0,
-                    power_heuristic(paths.prev_pdf[miss], self.lights.pdf_environment(dm)),
-                )
-                if env is not None:
-                    radiance[paths.idx[miss]] += paths.beta[miss] * env.radiance(dm) * weight[:, None]
-                if observer is not None:
-                    observer.on_escape(paths.idx[miss], dm, paths.beta[miss] * weight[:, None])
+                self._escape(paths, miss, radiance, observer)
 
             roulette = segment >= rr_depth
             scattered = None
@@ -371,6 +364,22 @@ class PathTracer:
                 paths = _Paths.concatenate(paths, scattered.paths)
         np.nan_to_num(radiance, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         return TraceResult(radiance, bounces, rays_traced)
+
+    def _escape(self, paths: _Paths, miss: np.ndarray, radiance: np.ndarray, observer) -> None:
+        """The environment's radiance seen by the escaped paths `miss` (MIS-weighted), and the observer's
+        escape events."""
+        env = self.lights.environment
+        env_map = env.tables if isinstance(env, EnvironmentMapLight) else NO_MAP
+        if env_map is NO_MAP:
+            le, env_pdf = self.lights.environment_lookup(paths.d[miss])
+        else:
+            le, env_pdf = _NO_ROWS3, _NO_ROWS
+        weight = wavefront.add_escapes(
+            radiance if env is not None else np.zeros_like(radiance), miss, paths.idx, paths.beta, paths.d,
+            paths.prev_pdf, paths.prev_delta, env_map, self.lights.env_prob, _f64(le), _f64(env_pdf),
+        )  # fmt: skip
+        if observer is not None:
+            observer.on_escape(paths.idx[miss], paths.d[miss], paths.beta[miss] * weight[:, None])
 
     def _scatter_at_surfaces(
         self,
@@ -518,30 +527,26 @@ class PathTracer:
         return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, wo_local)
 
     def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
-        """Add light-sampled direct lighting (MIS-weighted) at every non-delta vertex; returns shadow rays."""
+        """Add light-sampled direct lighting (MIS-weighted) at every vertex; returns shadow rays. Vertices
+        with only delta lobes sample lights too and get nothing from them (`eval_bsdf` is 0 there, so they
+        cast no shadow ray): cheaper than gathering the other rows apart."""
         if self.lights.count == 0:
             return 0
-        delta = sh.surf.is_delta
-        every = not delta.any()
-        rows = np.arange(len(idx)) if every else np.flatnonzero(~delta)
-        if len(rows) == 0:
-            return 0
-        sel = slice(None) if every else rows  # a view, not a gather, when every vertex samples lights
-        ls = self.lights.sample(sh.position[sel], u[sel, 0], u[sel, 1:3])
+        rows = np.arange(len(idx))
+        ls = self.lights.sample(sh.position, u[:, 0], u[:, 1:3])
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
-        f_cos, bsdf_pdf = eval_bsdf(sh.surf if every else sh.surf.take(rows), sh.wo_local[sel], wi_local)
+        f_cos, bsdf_pdf = eval_bsdf(sh.surf, sh.wo_local, wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)
         live, contribution, origin, t_max, light_scale = wavefront.shadow_rays(
             rows, beta, _f64(f_cos), _f64(bsdf_pdf), lights, sh.position, sh.ng, sh.scale
         )
         if len(live) == 0:
             return 0
-        at = rows[live]
         blocked = self._occluded(origin, ls.direction[live], t_max)
-        wavefront.add_unblocked(radiance, idx[at], contribution, blocked)
+        wavefront.add_unblocked(radiance, idx[live], contribution, blocked)
         if observer is not None:
-            weight = beta[at] * f_cos[live] * light_scale[live, None]
-            _observe_environment_samples(observer, idx[at], ls, live, weight, blocked)
+            weight = beta[live] * f_cos[live] * light_scale[live, None]
+            _observe_environment_samples(observer, idx[live], ls, live, weight, blocked)
         return len(live)
 
 

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from workers.render import kernels
-from workers.render.environment import ConstantEnvironment, EnvironmentMapLight
+from workers.render.environment import NO_MAP, ConstantEnvironment, EnvironmentMapLight, sample_one
 from workers.render.jit import njit
 from workers.render.sampling import luminance, normalize
 from workers.scene import spec
@@ -160,25 +160,28 @@ class LightSampler:
 
     def sample(self, p: np.ndarray, u_select: np.ndarray, u: np.ndarray) -> LightSample:
         """Pick a light for each shading point p (N, 3) and a point or direction on it: one compiled pass
-        over the rows, then the environment's rows and textured emission in NumPy (both are lookups into
-        images, and the environment is replaceable: `workers.models.prt.lighting`)."""
+        over the rows, lat-long maps included; then in NumPy the rows of another kind of environment (it is
+        replaceable: `workers.models.prt.lighting`) and textured emission (lookups into images)."""
         n = len(p)
         if self.count == 0 or n == 0:
             return LightSample(
                 np.zeros((n, 3)), np.full(n, np.inf), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
             )
+        env = self.environment
+        env_map = env.tables if isinstance(env, EnvironmentMapLight) else NO_MAP
         direction, distance, radiance, pdf, delta, kind, tri, b = _sample_lights(
             np.ascontiguousarray(p, dtype=np.float64),
             np.ascontiguousarray(u_select, dtype=np.float64),
             np.ascontiguousarray(u, dtype=np.float64),
             self._tables,
+            env_map,
         )
-        if self.environment is not None:
+        if env is not None and env_map is NO_MAP:
             sel = np.flatnonzero(kind == ENVIRONMENT)
             if len(sel):
-                d, env_pdf = self.environment.sample(u[sel])
+                d, env_pdf = env.sample(u[sel])
                 direction[sel] = d
-                radiance[sel] = self.environment.radiance(d) * (env_pdf > 0)[:, None]
+                radiance[sel] = env.radiance(d) * (env_pdf > 0)[:, None]
                 pdf[sel] *= env_pdf
         if self.emission_scale is not None:
             sel = np.flatnonzero(kind == TRIANGLE)
@@ -193,10 +196,18 @@ class LightSampler:
         """Solid-angle pdf with which `sample` would have produced a BSDF-sampled hit on an emitter."""
         return self.area_pdf[prim] * distance**2 / np.maximum(np.abs(cos_light), 1e-300)
 
-    def pdf_environment(self, directions: np.ndarray) -> np.ndarray:
-        if self.environment is None or self.env_prob == 0:
-            return np.zeros(len(directions))
-        return self.env_prob * self.environment.pdf(directions)
+    def environment_lookup(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Radiance of the environment along world directions (0 without one) and the solid-angle pdf with
+        which `sample` draws them (selection included), in one pass where the environment offers one."""
+        n = len(directions)
+        env = self.environment
+        if env is None:
+            return np.zeros((n, 3)), np.zeros(n)
+        if isinstance(env, EnvironmentMapLight | ConstantEnvironment):
+            radiance, pdf = env.radiance_and_pdf(directions)
+        else:
+            radiance, pdf = env.radiance(directions), env.pdf(directions)
+        return radiance, pdf * self.env_prob
 
 
 class _LightTables(NamedTuple):
@@ -222,10 +233,11 @@ class _LightTables(NamedTuple):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _sample_lights(p, u_select, u, lights):
-    """Triangle, point and directional light samples per row; environment rows get their selection
-    probability in `pdf` and are finished by the caller. Also returns per row the light kind, the
-    triangle and its barycentrics (for emission textures)."""
+def _sample_lights(p, u_select, u, lights, env):
+    """Triangle, point, directional and environment light samples per row, the environment from the
+    lat-long map `env`; without one (`NO_MAP`) environment rows get their selection probability in `pdf`
+    and are finished by the caller. Also returns per row the light kind, the triangle and its barycentrics
+    (for emission textures)."""
     n = len(p)
     direction, distance = np.zeros((n, 3)), np.full(n, np.inf)
     radiance, pdf, delta = np.zeros((n, 3)), np.zeros(n), np.zeros(n, np.bool_)
@@ -277,6 +289,11 @@ def _sample_lights(p, u_select, u, lights):
                 direction[i, c] = lights.dir_to_light[which, c]
                 radiance[i, c] = lights.dir_irradiance[which, c]
             pdf[i], delta[i] = select, True
+        elif env.image.shape[0] > 0:
+            dx, dy, dz, env_pdf, r, g, b = sample_one(u[i, 0], u[i, 1], env)
+            direction[i, 0], direction[i, 1], direction[i, 2] = dx, dy, dz
+            radiance[i, 0], radiance[i, 1], radiance[i, 2] = r, g, b
+            pdf[i] = select * env_pdf
         else:
             pdf[i] = select
     return direction, distance, radiance, pdf, delta, kind, tri, bary

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from workers.render import kernels as k
+from workers.render.environment import direction_lookup
 from workers.render.jit import njit
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
@@ -27,7 +28,7 @@ kernel = njit(cache=True, nogil=True, fastmath=False)
 
 
 @k.scalar
-def _offset(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
+def offset_one(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
     """A ray origin moved off the surface along ng, to the side `d` leaves by (no self-hits). The
     distance is relative to `scale`: Embree works in float32, so its errors grow with the coordinates."""
     eps = RAY_OFFSET * max(scale, 1e-30)
@@ -41,7 +42,7 @@ def offset_origins(position, ng, direction, scale):
     out = np.empty_like(position)
     for i in range(len(position)):
         p, n, d = position[i], ng[i], direction[i]
-        out[i, 0], out[i, 1], out[i, 2] = _offset(
+        out[i, 0], out[i, 1], out[i, 2] = offset_one(
             p[0], p[1], p[2], n[0], n[1], n[2], d[0], d[1], d[2], scale[i]
         )
     return out
@@ -109,6 +110,29 @@ def add_emitter_hits(radiance, idx, beta, emitted, prim, t, d, ng, area_pdf, pre
 
 
 @kernel
+def add_escapes(radiance, rows, idx, beta, d, prev_pdf, prev_delta, env_map, env_prob, env_radiance, env_pdf):
+    """Add the environment's radiance to the paths `rows` whose rays escaped, weighted by MIS against light
+    sampling (power heuristic; fully after delta scattering); returns the weights. The radiance and the
+    light-sampling pdf (selection included) come from the lat-long map `env_map` (`env_prob` the map's
+    selection probability) or, without one (`NO_MAP`), from `env_radiance`, `env_pdf` per row."""
+    weights = np.empty(len(rows))
+    for j in range(len(rows)):
+        i = rows[j]
+        if env_map.image.shape[0] > 0:
+            r, g, b, pdf = direction_lookup(d[i, 0], d[i, 1], d[i, 2], env_map)
+            pdf *= env_prob
+        else:
+            r, g, b, pdf = env_radiance[j, 0], env_radiance[j, 1], env_radiance[j, 2], env_pdf[j]
+        weight = 1.0 if prev_delta[i] else k.power_heuristic(prev_pdf[i], pdf)
+        weights[j] = weight
+        p = idx[i]
+        radiance[p, 0] += beta[i, 0] * r * weight
+        radiance[p, 1] += beta[i, 1] * g * weight
+        radiance[p, 2] += beta[i, 2] * b * weight
+    return weights
+
+
+@kernel
 def shading_frames(d, ns, two_sided):
     """Frames (s, t, n) around the shading normals, flipped towards the viewer on two-sided surfaces, and
     wo = -d in them."""
@@ -166,7 +190,7 @@ def shadow_rays(rows, beta, f_cos, bsdf_pdf, lights, position, ng, scale):
         if not largest > 0:
             continue
         p, n, dr = position[i], ng[i], direction[j]
-        origin[count, 0], origin[count, 1], origin[count, 2] = _offset(
+        origin[count, 0], origin[count, 1], origin[count, 2] = offset_one(
             p[0], p[1], p[2], n[0], n[1], n[2], dr[0], dr[1], dr[2], scale[i]
         )
         dist = distance[j]
@@ -235,7 +259,7 @@ def next_paths(idx, beta, sampled, frames, position, ng, scale, u_roulette, use_
         dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
         dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
         p, nrm = position[i], ng[i]
-        out_o[count, 0], out_o[count, 1], out_o[count, 2] = _offset(
+        out_o[count, 0], out_o[count, 1], out_o[count, 2] = offset_one(
             p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
         )
         out_d[count, 0], out_d[count, 1], out_d[count, 2] = dx, dy, dz
@@ -268,3 +292,22 @@ def take_paths(rows, paths):
         out_idx[j], out_pdf[j], out_delta[j] = idx[i], prev_pdf[i], prev_delta[i]
         out_t_min[j], out_spread[j] = t_min[i], spread[i]
     return out_idx, out_o, out_d, out_beta, out_pdf, out_delta, out_t_min, out_spread
+
+
+@kernel
+def rays_leaving(wi, fs, ft, ns, position, ng, scale):
+    """Rays leaving surface points along local directions `wi` (one per row): world directions in the frames
+    (fs, ft, ns) and origins offset off the surface to the side they leave by."""
+    n = len(wi)
+    origins, directions = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        x, y, z = wi[i, 0], wi[i, 1], wi[i, 2]
+        dx = x * fs[i, 0] + y * ft[i, 0] + z * ns[i, 0]
+        dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
+        dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
+        p, nrm = position[i], ng[i]
+        origins[i, 0], origins[i, 1], origins[i, 2] = offset_one(
+            p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
+        )
+        directions[i, 0], directions[i, 1], directions[i, 2] = dx, dy, dz
+    return origins, directions

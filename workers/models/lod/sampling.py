@@ -21,12 +21,19 @@ import torch
 
 from workers.models.lod.config import LodConfig
 from workers.models.lod.grid import LodGrid
-from workers.models.lod.segments import boundary_pair_rows, box_exit_rows, roulette_survivors
+from workers.models.lod.segments import (
+    add_unblocked_throughput,
+    boundary_pair_rows,
+    box_exit_rows,
+    roulette_survivors,
+    voxel_shadow_rays,
+)
+from workers.render import wavefront
 from workers.render.bsdf import eval_bsdf, sample_bsdf
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
-from workers.render.sampling import max3, square_to_uniform_sphere
+from workers.render.sampling import square_to_uniform_sphere
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import CompiledScene
 from workers.scene.reference import SceneRef
@@ -121,19 +128,19 @@ def throughput_estimates(
             break
         sh = tracer.shade(hits, o, d)
         light = wi[live]
-        f_cos, _ = eval_bsdf(sh.surf, sh.wo_local, sh.to_local(light))
-        lit = np.flatnonzero(max3(f_cos) > 0)
+        rows = np.arange(len(live))
+        f_cos, _ = eval_bsdf(sh.surf, sh.wo_local, wavefront.to_local_rows(rows, light, sh.fs, sh.ft, sh.ns))
+        f_cos = _f64(f_cos)
+        lit, origin, t_max = voxel_shadow_rays(f_cos, light, sh.position, sh.ng, sh.scale, lo, hi)
         if len(lit):
-            origin = tracer.offset(sh.position[lit], sh.ng[lit], light[lit], sh.scale[lit])
-            blocked = tracer.rays.occluded(origin, light[lit], box_exit(lo[lit], hi[lit], origin, light[lit]))
-            value[live[lit]] += beta[lit] * f_cos[lit] * ~blocked[:, None]
+            blocked = tracer.rays.occluded(origin, light[lit], t_max)
+            add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
         sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
-        d = sh.to_world(sampled)
-        o = tracer.offset(sh.position, sh.ng, d, sh.scale)
+        o, d = wavefront.rays_leaving(_f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale)
         hits = tracer.rays.intersect(o, d)
         keep = roulette_survivors(
-            beta, _f64(weight), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, _f64(d), RR_MAX_SURVIVAL
+            beta, _f64(weight), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, d, RR_MAX_SURVIVAL
         )
         live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
         hits = hits.take(keep)

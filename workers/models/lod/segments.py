@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from workers.render.jit import njit
+from workers.render.wavefront import offset_one
 
 kernel = njit(cache=True, nogil=True, fastmath=False)
 
@@ -93,3 +94,33 @@ def roulette_survivors(beta, weight, u_survive, prim, t, lo, hi, origins, direct
             keep[n_keep] = i
             n_keep += 1
     return keep[:n_keep]
+
+
+@kernel
+def voxel_shadow_rays(f_cos, light, position, ng, scale, lo, hi):
+    """Shadow rays towards the uniform directions `light` from the rows whose BSDF passes light there
+    (f_cos > 0): those rows, the rays' origins offset off the surface, and where they leave the voxel box."""
+    n = len(f_cos)
+    lit, origins, t_max = np.empty(n, np.int64), np.empty((n, 3)), np.empty(n)
+    count = 0
+    for i in range(n):
+        if not _max3(f_cos[i, 0], f_cos[i, 1], f_cos[i, 2]) > 0:
+            continue
+        p, nrm, d = position[i], ng[i], light[i]
+        o0, o1, o2 = offset_one(p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], d[0], d[1], d[2], scale[i])
+        origins[count, 0], origins[count, 1], origins[count, 2] = o0, o1, o2
+        t_max[count] = _exit_distance(lo, hi, i, o0, o1, o2, d[0], d[1], d[2])
+        lit[count] = i
+        count += 1
+    return lit[:count], origins[:count], t_max[:count]
+
+
+@kernel
+def add_unblocked_throughput(value, live, lit, beta, f_cos, blocked):
+    """value[live[lit]] += beta f_cos on the rows of `lit` whose shadow ray is not blocked."""
+    for j in range(len(lit)):
+        if blocked[j]:
+            continue
+        i = lit[j]
+        for c in range(3):
+            value[live[i], c] += beta[i, c] * f_cos[i, c]

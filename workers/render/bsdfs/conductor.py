@@ -19,8 +19,6 @@ from workers.scene import spec
 
 @register_material("conductor")
 class Conductor(CompiledBSDF):
-    delta_when_smooth = True
-
     def parameters(self, material: spec.Conductor) -> MaterialParameters:
         return MaterialParameters(
             base=material.specular, alpha=material.roughness, roughness=material.roughness

@@ -22,7 +22,6 @@ from workers.scene import spec
 @register_material("dielectric")
 class Dielectric(CompiledBSDF):
     two_sided = False
-    delta_when_smooth = True
 
     def parameters(self, material: spec.Dielectric) -> MaterialParameters:
         return MaterialParameters(alpha=material.roughness, ior=material.ior, roughness=material.roughness)
