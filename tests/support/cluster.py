@@ -116,6 +116,7 @@ class LocalCluster:
                 "--head",
                 f"--port={self.address.rpartition(':')[2]}",
                 "--include-dashboard=false",
+                f"--dashboard-port={free_port()}",  # Ray's minimal dashboard runs anyway: not on 8265
                 f"--ray-client-server-port={free_port()}",
             ]
 
