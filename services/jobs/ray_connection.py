@@ -28,7 +28,6 @@ from ray._private.worker import global_worker
 PROBE_KEY = b"nbake-probe"  # a key nobody writes: reading it proves the GCS answers
 PROBE_TIMEOUT_S = 1.0
 PROBE_INTERVAL_S = 1.0
-STALE_AFTER_S = 15.0  # no successful probe for this long (a stuck scheduler, say): not ready
 FIRST_BACKOFF_S = 0.5
 MAX_BACKOFF_S = 10.0
 
@@ -42,7 +41,6 @@ class RayConnection:
         self.address = address  # what `ray.init` is given again: a name, not the GCS's resolved IP
         self._lock = threading.Lock()
         self._connected = ray.is_initialized()
-        self._last_ok = time.monotonic() if self._connected else 0.0
         self._next_probe = 0.0
         self._backoff = FIRST_BACKOFF_S
         self._problem = "" if self._connected else "not connected yet"
@@ -67,13 +65,10 @@ class RayConnection:
         return self._connected
 
     def ready(self) -> None:
-        """Raise, saying why, unless the cluster answered recently (for the readiness endpoint)."""
+        """Raise, saying why, unless the last probe found the cluster (for the readiness endpoint)."""
         with self._lock:
             if not self._connected:
                 raise ConnectionError(f"Ray cluster at {self.address} unreachable: {self._problem}")
-            silent = time.monotonic() - self._last_ok
-            if silent > STALE_AFTER_S:
-                raise TimeoutError(f"Ray cluster at {self.address} not probed for {silent:.0f} s")
 
     def _probe(self, now: float, on_lost: Callable[[], None]) -> None:
         try:
@@ -81,8 +76,6 @@ class RayConnection:
         except Exception as error:  # any failure to answer is a lost cluster
             self._lose(f"{type(error).__name__}: {error}", on_lost)
             return
-        with self._lock:
-            self._last_ok = now
         self._next_probe = now + PROBE_INTERVAL_S
 
     def _lose(self, problem: str, on_lost: Callable[[], None]) -> None:
@@ -110,7 +103,7 @@ class RayConnection:
             return
         log.warning("reconnected to the Ray cluster at %s", self.address)
         with self._lock:
-            self._connected, self._last_ok, self._problem = True, time.monotonic(), ""
+            self._connected, self._problem = True, ""
         self._backoff = FIRST_BACKOFF_S
         self._next_probe = time.monotonic() + PROBE_INTERVAL_S
 
