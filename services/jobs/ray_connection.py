@@ -8,9 +8,12 @@ first failure, disconnects (`ray.shutdown`, in time, before Ray ends the process
 again with exponential backoff until the cluster answers. The API reads `ready` instead of calling Ray,
 so it keeps answering (and reports Ray not ready) during the outage.
 
-A driver whose raylet died survives `ray.shutdown` only while its parent process lives (Ray takes an
-orphaned driver's broken raylet socket for its own death); a server started with `--outlive-parent`
-whose parent exited therefore ends at the disconnect, for its supervisor to restart.
+Where this falls short: a driver whose raylet died survives `ray.shutdown` only while its parent process
+lives (Ray takes an orphaned driver's broken raylet socket for its own death), so a server started with
+`--outlive-parent` whose parent exited ends at the disconnect; a blocking Ray call the scheduler began
+between two probes (creating or looking up a named actor) still ends the process after the 60 s; in both
+cases the next start resumes the jobs from their checkpoints. The embedded cluster (no `RAY_ADDRESS`) is
+looked for again at its old GCS address, where nothing comes back: the server stays up, not ready.
 """
 
 from __future__ import annotations
