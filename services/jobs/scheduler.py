@@ -80,9 +80,9 @@ class Scheduler:
 
     # ------------------------------------------------------------------ lifecycle
 
-    def start(self) -> None:
+    def start(self, ray_connection: RayConnection) -> None:
         """Tick on a thread of its own, on the Ray cluster this process is connected to."""
-        self.ray = RayConnection.current()
+        self.ray = ray_connection
         self._thread = threading.Thread(target=self._loop, name="nbake-scheduler", daemon=True)
         self._thread.start()
 
@@ -219,7 +219,7 @@ class Scheduler:
         fault, so it is queued again and resumes from its checkpoint on the cluster that comes back."""
         lost, self.running = self.running, {}
         for job_id in lost:
-            error = f"the Ray cluster was lost ({self.ray.address})"
+            error = f"the Ray cluster was lost ({self.ray.name})"
             self._finish(job_id, JobOutcome(state="failed", error=error, infrastructure_failure=True))
 
     # ------------------------------------------------------------------ finishing

@@ -2,7 +2,9 @@
 trees of its own, as a deployment's head pod) outlives the SIGKILL of every process of that cluster. The
 API keeps answering and reports Ray not ready, the running job goes back to the queue as an
 infrastructure failure, the server connects again once the cluster is restarted on the same address, and
-the job resumes from its checkpoint in the store to the image an uninterrupted render gives.
+the job resumes from its checkpoint in the store to the image an uninterrupted render gives. The same
+holds for the server's embedded cluster (no `RAY_ADDRESS`), which the server starts again by itself; and a
+server that stops with its parent leaves an external cluster running.
 
 Without Ray's GCS fault tolerance a restarted head is a new cluster: the server's connection to the old
 one cannot be reused, so this is the server re-initialising Ray, not Ray recovering.
@@ -10,6 +12,8 @@ one cannot be reused, so this is the server re-initialising Ray, not Ray recover
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import os
 import shutil
 import signal
@@ -17,7 +21,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -28,9 +32,11 @@ from tests.integration.test_jobs_recovery import assert_uninterrupted_render
 from tests.integration.test_serve_lifetime import PARENT, alive
 from tests.support.cluster import LocalCluster, RayNode, ServeReplica
 from tests.support.ports import free_port
+from tests.support.sockets import process_tree
+from workers.runtime.checkpoints import COMMIT_MARKER
 
 REPO = Path(__file__).resolve().parents[2]
-# A Ray cluster started twice, a server and a render resumed: about two minutes on the shared 2-core machine
+# Ray clusters started twice, servers and renders resumed: about five minutes on the shared 2-core machine
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 SEED = 5
 CONFIG = {"spp": 384, "checkpoint_interval_s": 0}
@@ -76,18 +82,24 @@ def wait_until(condition, what: str, timeout: float = 120) -> None:
         time.sleep(0.25)
 
 
-def test_a_killed_ray_cluster_is_reconnected_and_the_job_resumes_from_its_checkpoint(cluster, server):
+def interrupt_and_resume(
+    server: ServeReplica, kill: Callable[[], None], restart: Callable[[httpx.Client, str], None]
+) -> None:
+    """A render killed with its whole Ray cluster after its first checkpoint and brought back by
+    `restart(client, job_id)`: the API answers throughout, the job goes back to the queue and resumes to
+    the uninterrupted image."""
     with httpx.Client(
         base_url=server.url, headers={"Authorization": f"Bearer {TOKENS['admin']}"}, timeout=30
     ) as client:
         job = submit(client, kind="render", scene="cornell_box", preset="quick", config=CONFIG, seed=SEED)
+        checkpoints = server.data_dir / "store" / "checkpoints" / job["id"]
         wait_until(
-            lambda: (client.get(f"/v1/jobs/{job['id']}").json()["progress"] or {}).get("step", 0) >= 128,
-            "the render reached its first checkpoints",
+            lambda: any(checkpoints.glob(f"step-*/{COMMIT_MARKER}")),
+            "the render committed its first checkpoint",
             timeout=300,
         )
 
-        cluster.stop()  # SIGKILL to every process of every node of the cluster
+        kill()
 
         wait_until(lambda: readiness(client)[0] == 503, "/readyz reported Ray not ready")
         body = readiness(client)[1]
@@ -96,10 +108,8 @@ def test_a_killed_ray_cluster_is_reconnected_and_the_job_resumes_from_its_checkp
         queued = wait_for(client, job["id"], {"QUEUED", "FAILED"}, timeout=60)
         assert queued["state"] == "QUEUED", queued  # retried, not failed: the cluster's fault, not the job's
         assert client.get("/v1/jobs").status_code == 200  # the API answers while Ray is down
-        time.sleep(3)  # the server tries to reconnect meanwhile, and the job waits for it
-        assert client.get(f"/v1/jobs/{job['id']}").json()["state"] == "QUEUED"
 
-        cluster.start_head(cpus=CPUS, name="head-restarted")  # the same address, a new cluster
+        restart(client, job["id"])
 
         done = wait_for(client, job["id"], {"SUCCEEDED", "FAILED"}, timeout=400)
         assert done["state"] == "SUCCEEDED", done
@@ -115,6 +125,53 @@ def test_a_killed_ray_cluster_is_reconnected_and_the_job_resumes_from_its_checkp
     assert resumed, messages
     assert done["attempts"] == 2
     assert_uninterrupted_render(image, done["config"], SEED)
+
+
+def test_a_killed_ray_cluster_is_reconnected_and_the_job_resumes_from_its_checkpoint(cluster, server):
+    def restart(client: httpx.Client, job_id: str) -> None:
+        time.sleep(3)  # the server tries to connect meanwhile; nothing runs until the cluster is back
+        assert readiness(client)[0] == 503
+        assert client.get(f"/v1/jobs/{job_id}").json()["state"] == "QUEUED"
+        cluster.start_head(cpus=CPUS, name="head-restarted")  # the same address, a new cluster
+
+    interrupt_and_resume(server, kill=cluster.stop, restart=restart)  # stop: SIGKILL to every process
+
+
+def test_a_killed_embedded_cluster_is_started_again_and_the_job_resumes():
+    """Without `RAY_ADDRESS` the cluster is the server's own child processes: killed, the server starts a
+    new one by itself."""
+    root = Path(tempfile.mkdtemp(prefix="nbe-", dir="/tmp"))  # short: the embedded cluster's sockets
+    replica = ServeReplica(root / "data", {"NBAKE_TOKENS": TOKENS_ENV, "NBAKE_MAX_RUNNING": "1"})
+    try:
+        replica.start()
+        kill = functools.partial(kill_ray_below, replica.process.pid)
+        interrupt_and_resume(replica, kill=kill, restart=lambda *_: None)  # the server restarts it
+    finally:
+        replica.stop()
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def kill_ray_below(server: int) -> None:
+    """SIGKILL every Ray process below `server` (its embedded cluster), until none is left; the server
+    itself and anything else it started live on."""
+    deadline = time.monotonic() + 30
+    while ray_processes := [pid for pid in process_tree(server) - {server} if is_ray(pid)]:
+        assert time.monotonic() < deadline, f"Ray processes survived SIGKILL: {ray_processes}"
+        for pid in ray_processes:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        time.sleep(0.1)
+
+
+def is_ray(pid: int) -> bool:
+    """A live (not zombie) process of a Ray cluster: its binaries, or Python running Ray's own code."""
+    try:
+        comm = Path(f"/proc/{pid}/comm").read_text().strip()
+        command = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+    found = comm in ("gcs_server", "raylet") or comm.startswith("ray::") or b"/site-packages/ray/" in command
+    return found and alive(pid)
 
 
 def test_a_server_whose_parent_died_stops_without_stopping_the_external_cluster(cluster, tmp_path):
