@@ -15,10 +15,13 @@ from services.api.routes import artifacts, assets, catalog, health, jobs, tokens
 from services.api.services import Services
 from services.api.settings import ServiceSettings
 from services.dashboard import mount_dashboard
+from services.jobs.ray_connection import RayConnection
 
 
-def create_app(settings: ServiceSettings) -> FastAPI:
-    services = Services.build(settings)
+def create_app(settings: ServiceSettings, ray_connection: RayConnection | None = None) -> FastAPI:
+    """The app; `ray_connection` says how to connect to Ray again when the cluster is lost (by default,
+    to the cluster `ray.init` joined, at the same address)."""
+    services = Services.build(settings, ray_connection)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):

@@ -15,6 +15,7 @@ from services.artifacts.store import BlobStore
 from services.geometry import GeometryProcesses
 from services.jobs.db import Database
 from services.jobs.metrics import ServiceMetrics
+from services.jobs.ray_connection import RayConnection
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.scheduler import Scheduler, SchedulerSettings
@@ -36,10 +37,11 @@ class Services:
     scheduler: Scheduler
     geometry: GeometryProcesses
     tenancy: Tenancy
+    ray_connection: RayConnection | None = None  # None: the one `ray.init` made, joined again as it was
     admin_token_file: Path | None = None
 
     @classmethod
-    def build(cls, settings: ServiceSettings) -> Services:
+    def build(cls, settings: ServiceSettings, ray_connection: RayConnection | None = None) -> Services:
         data_dir = settings.data_dir
         data_dir.mkdir(parents=True, exist_ok=True)
         db = Database(settings.db_url, settings.database_schema)
@@ -59,7 +61,18 @@ class Services:
         geometry = GeometryProcesses()
         submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
         return cls(
-            settings, db, jobs, blobs, artifacts, scenes, submitter, metrics, scheduler, geometry, tenancy
+            settings,
+            db,
+            jobs,
+            blobs,
+            artifacts,
+            scenes,
+            submitter,
+            metrics,
+            scheduler,
+            geometry,
+            tenancy,
+            ray_connection,
         )
 
     def start(self) -> None:
@@ -75,7 +88,7 @@ class Services:
         store_tokens(self.db, tokens)
         self.tenancy.adopt_unowned_assets(asset_ids(self.settings.store))
         if self.settings.scheduling:
-            self.scheduler.start()
+            self.scheduler.start(self.ray_connection or RayConnection.current())
 
     def stop(self) -> None:
         self.scheduler.stop()

@@ -25,6 +25,7 @@ from services.api.grpc.server import with_grpc
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
 from services.cli.lifetime import die_with_parent
+from services.jobs.ray_connection import RayConnection
 
 RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
 
@@ -86,7 +87,7 @@ def serve_command(
         _, path = generated_admin_token(data_dir)
         typer.echo(f"admin token: {path}", err=True)
     typer.echo(f"dashboard: http://{f'[{host}]' if ':' in host else host}:{port}/ui", err=True)
-    ray_temp = start_ray(data_dir)
+    ray_connection, ray_temp = start_ray(data_dir)
     inference = None
     if inference_port is not None:
         command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--host", host]
@@ -94,7 +95,7 @@ def serve_command(
         inference = subprocess.Popen([*command, "--data-dir", str(data_dir), "--log-level", log_level])
     try:
         uvicorn.run(
-            with_grpc(create_app(settings), host, grpc_port),
+            with_grpc(create_app(settings, ray_connection), host, grpc_port),
             host=host,
             port=port,
             log_level=log_level,
@@ -109,20 +110,26 @@ def serve_command(
             shutil.rmtree(ray_temp, ignore_errors=True)
 
 
-def start_ray(data_dir: Path) -> Path | None:
+def start_ray(data_dir: Path) -> tuple[RayConnection, Path | None]:
     """Join `RAY_ADDRESS`, or start a local cluster on loopback with its session files under the data dir
     (or, if that path is too long for Ray's sockets, a private /tmp folder: returned, to be removed on exit).
+    The connection makes the same again when the cluster is lost: joins the address once it answers, or
+    starts a new local cluster.
     """
     if os.environ.get("RAY_ADDRESS"):
         ray.init(address=os.environ["RAY_ADDRESS"], log_to_driver=False)
-        return None
+        return RayConnection.joining(os.environ["RAY_ADDRESS"]), None
     temp_dir = (data_dir / "ray").resolve()
     private = len(str(temp_dir)) > RAY_TEMP_DIR_MAX
     if private:
         temp_dir = Path(tempfile.mkdtemp(prefix="nbake-ray-", dir="/tmp"))
     single_machine_ray()
-    ray.init(address="local", include_dashboard=False, _temp_dir=str(temp_dir), log_to_driver=False)
-    return temp_dir if private else None
+
+    def start_local() -> None:
+        ray.init(address="local", include_dashboard=False, _temp_dir=str(temp_dir), log_to_driver=False)
+
+    start_local()
+    return RayConnection("embedded in this server", start_local), temp_dir if private else None
 
 
 def single_machine_ray() -> None:

@@ -4,7 +4,9 @@ Each tick it polls the drivers it owns (persisting their events), finishes jobs 
 (publishing the artifact, retrying infrastructure failures a bounded number of times, deleting
 checkpoints of finished jobs), passes cancellations on, starts queued jobs within the concurrency limit
 and renews its leases. RUNNING jobs with no live driver (after a server restart, or whose owner stopped
-renewing its lease) are adopted and restarted from their checkpoints with the same JobSpec.
+renewing its lease) are adopted and restarted from their checkpoints with the same JobSpec. When the Ray
+cluster is lost, the jobs running on it are infrastructure failures (retried, so they resume from their
+checkpoints) and nothing touches Ray until the connection is made again.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import ray
 from services.artifacts.artifacts import ArtifactStore
 from services.jobs.errors import JobServiceError
 from services.jobs.metrics import ServiceMetrics
+from services.jobs.ray_connection import RayConnection
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.states import JobState
@@ -68,6 +71,7 @@ class Scheduler:
             scenes,
             metrics,
         )
+        self.ray: RayConnection | None = None  # from `start`, when this process is connected to Ray
         self.running: dict[str, Running] = {}
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -76,7 +80,9 @@ class Scheduler:
 
     # ------------------------------------------------------------------ lifecycle
 
-    def start(self) -> None:
+    def start(self, ray_connection: RayConnection) -> None:
+        """Tick on a thread of its own, on the Ray cluster this process is connected to."""
+        self.ray = ray_connection
         self._thread = threading.Thread(target=self._loop, name="nbake-scheduler", daemon=True)
         self._thread.start()
 
@@ -108,6 +114,8 @@ class Scheduler:
             self._wake.clear()
 
     def tick(self) -> None:
+        if not self.ray.check(on_lost=self._lose_running):
+            return
         if time.monotonic() >= self._next_adoption:
             self._adopt_orphans()
             self._next_adoption = time.monotonic() + self.settings.lease_s / 3
@@ -205,6 +213,14 @@ class Scheduler:
             del self.running[job_id]
             running.handle.release()
             self._finish(job_id, outcome)
+
+    def _lose_running(self) -> None:
+        """The cluster is gone and its drivers with it: each running job fails as the infrastructure's
+        fault, so it is queued again and resumes from its checkpoint on the cluster that comes back."""
+        lost, self.running = self.running, {}
+        for job_id in lost:
+            error = f"the Ray cluster was lost ({self.ray.name})"
+            self._finish(job_id, JobOutcome(state="failed", error=error, infrastructure_failure=True))
 
     # ------------------------------------------------------------------ finishing
 

@@ -28,7 +28,7 @@ from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, encode_binary
 from tests.bench.common import BenchSection
 from tests.bench.http_load import Connection
-from tests.integration.test_api_server import TOKENS, free_port
+from tests.integration.test_api_server import TOKENS
 from tests.integration.test_grpc_server import LONG, start_serve
 from tests.integration.test_inference_server import (
     aimed_rays,
@@ -36,6 +36,7 @@ from tests.integration.test_inference_server import (
     run_and_publish,
     start_server,
 )
+from tests.support.ports import free_port
 from tests.support.postgres import PrivatePostgres
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.scene.builtin import BUILTIN_SCENES

@@ -88,12 +88,6 @@ def drop_schema(url: str, schema: str) -> None:
 # ---------------------------------------------------------------------------------------------- servers
 
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 class ServerThread:
     """uvicorn serving `create_app(settings)` on a thread, on a socket bound before it starts."""
 

@@ -16,7 +16,7 @@ from neuralbake_client.cli.main import app
 from neuralbake_client.cli.render import first_positional
 from typer.testing import CliRunner
 
-from tests.integration.test_api_server import free_port
+from tests.support.ports import free_port
 
 HEAVY = {"torch", "ray", "embreex", "workers", "numpy", "grpc", "httpx", "pydantic"}
 PLUGIN = {"services", "services.cli", "services.cli.plugin"}  # the server's registration: names only

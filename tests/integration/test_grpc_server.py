@@ -23,7 +23,8 @@ from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
 from grpc_status import rpc_status
 from neuralbake.v1 import artifacts_pb2, artifacts_pb2_grpc, jobs_pb2, jobs_pb2_grpc
 
-from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, free_port
+from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV
+from tests.support.ports import free_port
 
 TINY = {"width": 32, "height": 32, "spp": 4}  # a render job of a few seconds
 LONG = {"width": 32, "height": 32, "spp": 1 << 16, "tile_size": 32}  # runs for minutes unless cancelled

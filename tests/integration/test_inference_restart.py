@@ -18,8 +18,9 @@ from neuralbake_client.retry import Retry
 
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
-from tests.integration.test_api_server import NBAKE, TOKENS, free_port
+from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_inference_server import install_tokens, run_and_publish
+from tests.support.ports import free_port
 from workers.scene.builtin import BUILTIN_SCENES
 from workers.scene.image_io import read_exr
 

@@ -28,8 +28,9 @@ from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
 from services.jobs.db import Database
-from tests.integration.test_api_server import NBAKE, TOKENS, free_port
+from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.support.jobs import run_kind_job
+from tests.support.ports import free_port
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.models.registry import get_inference
 from workers.scene.builtin import BUILTIN_SCENES

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from tests.integration import test_api_server as api
-from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, events, free_port, submit, wait_for
+from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, events, submit, wait_for
+from tests.support.ports import free_port
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
@@ -158,11 +159,16 @@ def test_a_killed_server_resumes_its_jobs_from_checkpoints(serve):
     assert any("driver was gone" in (e["data"].get("message") or "") for e in stream)
     assert job["attempts"] == 1  # a server restart is not the job's failure
 
-    exr = Path(tempfile.mkdtemp(prefix="nbt-exr-", dir="/tmp")) / "image.exr"
-    exr.write_bytes(image)
+    assert_uninterrupted_render(image, job["config"], SEED)
+
+
+def assert_uninterrupted_render(image: bytes, config: dict, seed: int) -> None:
+    """`image` (an EXR of cornell_box) is bit-identical to the same render run in one go, in this process."""
+    with tempfile.TemporaryDirectory(prefix="nbt-exr-", dir="/tmp") as folder:
+        exr = Path(folder) / "image.exr"
+        exr.write_bytes(image)
+        served = read_exr(exr)
     direct = render(
-        compile_scene(get_builtin("cornell_box")), RenderConfig.model_validate(job["config"]).settings(SEED)
+        compile_scene(get_builtin("cornell_box")), RenderConfig.model_validate(config).settings(seed)
     )
-    np.testing.assert_array_equal(read_exr(exr), direct.image)
-    exr.unlink()
-    exr.parent.rmdir()
+    np.testing.assert_array_equal(served, direct.image)

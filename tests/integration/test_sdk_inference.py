@@ -21,8 +21,9 @@ import pytest
 from neuralbake_client import AsyncClient, Client, ConnectionFailed, InvalidRequest, Job, NotFound, Retry
 from PIL import Image
 
-from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, free_port
+from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV
 from tests.integration.test_grpc_server import TINY, Served
+from tests.support.ports import free_port
 from workers.scene.image_io import read_exr
 
 START_TIMEOUT_S = 180

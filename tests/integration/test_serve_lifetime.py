@@ -13,7 +13,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.integration.test_api_server import NBAKE, free_port
+from tests.integration.test_api_server import NBAKE
+from tests.support.ports import free_port
 from tests.support.sockets import listeners, process_tree
 
 PARENT = """

@@ -30,9 +30,10 @@ from typer.testing import CliRunner
 
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_assets import CUBE_OBJ, scene_yaml
-from tests.integration.test_api_server import NBAKE, TOKENS, free_port
+from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_grpc_server import TINY, Served
 from tests.integration.test_sdk_inference import wait_ready
+from tests.support.ports import free_port
 
 served = grpc_server.served  # fixture
 

@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tests.support.s3 import free_port
+from tests.support.ports import free_port, worker_port_options
 
 RAY = str(Path(sys.executable).with_name("ray"))
 START_TIMEOUT_S = 120
@@ -103,18 +103,24 @@ class LocalCluster:
         """What a process joining the cluster (`nbake serve`) adds to its environment."""
         return {**self.env, "RAY_ADDRESS": self.address}
 
-    def start_head(self, cpus: int) -> RayNode:
+    def start_head(self, cpus: int, name: str = "head") -> RayNode:
+        """The head node; a head started again after `stop` (under a new name) takes the address of the one
+        before, as a restarted head pod behind its service name would: the same cluster address, a new
+        cluster."""
+        restarted = bool(self.address)
+
         def head_args() -> list[str]:
-            port = free_port()
-            self.address = f"127.0.0.1:{port}"
+            if not restarted:
+                self.address = f"127.0.0.1:{free_port()}"
             return [
                 "--head",
-                f"--port={port}",
+                f"--port={self.address.rpartition(':')[2]}",
                 "--include-dashboard=false",
+                f"--dashboard-port={free_port()}",  # Ray's minimal dashboard runs anyway: not on 8265
                 f"--ray-client-server-port={free_port()}",
             ]
 
-        return self._start_retrying("head", cpus, head_args, hidden=())
+        return self._start_retrying(name, cpus, head_args, hidden=())
 
     def add_node(self, name: str, cpus: int, hidden: tuple[Path, ...] = ()) -> RayNode:
         return self._start_retrying(name, cpus, lambda: [f"--address={self.address}"], hidden)
@@ -147,6 +153,7 @@ class LocalCluster:
             "--metrics-export-port",
         ):
             command.append(f"{option}={free_port()}")
+        command += worker_port_options()
         if hidden:
             mounts = " && ".join(f"mount -t tmpfs nbake-hidden {shlex.quote(str(p))}" for p in hidden)
             command = ["unshare", "--mount", "--propagation", "private", "--", "sh", "-c",

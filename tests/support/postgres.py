@@ -11,7 +11,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from tests.integration.test_api_server import free_port
+from tests.support.ports import free_port
 
 SERVER_USER = "postgres"
 

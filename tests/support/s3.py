@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -19,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
+
+from tests.support.ports import free_port
 
 MOTO_SERVER = str(Path(sys.executable).with_name("moto_server"))
 START_TIMEOUT_S = 60
@@ -36,12 +37,6 @@ class S3Server:
         name = f"nbake-{uuid.uuid4().hex[:12]}"
         fsspec.filesystem("s3").mkdir(name)
         return name
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 @contextlib.contextmanager
