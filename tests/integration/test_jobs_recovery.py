@@ -22,6 +22,7 @@ from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV, events,
 from tests.support.ports import free_port
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
+from workers.runtime.checkpoints import COMMIT_MARKER
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
 from workers.scene.image_io import read_exr
@@ -35,7 +36,7 @@ class ServeProcess:
     teardown can still remove anything of the group that outlived it."""
 
     def __init__(self, data_dir: Path, database: api.DatabaseChoice):
-        self.port = free_port()
+        self.data_dir, self.port = data_dir, free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         env = {**os.environ, "NBAKE_TOKENS": TOKENS_ENV, "NBAKE_MAX_RUNNING": "1"}
         env.pop("RAY_ADDRESS", None)
@@ -134,9 +135,12 @@ def test_a_killed_server_resumes_its_jobs_from_checkpoints(serve):
         queued = submit(
             client, kind="render", scene="cornell_box", preset="quick", config={"spp": 2}, seed=SEED
         )
+        # killed once a checkpoint is committed (progress alone can come before the first commit, and then
+        # there is nothing to resume from)
+        checkpoints = first.data_dir / "store" / "checkpoints" / running["id"]
         deadline = time.monotonic() + 180
-        while (client.get(f"/v1/jobs/{running['id']}").json()["progress"] or {}).get("step", 0) < 128:
-            assert time.monotonic() < deadline, "the render made no progress"
+        while not any(checkpoints.glob(f"step-*/{COMMIT_MARKER}")):
+            assert time.monotonic() < deadline, "the render committed no checkpoint"
             time.sleep(0.1)
     first.kill()
 
