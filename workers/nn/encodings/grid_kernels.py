@@ -1,14 +1,18 @@
 """Fused CPU kernels of the grid encodings: every level and corner of a batch in one compiled call.
 
 The PyTorch path of `grid.py` runs a dozen tensor operations per level and recomputes rows and weights
-in its backward; on a CPU that is dominated by dispatch and memory traffic. These kernels compute a
-point's cell, corner rows, d-linear weights and the weighted sum in registers, level after level.
+in its backward; on a CPU that is dominated by dispatch and memory traffic. These kernels compute each
+corner's row and d-linear weight from the point's coordinates in registers and gather or scatter at
+once, level after level. The dimension and feature counts arrive as the lengths of tuples (`primes`,
+`features`), so Numba compiles them in as constants; rows index the table as unsigned integers, which
+spares every access Numba's negative-index wraparound.
 
-- Forward and the input gradient run in parallel over chunks of points (each point writes only its own
-  output row).
-- The table gradient runs in parallel over levels: a level's rows are its own block of the table, so no
-  two threads add to the same row, and each level adds its points in order. The result is therefore
-  the same bit for bit whatever the thread count.
+- The forward runs in parallel over (level, chunk of points) tasks; each point writes only its own
+  output entries.
+- The backward runs in parallel over levels: a level's rows are its own block of the table, so no two
+  threads add to the same row, and each level adds its points in order; the input gradient's per-level
+  terms are summed in level order afterwards. The results are therefore the same bit for bit whatever
+  the thread count.
 
 Arithmetic is in the table's dtype (float32 in training, float64 in gradchecks), the same operations in
 the same order as the PyTorch path: position = x * scale + 0.5, weights multiplied dimension 0 first.
@@ -105,10 +109,9 @@ def _corner(point, corner, scale, side, rule, primes, one):
     per-dimension weights 1 - f_i or f_i dimension 0 first, as the PyTorch path does, so the two agree
     bit for bit.
 
-    Everything is recomputed per corner from `point`, a tuple, with no stores in between: the point's
-    dimension count is part of its type, so the loops over dimensions and corners unroll and the
-    compiler shares the per-dimension work between corners in registers. Keeping that work in arrays
-    instead measured 1.7x slower.
+    `point` holds the point's coordinates (a row of the points, or a tuple copy of it). Recomputing
+    the per-dimension work for each corner in registers measured 1.7x faster than computing it once
+    per point into small arrays and reading those back for each corner.
     """
     n_dims = len(primes)
     half = one / (one + one)  # 0.5 in the points' dtype (`one` is 1 in it)
@@ -145,27 +148,33 @@ def _corner_slope(point, corner, dim, scale, primes, one):
 
 
 @njit(cache=True, inline="always")
-def _row(key, level, rule, arithmetic, sizes, lookup_starts, lookup):
-    """Row within the level's block of the vertex with `key`, or -1 when it is not stored.
-
-    `arithmetic` is a constant at each call site: True where the level is known to be LINEAR or HASHED,
-    so the lookups (a binary search is a loop) drop out of the compiled corner loop and it unrolls.
-    """
-    if arithmetic:
-        return key & (sizes[level] - 1) if rule == _HASHED else key
-    start = lookup_starts[level]
+def _row(key, rule, size, lookup_start, lookup):
+    """Row within the level's block (of `size` rows) of the vertex with `key`, or -1 when it is not
+    stored. `lookup[lookup_start:]` is the level's lookup table (SORTED_KEYS and ROW_MAP levels)."""
+    if rule == _HASHED:
+        return key & (size - 1)
+    if rule == _LINEAR:
+        return key
     if rule == _ROW_MAP:
-        return lookup[start + key]
-    low, high = start, start + sizes[level]
+        return lookup[lookup_start + key]
+    low, high = lookup_start, lookup_start + size
     while low < high:
         middle = (low + high) // 2
         if lookup[middle] < key:
             low = middle + 1
         else:
             high = middle
-    if low < start + sizes[level] and lookup[low] == key:
-        return low - start
+    if low < lookup_start + size and lookup[low] == key:
+        return low - lookup_start
     return -1
+
+
+@njit(cache=True, inline="always")
+def _stored(rule, row):
+    """Whether a row from `_row` is stored: always on LINEAR and HASHED levels (no test compiled in)."""
+    if rule == _HASHED:
+        return True
+    return rule == _LINEAR or row >= 0
 
 
 @njit(cache=True, inline="always")
@@ -187,13 +196,12 @@ def _forward_points(
     first,
     last,
     level,
-    arithmetic,
+    rule,
     starts,
     scales,
     sides,
     primes,
     features,
-    rules,
     sizes,
     lookup_starts,
     lookup,
@@ -201,16 +209,17 @@ def _forward_points(
 ):
     """`grid_forward` for points first .. last - 1 at one level."""
     one = table.dtype.type(1.0)
-    rule, start, scale, side = rules[level], starts[level], scales[level], sides[level]
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
     n_features = len(features)
     for n in range(first, last):
-        point = x[n]  # a view: reading it here measured faster than a tuple copy
+        point = x[n]  # a row view: here (no stores between corners) it measured faster than a tuple copy
         for f in range(n_features):
             total = table.dtype.type(0.0)
             for corner in range(1 << len(primes)):
                 key, weight = _corner(point, corner, scale, side, rule, primes, one)
-                row = _row(key, level, rule, arithmetic, sizes, lookup_starts, lookup)
-                if arithmetic or row >= 0:
+                row = _row(key, rule, size, lookup_start, lookup)
+                if _stored(rule, row):
                     total += weight * table[np.uint64(start + row), f]
             out[n, np.uint64(level * n_features + f)] = total
 
@@ -228,20 +237,40 @@ def grid_forward(x, table, starts, scales, sides, primes, features, rules, sizes
     for task in prange(n_levels * n_chunks):
         level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
         first, last = chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)
-        if rules[level] == _LINEAR or rules[level] == _HASHED:
+        # The same call with the rule as a constant where it is arithmetic, so the lookups and the
+        # stored-row test drop out of the compiled loop.
+        rule = rules[level]
+        if rule == _HASHED:
             _forward_points(
                 x,
                 table,
                 first,
                 last,
                 level,
-                True,
+                _HASHED,
                 starts,
                 scales,
                 sides,
                 primes,
                 features,
-                rules,
+                sizes,
+                lookup_starts,
+                lookup,
+                out,
+            )
+        elif rule == _LINEAR:
+            _forward_points(
+                x,
+                table,
+                first,
+                last,
+                level,
+                _LINEAR,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
                 sizes,
                 lookup_starts,
                 lookup,
@@ -254,13 +283,12 @@ def grid_forward(x, table, starts, scales, sides, primes, features, rules, sizes
                 first,
                 last,
                 level,
-                False,
+                rule,
                 starts,
                 scales,
                 sides,
                 primes,
                 features,
-                rules,
                 sizes,
                 lookup_starts,
                 lookup,
@@ -273,13 +301,12 @@ def _table_gradient_points(
     x,
     grad_out,
     level,
-    arithmetic,
+    rule,
     starts,
     scales,
     sides,
     primes,
     features,
-    rules,
     sizes,
     lookup_starts,
     lookup,
@@ -287,14 +314,17 @@ def _table_gradient_points(
 ):
     """The table gradient of one level: every point in order adds to the level's block of `grad_table`."""
     one = grad_table.dtype.type(1.0)
-    rule, start, scale, side = rules[level], starts[level], scales[level], sides[level]
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
     n_features = len(features)
     for n in range(x.shape[0]):
+        # A tuple copy: the scatter's stores may alias `x` as far as the compiler knows, so a row view
+        # would be reread and the corner work redone after each one (measured 1.5x slower).
         point = _as_tuple(x[n], primes)
         for corner in range(1 << len(primes)):
             key, weight = _corner(point, corner, scale, side, rule, primes, one)
-            row = _row(key, level, rule, arithmetic, sizes, lookup_starts, lookup)
-            if arithmetic or row >= 0:
+            row = _row(key, rule, size, lookup_start, lookup)
+            if _stored(rule, row):
                 for f in range(n_features):
                     grad_table[np.uint64(start + row), f] += (
                         weight * grad_out[n, np.uint64(level * n_features + f)]
@@ -307,13 +337,12 @@ def _input_gradient_points(
     table,
     grad_out,
     level,
-    arithmetic,
+    rule,
     starts,
     scales,
     sides,
     primes,
     features,
-    rules,
     sizes,
     lookup_starts,
     lookup,
@@ -322,15 +351,16 @@ def _input_gradient_points(
     """The input gradient's terms of one level: terms[level, n, j] = scale_l * sum over corners c of
     (d w_c / d f_j) <table[row_c], grad_out[n, l]>."""
     one = table.dtype.type(1.0)
-    rule, start, scale, side = rules[level], starts[level], scales[level], sides[level]
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
     n_features, n_dims = len(features), len(primes)
     for n in range(x.shape[0]):
         point = _as_tuple(x[n], primes)
         terms[level, n, :] = 0
         for corner in range(1 << n_dims):
             key, _ = _corner(point, corner, scale, side, rule, primes, one)
-            row = _row(key, level, rule, arithmetic, sizes, lookup_starts, lookup)
-            if arithmetic or row >= 0:
+            row = _row(key, rule, size, lookup_start, lookup)
+            if _stored(rule, row):
                 dot = table.dtype.type(0.0)
                 for f in range(n_features):
                     dot += table[np.uint64(start + row), f] * grad_out[n, np.uint64(level * n_features + f)]
@@ -338,6 +368,60 @@ def _input_gradient_points(
                     terms[level, n, dim] += _corner_slope(point, corner, dim, scale, primes, one) * dot
         for dim in range(n_dims):
             terms[level, n, dim] *= scale
+
+
+@njit(cache=True, inline="always")
+def _backward_level(
+    x,
+    table,
+    grad_out,
+    level,
+    rule,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    sizes,
+    lookup_starts,
+    lookup,
+    grad_table,
+    terms,
+):
+    """The table gradient and the input gradient's terms of one level, each when its array is not empty."""
+    if grad_table.shape[0] > 0:
+        _table_gradient_points(
+            x,
+            grad_out,
+            level,
+            rule,
+            starts,
+            scales,
+            sides,
+            primes,
+            features,
+            sizes,
+            lookup_starts,
+            lookup,
+            grad_table,
+        )
+    if terms.shape[1] > 0:
+        _input_gradient_points(
+            x,
+            table,
+            grad_out,
+            level,
+            rule,
+            starts,
+            scales,
+            sides,
+            primes,
+            features,
+            sizes,
+            lookup_starts,
+            lookup,
+            terms,
+        )
 
 
 @njit(parallel=True, cache=True)
@@ -368,84 +452,67 @@ def grid_backward(
     thread count.
     """
     n_points, n_dims, n_levels = x.shape[0], len(primes), starts.shape[0]
-    want_table, want_input = grad_table.shape[0] > 0, grad_x.shape[0] > 0
-    terms = np.empty((n_levels, n_points if want_input else 0, n_dims), table.dtype)
+    terms = np.empty((n_levels, n_points if grad_x.shape[0] > 0 else 0, n_dims), table.dtype)
     for slot in prange(n_levels):
         level = _level_in_slot(slot, n_levels)
-        arithmetic = rules[level] == _LINEAR or rules[level] == _HASHED
-        if want_table:
+        if grad_table.shape[0] > 0:
             grad_table[starts[level] : starts[level] + sizes[level]] = 0
-            if arithmetic:
-                _table_gradient_points(
-                    x,
-                    grad_out,
-                    level,
-                    True,
-                    starts,
-                    scales,
-                    sides,
-                    primes,
-                    features,
-                    rules,
-                    sizes,
-                    lookup_starts,
-                    lookup,
-                    grad_table,
-                )
-            else:
-                _table_gradient_points(
-                    x,
-                    grad_out,
-                    level,
-                    False,
-                    starts,
-                    scales,
-                    sides,
-                    primes,
-                    features,
-                    rules,
-                    sizes,
-                    lookup_starts,
-                    lookup,
-                    grad_table,
-                )
-        if want_input:
-            if arithmetic:
-                _input_gradient_points(
-                    x,
-                    table,
-                    grad_out,
-                    level,
-                    True,
-                    starts,
-                    scales,
-                    sides,
-                    primes,
-                    features,
-                    rules,
-                    sizes,
-                    lookup_starts,
-                    lookup,
-                    terms,
-                )
-            else:
-                _input_gradient_points(
-                    x,
-                    table,
-                    grad_out,
-                    level,
-                    False,
-                    starts,
-                    scales,
-                    sides,
-                    primes,
-                    features,
-                    rules,
-                    sizes,
-                    lookup_starts,
-                    lookup,
-                    terms,
-                )
+        # As in `grid_forward`: the rule is a constant where it is arithmetic.
+        rule = rules[level]
+        if rule == _HASHED:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                _HASHED,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
+        elif rule == _LINEAR:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                _LINEAR,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
+        else:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                rule,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
     n_chunks = (terms.shape[1] + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
     for chunk in prange(n_chunks):
         for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
