@@ -12,6 +12,7 @@ import time
 from contextlib import nullcontext
 from functools import partial
 
+import numba
 import torch
 
 from tests.bench.common import BenchSection, median_seconds
@@ -38,9 +39,9 @@ def _forward_backward(encode, grid: HashGrid, x: torch.Tensor):
     return run
 
 
-def _timed(fn, kernels: bool) -> float:
+def _timed(fn, kernels: bool, clock=time.perf_counter) -> float:
     with nullcontext() if kernels else pytorch_path_on_cpu():
-        return median_seconds(fn, repeats=3)
+        return median_seconds(fn, repeats=3, clock=clock)
 
 
 def bench_hashgrid() -> BenchSection:
@@ -59,12 +60,16 @@ def bench_hashgrid() -> BenchSection:
             with torch.no_grad():
                 figures[path, "forward"] = _timed(partial(encode, x), kernels)
             figures[path, "forward+backward"] = _timed(_forward_backward(encode, grid, x), kernels)
+        with torch.no_grad():
+            figures["cpu", "forward"] = _timed(partial(grid, x), True, time.process_time)
+        figures["cpu", "forward+backward"] = _timed(_forward_backward(grid, grid, x), True, time.process_time)
         for mode in ("forward", "forward+backward"):
             kernels, pytorch, ref = (figures[path, mode] for path in ("kernels", "pytorch", "reference"))
             section.add(
                 points=n,
                 mode=mode,
                 kernels_pts_s=n / kernels,
+                kernels_pts_cpu_s=n / figures["cpu", mode],
                 pytorch_pts_s=n / pytorch,
                 reference_pts_s=n / ref,
                 kernels_over_pytorch=pytorch / kernels,
@@ -72,7 +77,15 @@ def bench_hashgrid() -> BenchSection:
     section.notes.append("kernels = workers/nn/encodings/grid_kernels.py (Numba, the CPU path)")
     section.notes.append("pytorch = the same interpolation as per-level tensor operations (the CUDA path)")
     section.notes.append("reference = loops over corners, plain indexing, autograd backward (same formula)")
-    section.notes.append(f"torch threads: {torch.get_num_threads()}; wall-clock medians of 3")
+    section.notes.append(
+        "kernels_pts_cpu_s = points per CPU-second of the process (all threads summed): on a machine"
+        " shared with other jobs it moves far less than wall time; with T threads and no other load,"
+        " wall-clock points/s is at most T times it"
+    )
+    section.notes.append(
+        f"torch threads: {torch.get_num_threads()}; numba threads: {numba.get_num_threads()}"
+    )
+    section.notes.append("medians of 3 (wall clock unless stated)")
     return section
 
 

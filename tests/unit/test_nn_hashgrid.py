@@ -203,3 +203,12 @@ def test_cpu_kernels_give_the_same_bits_whatever_the_thread_count():
         numba.set_num_threads(previous)
     for a, b in zip(*results, strict=True):
         assert torch.equal(a, b)
+
+
+def test_cpu_kernels_reject_level_blocks_that_do_not_tile_the_table():
+    """The table-gradient kernel zeroes only the level blocks, so rows outside them would hold garbage."""
+    grid = small_grid(3, dtype=torch.float32)
+    points = torch.rand(10, 3)
+    short = [*grid.level_blocks[:-1], (grid.level_blocks[-1][0], grid.level_blocks[-1][1] - 1)]
+    with pytest.raises(ValueError, match="cover"):
+        interpolate_grid(points, grid.table, grid.geometry, short, grid)

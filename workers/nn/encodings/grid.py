@@ -151,25 +151,49 @@ def _uses_kernels(x: Tensor, table: Tensor) -> bool:
     )
 
 
+def _check_tiling(blocks: list[tuple[int, int]], n_rows: int) -> None:
+    """The kernels' table gradient zeroes each level's block rather than the whole gradient up front, so
+    the blocks must cover the table's rows exactly, in level order."""
+    end = 0
+    for start, size in blocks:
+        if start != end:
+            raise ValueError(
+                f"level blocks must tile the table in order: a block starts at {start}, not {end}"
+            )
+        end += size
+    if end != n_rows:
+        raise ValueError(f"level blocks cover {end} rows of a table of {n_rows}")
+
+
 @dataclass(frozen=True)
 class _KernelArguments:
-    """The per-level arrays every CPU kernel takes after its point arrays, in the kernels' order."""
+    """The per-level arguments every CPU kernel takes after its point and table arrays, in the kernels'
+    order. The dimension and feature counts travel as the lengths of the tuples `primes` and `features`,
+    which Numba compiles in as constants (so per-point loops unroll)."""
 
     starts: np.ndarray
     scales: np.ndarray
     sides: np.ndarray
+    primes: tuple[int, ...]
+    features: tuple[int, ...]
     indexing: KernelIndexing
 
     @staticmethod
     def of(
-        geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex, dtype
+        geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex, table: Tensor
     ) -> _KernelArguments:
+        _check_tiling(blocks, table.shape[0])
         levels = range(geometry.n_levels)
+        indexing = index.kernel_indexing()
         return _KernelArguments(
             starts=np.asarray([start for start, _ in blocks], dtype=np.int64),
-            scales=np.asarray([geometry.scale(level) for level in levels], dtype=dtype),
+            scales=np.asarray(
+                [geometry.scale(level) for level in levels], dtype=table.detach().numpy().dtype
+            ),
             sides=np.asarray([geometry.vertices_per_side(level) for level in levels], dtype=np.int64),
-            indexing=index.kernel_indexing(),
+            primes=tuple(int(prime) for prime in indexing.primes[: geometry.n_dims]),
+            features=tuple(range(table.shape[1])),
+            indexing=indexing,
         )
 
     def __iter__(self):
@@ -178,7 +202,8 @@ class _KernelArguments:
             self.starts,
             self.scales,
             self.sides,
-            i.primes,
+            self.primes,
+            self.features,
             i.rules,
             i.sizes,
             i.lookup_starts,
@@ -209,9 +234,8 @@ class _GridInterpolation(torch.autograd.Function):
         ctx.geometry, ctx.blocks, ctx.index = geometry, blocks, index
         if _uses_kernels(x, table):
             out = table.new_empty(n_points, geometry.n_levels * n_features)  # the kernel writes every entry
-            points = x.detach().numpy()
-            arguments = _KernelArguments.of(geometry, blocks, index, points.dtype)
-            grid_kernels.grid_forward(points, table.detach().numpy(), *arguments, out.numpy())
+            arguments = _KernelArguments.of(geometry, blocks, index, table)
+            grid_kernels.grid_forward(x.detach().numpy(), table.detach().numpy(), *arguments, out.numpy())
             return out
         out = table.new_empty(n_points, geometry.n_levels, n_features)
         for level, (start, size) in enumerate(blocks):
@@ -225,20 +249,29 @@ class _GridInterpolation(torch.autograd.Function):
     @once_differentiable
     def backward(ctx, grad_out: Tensor) -> tuple[Tensor | None, Tensor | None, None, None, None]:
         x, table = ctx.saved_tensors
+        if _uses_kernels(x, table):
+            # The kernel writes every entry of the gradients it is given; an empty one is not wanted.
+            grad_x = x.new_empty(x.shape if ctx.needs_input_grad[0] else (0, x.shape[1]))
+            grad_table = table.new_empty(table.shape if ctx.needs_input_grad[1] else (0, table.shape[1]))
+            arguments = _KernelArguments.of(ctx.geometry, ctx.blocks, ctx.index, table)
+            grid_kernels.grid_backward(
+                x.detach().numpy(),
+                table.detach().numpy(),
+                grad_out.to(table.dtype).contiguous().numpy(),
+                *arguments,
+                grad_table.numpy(),
+                grad_x.numpy(),
+            )
+            return (
+                grad_x if ctx.needs_input_grad[0] else None,
+                grad_table if ctx.needs_input_grad[1] else None,
+                None,
+                None,
+                None,
+            )
         grad_x = torch.zeros_like(x) if ctx.needs_input_grad[0] else None
         grad_table = torch.zeros_like(table) if ctx.needs_input_grad[1] else None
-        if _uses_kernels(x, table):
-            points = x.detach().numpy()
-            arguments = _KernelArguments.of(ctx.geometry, ctx.blocks, ctx.index, points.dtype)
-            grad = grad_out.to(table.dtype).contiguous().numpy()
-            if grad_table is not None:
-                grid_kernels.grid_backward_table(points, grad, *arguments, grad_table.numpy())
-            if grad_x is not None:
-                grid_kernels.grid_backward_input(
-                    points, table.detach().numpy(), grad, *arguments, grad_x.numpy()
-                )
-        else:
-            _backward_torch(ctx, x, table, grad_out, grad_x, grad_table)
+        _backward_torch(ctx, x, table, grad_out, grad_x, grad_table)
         return grad_x, grad_table, None, None, None
 
 

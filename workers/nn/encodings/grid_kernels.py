@@ -1,14 +1,18 @@
 """Fused CPU kernels of the grid encodings: every level and corner of a batch in one compiled call.
 
 The PyTorch path of `grid.py` runs a dozen tensor operations per level and recomputes rows and weights
-in its backward; on a CPU that is dominated by dispatch and memory traffic. These kernels compute a
-point's cell, corner rows, d-linear weights and the weighted sum in registers, level after level.
+in its backward; on a CPU that is dominated by dispatch and memory traffic. These kernels compute each
+corner's row and d-linear weight from the point's coordinates in registers and gather or scatter at
+once, level after level. The dimension and feature counts arrive as the lengths of tuples (`primes`,
+`features`), so Numba compiles them in as constants; rows index the table as unsigned integers, which
+spares every access Numba's negative-index wraparound.
 
-- Forward and the input gradient run in parallel over chunks of points (each point writes only its own
-  output row).
-- The table gradient runs in parallel over levels: a level's rows are its own block of the table, so no
-  two threads add to the same row, and each level adds its points in order. The result is therefore
-  the same bit for bit whatever the thread count.
+- The forward runs in parallel over (level, chunk of points) tasks; each point writes only its own
+  output entries.
+- The backward runs in parallel over levels: a level's rows are its own block of the table, so no two
+  threads add to the same row, and each level adds its points in order; the input gradient's per-level
+  terms are summed in level order afterwards. The results are therefore the same bit for bit whatever
+  the thread count.
 
 Arithmetic is in the table's dtype (float32 in training, float64 in gradchecks), the same operations in
 the same order as the PyTorch path: position = x * scale + 0.5, weights multiplied dimension 0 first.
@@ -22,6 +26,8 @@ from enum import IntEnum
 import numba
 import numpy as np
 from numba import prange
+from numba.extending import overload
+from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from workers.render.jit import njit
 
@@ -30,7 +36,6 @@ from workers.render.jit import njit
 numba.config.THREADING_LAYER = "threadsafe"
 
 POINTS_PER_CHUNK = 1024
-POINTS_PER_BATCH = 32  # points whose corner rows are computed before the table is read
 
 
 class RowRule(IntEnum):
@@ -77,121 +82,99 @@ class KernelIndexing:
         )
 
 
-@njit(cache=True, inline="always")
-def _level_pairs(x, n, scale, side, rule, primes, lower, upper, w_lower, w_upper):
-    """Per dimension i, the key terms of the cell's lower and upper vertex along i and their linear
-    weights 1 - f_i and f_i, for point n at a level of lattice scale `scale`.
+_LINEAR = int(RowRule.LINEAR)
+_HASHED = int(RowRule.HASHED)
+_ROW_MAP = int(RowRule.ROW_MAP)
 
-    A corner's key combines one term per dimension: XOR of c_i * prime_i (hashed levels) or the sum of
-    c_i * side^i (every other rule: the vertex's linear index, dimension 0 fastest).
+
+def _as_tuple(array, like):
+    """The first len(like) entries of `array` as a tuple (compiled code only)."""
+    raise NotImplementedError
+
+
+@overload(_as_tuple, inline="always")
+def _as_tuple_of_length(array, like):
+    count = len(like)  # a compile-time constant: a tuple's length is part of its type
+    return lambda array, like: to_fixed_tuple(array, count)
+
+
+@njit(cache=True, inline="always")
+def _corner(point, corner, scale, side, rule, primes, one):
+    """Key and d-linear weight of corner number `corner` of the cell holding `point` at a level of
+    lattice scale `scale`.
+
+    Bit d-1-i of the corner number is its offset along dimension i (`outer_combine` order). The key
+    combines one term per dimension: XOR of c_i * prime_i (hashed levels) or the sum of c_i * side^i
+    (every other rule: the vertex's linear index, dimension 0 fastest). The weight multiplies the
+    per-dimension weights 1 - f_i or f_i dimension 0 first, as the PyTorch path does, so the two agree
+    bit for bit.
+
+    `point` holds the point's coordinates (a row of the points, or a tuple copy of it). Recomputing
+    the per-dimension work for each corner in registers measured 1.7x faster than computing it once
+    per point into small arrays and reading those back for each corner.
     """
-    one = w_lower.dtype.type(1.0)
-    half = x.dtype.type(0.5)
+    n_dims = len(primes)
+    half = one / (one + one)  # 0.5 in the points' dtype (`one` is 1 in it)
+    key = np.int64(0)
+    weight = one
     stride = np.int64(1)
-    for i in range(x.shape[1]):
-        position = x[n, i] * scale + half
+    for i in range(n_dims):
+        position = point[i] * scale + half
         floor = np.floor(position)
-        cell = np.int64(floor)
         fraction = position - floor
-        w_lower[i] = one - fraction
-        w_upper[i] = fraction
-        factor = primes[i] if rule == 1 else stride
-        lower[i] = cell * factor
-        upper[i] = (cell + 1) * factor
+        offset = (corner >> (n_dims - 1 - i)) & 1
+        term = (np.int64(floor) + offset) * (primes[i] if rule == _HASHED else stride)
+        key = key ^ term if rule == _HASHED else key + term
+        weight = weight * (fraction if offset else one - fraction)
         stride *= side
+    return key, weight
 
 
 @njit(cache=True, inline="always")
-def _corners(rule, lower, upper, w_lower, w_upper, keys, weights):
-    """Keys and weights of all 2^d corners, built one dimension at a time as `outer_combine` does:
-    corner 2j + b extends corner j of the dimensions so far by the lower (b = 0) or upper (b = 1) vertex,
-    so bit d-1-i of a corner's number is its offset along dimension i, and a weight is the product of
-    the per-dimension weights taken dimension 0 first."""
-    keys[0] = 0
-    weights[0] = w_lower.dtype.type(1.0)
-    count = 1
-    for i in range(lower.shape[0]):
-        for j in range(count - 1, -1, -1):
-            key, weight = keys[j], weights[j]
-            if rule == 1:
-                keys[2 * j], keys[2 * j + 1] = key ^ lower[i], key ^ upper[i]
-            else:
-                keys[2 * j], keys[2 * j + 1] = key + lower[i], key + upper[i]
-            weights[2 * j], weights[2 * j + 1] = weight * w_lower[i], weight * w_upper[i]
-        count *= 2
-
-
-@njit(cache=True, inline="always")
-def _corner_slope(corner, dim, w_lower, w_upper):
+def _corner_slope(point, corner, dim, scale, primes, one):
     """d weight / d f_dim of `corner`: the other dimensions' weights times -1 (lower) or +1 (upper)."""
-    n_dims = w_lower.shape[0]
-    one = w_lower.dtype.type(1.0)
+    n_dims = len(primes)
+    half = one / (one + one)
     slope = one
     for i in range(n_dims):
-        upper = (corner >> (n_dims - 1 - i)) & 1
+        offset = (corner >> (n_dims - 1 - i)) & 1
         if i == dim:
-            slope = slope * (one if upper else -one)
+            slope = slope * (one if offset else -one)
         else:
-            slope = slope * (w_upper[i] if upper else w_lower[i])
+            position = point[i] * scale + half
+            fraction = position - np.floor(position)
+            slope = slope * (fraction if offset else one - fraction)
     return slope
 
 
 @njit(cache=True, inline="always")
-def _row(key, level, rule, sizes, lookup_starts, lookup):
-    """Row within the level's block of the vertex with `key`, or -1 when it is not stored."""
-    if rule == 0:
+def _row(key, rule, size, lookup_start, lookup):
+    """Row within the level's block (of `size` rows) of the vertex with `key`, or -1 when it is not
+    stored. `lookup[lookup_start:]` is the level's lookup table (SORTED_KEYS and ROW_MAP levels)."""
+    if rule == _HASHED:
+        return key & (size - 1)
+    if rule == _LINEAR:
         return key
-    if rule == 1:
-        return key & (sizes[level] - 1)
-    start = lookup_starts[level]
-    if rule == 3:
-        return lookup[start + key]
-    low, high = start, start + sizes[level]
+    if rule == _ROW_MAP:
+        return lookup[lookup_start + key]
+    low, high = lookup_start, lookup_start + size
     while low < high:
         middle = (low + high) // 2
         if lookup[middle] < key:
             low = middle + 1
         else:
             high = middle
-    if low < start + sizes[level] and lookup[low] == key:
-        return low - start
+    if low < lookup_start + size and lookup[low] == key:
+        return low - lookup_start
     return -1
 
 
 @njit(cache=True, inline="always")
-def _batch_corners(
-    x, first, count, level, scales, sides, primes, rules, sizes, lookup_starts, lookup, scratch
-):
-    """Rows and weights of the corners of points first .. first + count - 1 at `level`, into
-    `scratch.rows` and `scratch.weights` [POINTS_PER_BATCH, 2^d] (rows -1 where a vertex is not stored).
-
-    Computing a batch's rows before touching the table turns the gathers and scatters that follow into
-    a tight loop of independent loads, which the CPU overlaps: at 2^19-row levels (4 MB each, beyond L2)
-    those random accesses, not the hashing, are most of the time.
-    """
-    lower, upper, w_lower, w_upper, keys, weights, rows, batch_weights = scratch
-    rule = rules[level]
-    for b in range(count):
-        _level_pairs(x, first + b, scales[level], sides[level], rule, primes, lower, upper, w_lower, w_upper)
-        _corners(rule, lower, upper, w_lower, w_upper, keys, weights)
-        for corner in range(keys.shape[0]):
-            rows[b, corner] = _row(keys[corner], level, rule, sizes, lookup_starts, lookup)
-            batch_weights[b, corner] = weights[corner]
-
-
-@njit(cache=True, inline="always")
-def _scratch(n_dims, dtype):
-    """Per-task work arrays of `_batch_corners`."""
-    return (
-        np.empty(n_dims, np.int64),
-        np.empty(n_dims, np.int64),
-        np.empty(n_dims, dtype),
-        np.empty(n_dims, dtype),
-        np.empty(1 << n_dims, np.int64),
-        np.empty(1 << n_dims, dtype),
-        np.empty((POINTS_PER_BATCH, 1 << n_dims), np.int64),
-        np.empty((POINTS_PER_BATCH, 1 << n_dims), dtype),
-    )
+def _stored(rule, row):
+    """Whether a row from `_row` is stored: always on LINEAR and HASHED levels (no test compiled in)."""
+    if rule == _HASHED:
+        return True
+    return rule == _LINEAR or row >= 0
 
 
 @njit(cache=True, inline="always")
@@ -206,104 +189,335 @@ def _level_in_slot(slot, n_levels):
     return 2 * slot if slot < half else 2 * (slot - half) + 1
 
 
+@njit(cache=True, inline="always")
+def _forward_points(
+    x,
+    table,
+    first,
+    last,
+    level,
+    rule,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    sizes,
+    lookup_starts,
+    lookup,
+    out,
+):
+    """`grid_forward` for points first .. last - 1 at one level."""
+    one = table.dtype.type(1.0)
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
+    n_features = len(features)
+    for n in range(first, last):
+        point = x[n]  # a row view: here (no stores between corners) it measured faster than a tuple copy
+        for f in range(n_features):
+            total = table.dtype.type(0.0)
+            for corner in range(1 << len(primes)):
+                key, weight = _corner(point, corner, scale, side, rule, primes, one)
+                row = _row(key, rule, size, lookup_start, lookup)
+                if _stored(rule, row):
+                    total += weight * table[np.uint64(start + row), f]
+            out[n, np.uint64(level * n_features + f)] = total
+
+
 @njit(parallel=True, cache=True)
-def grid_forward(x, table, starts, scales, sides, primes, rules, sizes, lookup_starts, lookup, out):
+def grid_forward(x, table, starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup, out):
     """out[n, l * F + f] = sum over corners c of w_c(x_n) * table[start_l + row_c, f].
 
     Tasks are (level, chunk of points), level-major, so a thread works through one level's block of the
     table at a time (a 2^19-row level is 4 MB: it stays in cache, all 16 levels would not); each task
     writes only its own columns of its own rows of `out`.
     """
-    n_points, n_dims = x.shape
-    n_levels, n_features = starts.shape[0], table.shape[1]
+    n_points, n_levels = x.shape[0], starts.shape[0]
     n_chunks = (n_points + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
     for task in prange(n_levels * n_chunks):
         level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
-        start = starts[level]
-        scratch = _scratch(n_dims, table.dtype)
-        rows, weights = scratch[6], scratch[7]
-        chunk_end = min(n_points, (chunk + 1) * POINTS_PER_CHUNK)
-        for first in range(chunk * POINTS_PER_CHUNK, chunk_end, POINTS_PER_BATCH):
-            count = min(POINTS_PER_BATCH, chunk_end - first)
-            _batch_corners(
-                x, first, count, level, scales, sides, primes, rules, sizes, lookup_starts, lookup, scratch
+        first, last = chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)
+        # The same call with the rule as a constant where it is arithmetic, so the lookups and the
+        # stored-row test drop out of the compiled loop.
+        rule = rules[level]
+        if rule == _HASHED:
+            _forward_points(
+                x,
+                table,
+                first,
+                last,
+                level,
+                _HASHED,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                out,
             )
-            for b in range(count):
+        elif rule == _LINEAR:
+            _forward_points(
+                x,
+                table,
+                first,
+                last,
+                level,
+                _LINEAR,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                out,
+            )
+        else:
+            _forward_points(
+                x,
+                table,
+                first,
+                last,
+                level,
+                rule,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                out,
+            )
+
+
+@njit(cache=True, inline="always")
+def _table_gradient_points(
+    x,
+    grad_out,
+    level,
+    rule,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    sizes,
+    lookup_starts,
+    lookup,
+    grad_table,
+):
+    """The table gradient of one level: every point in order adds to the level's block of `grad_table`."""
+    one = grad_table.dtype.type(1.0)
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
+    n_features = len(features)
+    for n in range(x.shape[0]):
+        # A tuple copy: the scatter's stores may alias `x` as far as the compiler knows, so a row view
+        # would be reread and the corner work redone after each one (measured 1.5x slower).
+        point = _as_tuple(x[n], primes)
+        for corner in range(1 << len(primes)):
+            key, weight = _corner(point, corner, scale, side, rule, primes, one)
+            row = _row(key, rule, size, lookup_start, lookup)
+            if _stored(rule, row):
                 for f in range(n_features):
-                    total = table.dtype.type(0.0)
-                    for corner in range(1 << n_dims):
-                        if rows[b, corner] >= 0:
-                            total += weights[b, corner] * table[start + rows[b, corner], f]
-                    out[first + b, level * n_features + f] = total
+                    grad_table[np.uint64(start + row), f] += (
+                        weight * grad_out[n, np.uint64(level * n_features + f)]
+                    )
 
 
-@njit(parallel=True, cache=True)
-def grid_backward_table(
-    x, grad_out, starts, scales, sides, primes, rules, sizes, lookup_starts, lookup, grad_table
+@njit(cache=True, inline="always")
+def _input_gradient_points(
+    x,
+    table,
+    grad_out,
+    level,
+    rule,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    sizes,
+    lookup_starts,
+    lookup,
+    terms,
 ):
-    """grad_table[start_l + row_c] += w_c(x_n) * grad_out[n, l], one level per thread, points in order.
-
-    Point by point, not in batches as the forward: batching the rows first measured slower here (each
-    addition reads and writes its row, so the CPU cannot run ahead the way it does over gathers).
-    """
-    n_points, n_dims = x.shape
-    n_features = grad_table.shape[1]
-    for slot in prange(starts.shape[0]):
-        level = _level_in_slot(slot, starts.shape[0])
-        lower, upper = np.empty(n_dims, np.int64), np.empty(n_dims, np.int64)
-        w_lower, w_upper = np.empty(n_dims, grad_table.dtype), np.empty(n_dims, grad_table.dtype)
-        keys = np.empty(1 << n_dims, np.int64)
-        weights = np.empty(1 << n_dims, grad_table.dtype)
-        rule, start = rules[level], starts[level]
-        for n in range(n_points):
-            _level_pairs(x, n, scales[level], sides[level], rule, primes, lower, upper, w_lower, w_upper)
-            _corners(rule, lower, upper, w_lower, w_upper, keys, weights)
-            for corner in range(1 << n_dims):
-                row = _row(keys[corner], level, rule, sizes, lookup_starts, lookup)
-                if row >= 0:
-                    for f in range(n_features):
-                        grad_table[start + row, f] += weights[corner] * grad_out[n, level * n_features + f]
-
-
-@njit(parallel=True, cache=True)
-def grid_backward_input(
-    x, table, grad_out, starts, scales, sides, primes, rules, sizes, lookup_starts, lookup, grad_x
-):
-    """grad_x[n, j] = sum_l scale_l * sum_c (d w_c / d f_j) <table[row_c], grad_out[n, l]>.
-
-    Level-major like `grid_forward` (one level's block of the table in cache at a time): each
-    (level, chunk) task writes its levels' terms to `terms` [L, N, d], then a pass over points adds
-    them to grad_x in level order, so the sums do not depend on the thread count.
-    """
-    n_points, n_dims = x.shape
-    n_levels, n_features = starts.shape[0], table.shape[1]
-    n_chunks = (n_points + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
-    terms = np.empty((n_levels, n_points, n_dims), table.dtype)
-    for task in prange(n_levels * n_chunks):
-        level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
-        rule, start = rules[level], starts[level]
-        lower, upper = np.empty(n_dims, np.int64), np.empty(n_dims, np.int64)
-        w_lower, w_upper = np.empty(n_dims, table.dtype), np.empty(n_dims, table.dtype)
-        keys = np.empty(1 << n_dims, np.int64)
-        weights = np.empty(1 << n_dims, table.dtype)
-        along = np.empty(n_dims, table.dtype)
-        for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
-            _level_pairs(x, n, scales[level], sides[level], rule, primes, lower, upper, w_lower, w_upper)
-            _corners(rule, lower, upper, w_lower, w_upper, keys, weights)
-            along[:] = 0
-            for corner in range(1 << n_dims):
-                row = _row(keys[corner], level, rule, sizes, lookup_starts, lookup)
-                if row < 0:
-                    continue
+    """The input gradient's terms of one level: terms[level, n, j] = scale_l * sum over corners c of
+    (d w_c / d f_j) <table[row_c], grad_out[n, l]>."""
+    one = table.dtype.type(1.0)
+    start, scale, side = starts[level], scales[level], sides[level]
+    size, lookup_start = sizes[level], lookup_starts[level]
+    n_features, n_dims = len(features), len(primes)
+    for n in range(x.shape[0]):
+        point = _as_tuple(x[n], primes)
+        terms[level, n, :] = 0
+        for corner in range(1 << n_dims):
+            key, _ = _corner(point, corner, scale, side, rule, primes, one)
+            row = _row(key, rule, size, lookup_start, lookup)
+            if _stored(rule, row):
                 dot = table.dtype.type(0.0)
                 for f in range(n_features):
-                    dot += table[start + row, f] * grad_out[n, level * n_features + f]
+                    dot += table[np.uint64(start + row), f] * grad_out[n, np.uint64(level * n_features + f)]
                 for dim in range(n_dims):
-                    along[dim] += _corner_slope(corner, dim, w_lower, w_upper) * dot
-            for dim in range(n_dims):
-                terms[level, n, dim] = along[dim] * scales[level]
+                    terms[level, n, dim] += _corner_slope(point, corner, dim, scale, primes, one) * dot
+        for dim in range(n_dims):
+            terms[level, n, dim] *= scale
+
+
+@njit(cache=True, inline="always")
+def _backward_level(
+    x,
+    table,
+    grad_out,
+    level,
+    rule,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    sizes,
+    lookup_starts,
+    lookup,
+    grad_table,
+    terms,
+):
+    """The table gradient and the input gradient's terms of one level, each when its array is not empty."""
+    if grad_table.shape[0] > 0:
+        _table_gradient_points(
+            x,
+            grad_out,
+            level,
+            rule,
+            starts,
+            scales,
+            sides,
+            primes,
+            features,
+            sizes,
+            lookup_starts,
+            lookup,
+            grad_table,
+        )
+    if terms.shape[1] > 0:
+        _input_gradient_points(
+            x,
+            table,
+            grad_out,
+            level,
+            rule,
+            starts,
+            scales,
+            sides,
+            primes,
+            features,
+            sizes,
+            lookup_starts,
+            lookup,
+            terms,
+        )
+
+
+@njit(parallel=True, cache=True)
+def grid_backward(
+    x,
+    table,
+    grad_out,
+    starts,
+    scales,
+    sides,
+    primes,
+    features,
+    rules,
+    sizes,
+    lookup_starts,
+    lookup,
+    grad_table,
+    grad_x,
+):
+    """grad_table[start_l + row_c] = sum over points n of w_c(x_n) * grad_out[n, l], and
+    grad_x[n, j] = sum_l scale_l * sum_c (d w_c / d f_j) <table[row_c], grad_out[n, l]>. An empty
+    `grad_table` or `grad_x` (no rows) means that gradient is not wanted.
+
+    `grad_table` need not be zeroed: each level zeroes its own block first, so the blocks must tile the
+    table. Tasks are whole levels: a level's rows are its own block of the table, so no two threads add
+    to the same row, and each level adds its points in order. The input gradient's per-level terms are
+    summed in level order afterwards. Both results are therefore the same bit for bit whatever the
+    thread count.
+    """
+    n_points, n_dims, n_levels = x.shape[0], len(primes), starts.shape[0]
+    terms = np.empty((n_levels, n_points if grad_x.shape[0] > 0 else 0, n_dims), table.dtype)
+    for slot in prange(n_levels):
+        level = _level_in_slot(slot, n_levels)
+        if grad_table.shape[0] > 0:
+            grad_table[starts[level] : starts[level] + sizes[level]] = 0
+        # As in `grid_forward`: the rule is a constant where it is arithmetic.
+        rule = rules[level]
+        if rule == _HASHED:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                _HASHED,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
+        elif rule == _LINEAR:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                _LINEAR,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
+        else:
+            _backward_level(
+                x,
+                table,
+                grad_out,
+                level,
+                rule,
+                starts,
+                scales,
+                sides,
+                primes,
+                features,
+                sizes,
+                lookup_starts,
+                lookup,
+                grad_table,
+                terms,
+            )
+    n_chunks = (terms.shape[1] + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
     for chunk in prange(n_chunks):
         for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
-            for level in range(n_levels):
-                for dim in range(n_dims):
-                    grad_x[n, dim] += terms[level, n, dim]
+            for dim in range(n_dims):
+                total = table.dtype.type(0.0)
+                for level in range(n_levels):
+                    total += terms[level, n, dim]
+                grad_x[n, dim] = total
