@@ -22,6 +22,9 @@ from workers.runtime.view_render import CameraParams
 from workers.scene.image_io import read_exr_channels
 
 MAIN_LAYER = "image"
+# Working memory: a pixel's values in every layer (up to 16 float32 channels) and their encoded copy; a
+# whole-layer answer or the stored view is a copy of stored images, admitted at one megapixel of 4 layers.
+PIXEL_BYTES, STORED_VIEW_BYTES = 128, 16 << 20
 
 
 class LayerQuery(BaseModel):
@@ -88,8 +91,13 @@ class RenderModel:
 
 class RenderInference:
     operations: ClassVar[Mapping[str, Operation]] = {
-        QUERY: Operation(params=LayerQuery, inputs={"pixels": ArraySpec("int64", (None, 2), required=False)}),
-        RENDER: Operation(params=LayerRender),
+        QUERY: Operation(
+            params=LayerQuery,
+            inputs={"pixels": ArraySpec("int64", (None, 2), required=False)},
+            row_bytes=PIXEL_BYTES,
+            call_bytes=STORED_VIEW_BYTES,
+        ),
+        RENDER: Operation(params=LayerRender, call_bytes=STORED_VIEW_BYTES),
     }
 
     def load(self, folder: Path, device: str) -> RenderModel:
