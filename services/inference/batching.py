@@ -47,7 +47,7 @@ class _Request:
         return self.operation, self.params.model_dump_json(), tuple(sorted(self.arrays))
 
 
-def _in_chunks(
+def in_chunks(
     run: Callable[[dict[str, np.ndarray]], Answer], arrays: dict[str, np.ndarray], rows: int, chunk_rows: int
 ) -> Answer:
     """`run` on at most `chunk_rows` rows at a time, outputs concatenated (meta: the first chunk's, as every
@@ -153,7 +153,7 @@ class Batcher:
                     if len(batch) == 1
                     else {name: np.concatenate([r.arrays[name] for r in batch]) for name in first.arrays}
                 )
-                answers = _split(_in_chunks(run, merged, sum(rows), self.chunk_rows), rows)
+                answers = _split(in_chunks(run, merged, sum(rows), self.chunk_rows), rows)
         except Exception as error:  # every request of the batch learns why
             for request in batch:
                 request.future.set_exception(error)

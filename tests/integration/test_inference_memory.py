@@ -143,6 +143,10 @@ def test_a_query_larger_than_the_working_budget_is_refused_naming_the_field(serv
     assert f"{WORKING_BYTES:,}" in problem["detail"] and "NBAKE_INFERENCE_WORKING_BYTES" in problem["detail"]
     assert unread.status_code == 413 and unread.json()["field"] == "body", unread.text
     assert f"{READING_BYTES:,}" in unread.json()["detail"]
+    with running.client() as http:  # a 0-d array reaches the estimate before the shape check: still its 422
+        scalar = {"origins": np.array(1.0), "directions": np.array(1.0)}
+        shapeless = binary_query(http, running.lsnif.artifact_id, scalar)
+    assert shapeless.status_code == 422 and shapeless.json()["field"] == "arrays.origins", shapeless.text
 
     origins, directions = (a.astype(np.float64) for a in _rays_away(REFUSED_RAYS).values())
 

@@ -68,8 +68,9 @@ class Operation:
     inputs: `row_bytes` per input row for as long as the answer lives (the outputs and their encoded
     copy), `activation_row_bytes` per row of the chunk being computed (intermediate arrays, network
     activations; a batched operation runs at most the service's `chunk_rows` rows at a time), and
-    `call_bytes` once per call (an image, a whole stored layer). Upper estimates, each kind's own; a
-    unit test measures them (`tests/unit/test_inference_memory.py`)."""
+    `call_bytes` once per call (an image, a whole stored layer). Upper estimates, each kind's own, with
+    how they were found beside them; `python -m tests.bench bench_inference_memory` measures the
+    measured kinds' peaks against them."""
 
     params: type[BaseModel]
     inputs: Mapping[str, ArraySpec] = field(default_factory=dict)

@@ -44,7 +44,7 @@ from workers.scene.spec import Camera, Diffuse, SceneObject, Transform
 TRIANGLES, LSNIF = "triangles", "lsnif"
 # Working memory of a ray query: the outputs (37 bytes a ray) and their encoded copy; and per ray of a
 # chunk, the broad phase's and the networks' intermediates: 8192 rays peaked at 24.5 MB over RSS before
-# the call, 65536 at 142 MB (2.05 KB a ray beyond a fixed 7 MB), so 3 KB covers a chunk of 8192.
+# the call, 65536 at 142 MB (2.05 KB a ray beyond a fixed 7 MB), so 3 KB covers chunks of 8192 and up.
 QUERY_ROW_BYTES, QUERY_ACTIVATION_ROW_BYTES = 80, 3 << 10
 
 
