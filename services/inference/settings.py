@@ -29,10 +29,12 @@ class InferenceSettings(BaseModel):
         "before they are read: a body needing more than all of it gets a 413",
     )
     max_waiting: int = Field(256, ge=0, description="requests waiting for memory, per pool; more get a 503")
-    # 16384: lsnif queries from 16 threads in one process answered 15/s at 8192, 24/s at 16384 and 25/s
-    # unchunked (each call pays a per-instance broad phase); its activations are then about 50 MB.
+    # As many as a batch merges: each call pays a fixed cost (lsnif: a broad phase per instance), and the
+    # inference load bench (64 clients, 30 s) served 1500 requests at 16384 and 2193 at 65536 (8192 had
+    # halved it again). The activations of a 65536-ray lsnif call are about 140 MB; smaller requests
+    # reserve theirs row by row, so chunks bound only what one large request would take at once.
     chunk_rows: int = Field(
-        16384, ge=1, description="rows one model call runs at a time: bounds activation memory per call"
+        1 << 16, ge=1, description="rows one model call runs at a time: bounds activation memory per call"
     )
     max_batch_rows: int = Field(1 << 16, ge=1, description="rows one batched model call may merge")
     max_wait_ms: float = Field(2.0, ge=0, description="how long a batch waits for more requests")
