@@ -54,11 +54,18 @@ class MemoryPool:
         finally:
             self.release(nbytes)
 
-    def acquire(self, nbytes: int, timeout_s: float) -> None:
+    def try_acquire(self, nbytes: int) -> bool:
+        """Take `nbytes` if nobody waits and they fit; never blocks (for an event loop's fast path)."""
         with self.condition:
-            if not self.waiting and self.used + nbytes <= self.budget:
-                self._take(nbytes)
-                return
+            if self.waiting or self.used + nbytes > self.budget:
+                return False
+            self._take(nbytes)
+            return True
+
+    def acquire(self, nbytes: int, timeout_s: float) -> None:
+        if self.try_acquire(nbytes):
+            return
+        with self.condition:
             if len(self.waiting) >= self.max_waiting:
                 self.outcomes.labels(self.name, "queue_full").inc()
                 raise QueueFull(f"{len(self.waiting)} requests already wait for {self.name} memory; retry")

@@ -120,7 +120,10 @@ async def query(artifact_id: str, request: Request, state: StateDep, principal: 
         held.callback(service.reading.release, reading)
 
     try:
-        await run_in_threadpool(hold)
+        if service.reading.try_acquire(reading):  # without a thread of the pool when nobody waits
+            held.callback(service.reading.release, reading)
+        else:
+            await run_in_threadpool(hold)
         body = await request.body()
         arguments = (service, held, artifact_id, body, content_type, binary)
         response = await run_in_threadpool(_answer_query, *arguments)
