@@ -27,6 +27,27 @@ def serve_inference_command(
     memory_bytes: Annotated[
         int | None, typer.Option(min=1, help="Memory budget of loaded models (NBAKE_INFERENCE_MEMORY_BYTES).")
     ] = None,
+    working_bytes: Annotated[
+        int | None,
+        typer.Option(
+            min=1 << 20,
+            help="Memory requests in flight may allocate between them; larger queries get a 413 "
+            "(NBAKE_INFERENCE_WORKING_BYTES).",
+        ),
+    ] = None,
+    reading_bytes: Annotated[
+        int | None,
+        typer.Option(
+            min=1 << 20,
+            help="Memory REST bodies being received may take between them (NBAKE_INFERENCE_READING_BYTES).",
+        ),
+    ] = None,
+    max_waiting: Annotated[
+        int | None, typer.Option(min=0, help="Requests waiting for working memory; more get a 503.")
+    ] = None,
+    chunk_rows: Annotated[
+        int | None, typer.Option(min=1, help="Rows one model call runs at a time (bounds activations).")
+    ] = None,
     max_wait_ms: Annotated[
         float | None, typer.Option(min=0, help="How long a batch waits for more requests.")
     ] = None,
@@ -56,8 +77,13 @@ def serve_inference_command(
         settings = InferenceSettings.from_env(
             data_dir,
             memory_budget_bytes=memory_bytes,
+            working_bytes=working_bytes,
+            reading_bytes=reading_bytes,
+            max_waiting=max_waiting,
+            chunk_rows=chunk_rows,
             max_wait_ms=max_wait_ms,
             max_rows=max_rows,
+            torch_threads=torch_threads,
             device=device,
         )
     except ValueError as error:

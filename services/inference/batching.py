@@ -3,9 +3,13 @@
 Each loaded model has one worker thread, so a model only ever runs one call at a time (torch and the
 path tracer's intersector are not re-entered). The worker takes the first waiting request, then gathers
 more with the same operation and parameters until `max_rows` rows or `max_wait_s` have passed, runs the
-model once on the concatenated arrays and hands each request its own rows back. Operations that are not
+model on the concatenated arrays and hands each request its own rows back. Operations that are not
 row-independent run one request per call on the same thread. The thread ends when idle and starts again
 on the next request, so an evicted model leaves nothing running.
+
+A batched call runs at most `chunk_rows` rows at a time and concatenates the chunks' outputs, so the
+model's intermediate arrays and activations are bounded per call whatever the batch (or one request)
+holds; the outputs themselves are the answer and are counted by the service's admission.
 """
 
 from __future__ import annotations
@@ -43,6 +47,21 @@ class _Request:
         return self.operation, self.params.model_dump_json(), tuple(sorted(self.arrays))
 
 
+def in_chunks(
+    run: Callable[[dict[str, np.ndarray]], Answer], arrays: dict[str, np.ndarray], rows: int, chunk_rows: int
+) -> Answer:
+    """`run` on at most `chunk_rows` rows at a time, outputs concatenated (meta: the first chunk's, as every
+    chunk of a row-independent operation says the same)."""
+    if rows <= chunk_rows:
+        return run(arrays)
+    parts = [
+        run({name: array[start : start + chunk_rows] for name, array in arrays.items()})
+        for start in range(0, rows, chunk_rows)
+    ]
+    merged = {name: np.concatenate([p.arrays[name] for p in parts]) for name in parts[0].arrays}
+    return Answer(merged, parts[0].meta)
+
+
 def _split(answer: Answer, counts: list[int]) -> list[Answer]:
     bounds = np.cumsum([0, *counts])
     return [
@@ -58,10 +77,12 @@ class Batcher:
         self,
         run: Callable[[str, BaseModel, dict[str, np.ndarray]], Answer],
         max_rows: int,
+        chunk_rows: int,
         max_wait_s: float,
         on_batch: Callable[[int, int], None],
     ) -> None:
-        self.run, self.max_rows, self.max_wait_s, self.on_batch = run, max_rows, max_wait_s, on_batch
+        self.run, self.max_rows, self.chunk_rows = run, max_rows, chunk_rows
+        self.max_wait_s, self.on_batch = max_wait_s, on_batch
         self.queue: queue.Queue[_Request] = queue.Queue()
         self.lock = threading.Lock()
         self.thread: threading.Thread | None = None
@@ -118,12 +139,21 @@ class Batcher:
 
     def _run(self, batch: list[_Request]) -> None:
         first = batch[0]
+
+        def run(arrays: dict[str, np.ndarray]) -> Answer:
+            return self.run(first.operation, first.params, arrays)
+
         try:
-            if len(batch) == 1:
-                answers = [self.run(first.operation, first.params, first.arrays)]
+            if not first.spec.batched:
+                answers = [run(first.arrays)]
             else:
-                merged = {name: np.concatenate([r.arrays[name] for r in batch]) for name in first.arrays}
-                answers = _split(self.run(first.operation, first.params, merged), [r.rows for r in batch])
+                rows = [r.rows for r in batch]
+                merged = (
+                    first.arrays
+                    if len(batch) == 1
+                    else {name: np.concatenate([r.arrays[name] for r in batch]) for name in first.arrays}
+                )
+                answers = _split(in_chunks(run, merged, sum(rows), self.chunk_rows), rows)
         except Exception as error:  # every request of the batch learns why
             for request in batch:
                 request.future.set_exception(error)

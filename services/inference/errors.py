@@ -21,7 +21,9 @@ class UnsupportedOperation(JobServiceError):
     status, title = 400, "Unsupported operation"
 
 
-class TooManyRows(JobServiceError):
+class RequestTooLarge(JobServiceError):
+    """More rows than a request may hold, or more working memory than the whole budget."""
+
     status, title = 413, "Request too large"
 
 
@@ -34,3 +36,9 @@ class ArtifactRefused(JobServiceError):
 class Overloaded(JobServiceError):
     status, title = 503, "Timed out"
     headers = {"Retry-After": "1"}  # noqa: RUF012
+
+
+class QueueFull(Overloaded):
+    """Too many requests already wait for working memory: refused before its body is held any longer."""
+
+    title = "Too many requests waiting"

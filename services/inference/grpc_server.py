@@ -78,23 +78,25 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
     def Query(self, request, context):
         self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
         params = json_format.MessageToDict(request.params)
-        served, answer = self.service.call(request.artifact_id, QUERY, params, _arrays(request.arrays))
-        return inference_pb2.QueryResponse(
-            artifact_id=request.artifact_id,
-            kind=served.loaded.kind,
-            meta=_struct(answer.meta),
-            arrays=[_array_message(name, array) for name, array in answer.arrays.items()],
-        )
+        arrays = _arrays(request.arrays)
+        size = request.ByteSize()
+        with self.service.answering(request.artifact_id, QUERY, params, arrays, size) as (served, answer):
+            return inference_pb2.QueryResponse(
+                artifact_id=request.artifact_id,
+                kind=served.loaded.kind,
+                meta=_struct(answer.meta),
+                arrays=[_array_message(name, array) for name, array in answer.arrays.items()],
+            )
 
     def Render(self, request, context):
         self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
         params = json_format.MessageToDict(request.params)
-        _, answer = self.service.call(request.artifact_id, RENDER, params, {})
-        context.set_trailing_metadata((("server-timing", server_timing(answer)),))
         media_type = images.media_type_for(request.media_type)
-        return inference_pb2.RenderResponse(
-            media_type=media_type, data=images.encode(answer.arrays["image"], media_type)
-        )
+        with self.service.answering(request.artifact_id, RENDER, params, {}, 0) as (_, answer):
+            context.set_trailing_metadata((("server-timing", server_timing(answer)),))
+            return inference_pb2.RenderResponse(
+                media_type=media_type, data=images.encode(answer.arrays["image"], media_type)
+            )
 
 
 def start_grpc_inference(state: InferenceState, host: str, port: int, max_message_bytes: int) -> GrpcServer:

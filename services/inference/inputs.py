@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from services.inference.errors import InvalidQuery, TooManyRows
+from services.inference.errors import InvalidQuery, RequestTooLarge
 from workers.models.registry import ArraySpec, Operation
 
 
@@ -59,5 +59,5 @@ def checked_arrays(
     if len(rows) > 1:
         raise InvalidQuery(f"the arrays disagree on their number of rows ({sorted(rows)})", "arrays")
     if rows and rows.pop() > max_rows:
-        raise TooManyRows(f"at most {max_rows} rows per request; split it", "arrays")
+        raise RequestTooLarge(f"at most {max_rows} rows per request; split it", "arrays")
     return checked

@@ -1,5 +1,6 @@
 """Prometheus figures of one inference server: requests by operation and status, latency, how well
-dynamic batching merges (rows and requests per model call), and how the model cache behaves."""
+dynamic batching merges (rows and requests per model call), how the model cache behaves, and the
+working memory of requests in flight (reserved bytes, waiting requests, admission outcomes)."""
 
 from __future__ import annotations
 
@@ -43,3 +44,27 @@ class InferenceMetrics:
             "nbake_inference_loaded_bytes", "Bytes of loaded models", registry=self.registry
         )
         self.loaded_models = Gauge("nbake_inference_loaded_models", "Loaded models", registry=self.registry)
+        self.pool_bytes = Gauge(
+            "nbake_inference_reserved_bytes",
+            "Memory reserved by requests in flight, by pool (reading bodies, working)",
+            ["pool"],
+            registry=self.registry,
+        )
+        self.waiting = Gauge(
+            "nbake_inference_waiting_requests",
+            "Requests waiting for memory, by pool",
+            ["pool"],
+            registry=self.registry,
+        )
+        self.admission = Counter(
+            "nbake_inference_admission",
+            "Admission outcomes by pool (admitted, too_large, queue_full, timeout)",
+            ["pool", "outcome"],
+            registry=self.registry,
+        )
+        self.admission_wait = Histogram(
+            "nbake_inference_admission_wait_seconds",
+            "Time a request waited for memory, by pool",
+            ["pool"],
+            registry=self.registry,
+        )

@@ -1,10 +1,19 @@
 """The inference service's core, shared by the REST and gRPC adapters: the model cache, one batcher per
-loaded model, request checks, limits and timeouts. Every model call goes through a batcher, so both
-adapters get the same merging, the same one-call-at-a-time guarantee and the same errors."""
+loaded model, request checks, limits, working-memory admission and timeouts. Every model call goes
+through a batcher, so both adapters get the same merging, the same one-call-at-a-time guarantee and the
+same errors.
+
+Memory is bounded as a whole: loaded models by the cache's budget, and what requests allocate on top by
+the working-memory budget (`admission`). A request's bytes are estimated before anything is converted
+or run, from its body, its inputs at the operation's declared dtypes (twice: converted, then merged into
+a batch) and the operation's declared costs per row and per call; the adapters encode the answer inside
+the reservation, so the encoded copy is counted too.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from concurrent.futures import TimeoutError as FutureTimeout
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -17,17 +26,20 @@ from pydantic import BaseModel
 from services.artifacts.artifacts import ArtifactNotFound, ArtifactStore
 from services.artifacts.digests import known_digest
 from services.artifacts.store import BlobStore
+from services.inference.admission import MemoryPool
 from services.inference.batching import Batcher
 from services.inference.cache import ModelCache
-from services.inference.errors import InvalidQuery, Overloaded, UnsupportedOperation
+from services.inference.errors import InvalidQuery, Overloaded, RequestTooLarge, UnsupportedOperation
 from services.inference.inputs import checked_arrays, checked_params
 from services.inference.loader import Loaded, load_artifact
 from services.inference.metrics import InferenceMetrics
 from services.inference.settings import InferenceSettings
 from services.jobs.errors import JobServiceError
-from workers.models.registry import RENDER, Answer
+from workers.models.registry import RENDER, Answer, Operation
+from workers.render.heap import return_freed_arrays
 
 FRAME_SECONDS = "frame_seconds"  # in a render's meta: the model's time for the frame
+TRIMS_PER_BUDGET = 4  # freed heap goes back to the OS after each quarter of the working budget is released
 
 
 def server_timing(answer: Answer) -> str:
@@ -76,16 +88,22 @@ class InferenceService:
         self.settings = settings
         self.device = settings.resolved_device()
         torch.set_num_threads(settings.torch_threads)  # one process, one setting: every model call shares it
+        return_freed_arrays()  # before a model builds a RayScene, which would keep them (workers.render.heap)
         self.metrics = InferenceMetrics()
         self.blobs = BlobStore(settings.shared.store)
         self.artifacts = ArtifactStore(self.blobs, settings.shared.store, checkpoint_root=settings.work_dir)
         self.cache = ModelCache(settings.memory_budget_bytes, self._load, self.metrics)
+        self.reading, self.working = (
+            MemoryPool(name, budget, settings.max_waiting, budget // TRIMS_PER_BUDGET, self.metrics)
+            for name, budget in (("reading", settings.reading_bytes), ("working", settings.working_bytes))
+        )
 
     def _load(self, artifact_id: str) -> Served:
         loaded = load_artifact(self.artifacts, artifact_id, self.device, self.settings.work_dir)
         batcher = Batcher(
             lambda operation, params, arrays: self._answer(loaded, operation, params, arrays),
             self.settings.max_batch_rows,
+            self.settings.chunk_rows,
             self.settings.max_wait_ms / 1000,
             self._count_batch,
         )
@@ -118,10 +136,17 @@ class InferenceService:
     def models(self) -> list[ModelInfo]:
         return [entry.info() for entry in self.cache.snapshot()]
 
-    def call(
-        self, artifact_id: str, operation: str, params: dict[str, Any], arrays: dict[str, np.ndarray]
-    ) -> tuple[Served, Answer]:
-        """The answer of one request; raises the service's errors (4xx) or Overloaded on timeout."""
+    @contextmanager
+    def answering(
+        self,
+        artifact_id: str,
+        operation: str,
+        params: dict[str, Any],
+        arrays: dict[str, np.ndarray],
+        body_bytes: int,
+    ) -> Iterator[tuple[Served, Answer]]:
+        """The answer of one request, its working memory held until the block (which encodes it) ends;
+        raises the service's errors (4xx), or Overloaded when it waits or runs past the timeout."""
         with self.measured(operation):
             served = self.served(artifact_id)
             loaded = served.loaded
@@ -133,15 +158,55 @@ class InferenceService:
                     f"(it supports: {supported})"
                 )
             typed = checked_params(spec, params)
-            inputs = checked_arrays(spec, arrays, self.settings.max_rows)
-            future = served.batcher.submit(operation, spec, typed, inputs)
-            try:
-                return served, future.result(timeout=self.settings.request_timeout_s)
-            except FutureTimeout:
-                future.cancel()
-                raise Overloaded(
-                    f"no answer within {self.settings.request_timeout_s} s; the model is busy, retry"
-                ) from None
+            deadline = time.monotonic() + self.settings.request_timeout_s
+            nbytes = self._admitted_bytes(spec, arrays, body_bytes)
+            with self.working.reserved(nbytes, self.settings.request_timeout_s):
+                inputs = checked_arrays(spec, arrays, self.settings.max_rows)
+                future = served.batcher.submit(operation, spec, typed, inputs)
+                try:
+                    answer = future.result(timeout=max(deadline - time.monotonic(), 0.0))
+                except FutureTimeout:
+                    future.cancel()
+                    raise Overloaded(
+                        f"no answer within {self.settings.request_timeout_s} s; the model is busy, retry"
+                    ) from None
+                yield served, answer
+
+    def _admitted_bytes(self, spec: Operation, arrays: dict[str, np.ndarray], body_bytes: int) -> int:
+        """The working memory a request will need, from its shapes alone (nothing converted or run yet);
+        RequestTooLarge naming its row input when that is more than the whole budget."""
+        known = {name: array for name, array in arrays.items() if name in spec.inputs}
+        row_inputs = [a for n, a in known.items() if spec.inputs[n].shape[:1] == (None,) and a.ndim]
+        rows = max((len(a) for a in row_inputs), default=0)  # a 0-d array is refused by its shape check
+        converted = sum(a.size * np.dtype(spec.inputs[n].dtype).itemsize for n, a in known.items())
+        per_call = spec.call_bytes + min(rows, self.settings.chunk_rows) * spec.activation_row_bytes
+        nbytes = body_bytes + 2 * converted + rows * spec.row_bytes + per_call
+        budget = self.settings.working_bytes
+        if nbytes > budget:
+            self.metrics.admission.labels("working", "too_large").inc()
+            field = next((f"arrays.{n}" for n in spec.inputs if n in known), "params")
+            per_row = nbytes / max(rows, 1)
+            raise RequestTooLarge(
+                f"this request needs about {nbytes:,} bytes of working memory ({rows:,} rows); the "
+                f"inference service's working-memory budget is {budget:,} bytes "
+                f"(NBAKE_INFERENCE_WORKING_BYTES), about {int(budget // per_row):,} rows of this operation: "
+                "split it",
+                field,
+            )
+        return nbytes
+
+    def admitted_body(self, nbytes: int) -> int:
+        """`nbytes` (what receiving a body will take), or RequestTooLarge naming the body when that is more
+        than the whole reading pool."""
+        budget = self.settings.reading_bytes
+        if nbytes > budget:
+            self.metrics.admission.labels("reading", "too_large").inc()
+            raise RequestTooLarge(
+                f"receiving this body takes about {nbytes:,} bytes; the inference service's reading budget "
+                f"is {budget:,} bytes (NBAKE_INFERENCE_READING_BYTES): send fewer rows per request",
+                "body",
+            )
+        return nbytes
 
     @contextmanager
     def measured(self, operation: str):

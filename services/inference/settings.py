@@ -16,6 +16,26 @@ class InferenceSettings(BaseModel):
 
     shared: ServiceSettings = Field(description="the job server's settings: its database and store")
     memory_budget_bytes: int = Field(1 << 30, ge=1, description="loaded models beyond it evict the LRU one")
+    working_bytes: int = Field(
+        256 << 20,
+        ge=1 << 20,
+        description="what requests in flight may allocate between them (inputs, outputs, activations): a "
+        "request needing more than all of it gets a 413, others wait their turn",
+    )
+    reading_bytes: int = Field(
+        128 << 20,
+        ge=1 << 20,
+        description="what REST bodies being received may take between them, admitted by Content-Length "
+        "before they are read: a body needing more than all of it gets a 413",
+    )
+    max_waiting: int = Field(256, ge=0, description="requests waiting for memory, per pool; more get a 503")
+    # As many as a batch merges: each call pays a fixed cost (lsnif: a broad phase per instance), and the
+    # inference load bench (64 clients, 30 s) served 1500 requests at 16384 and 2193 at 65536 (8192 had
+    # halved it again). The activations of a 65536-ray lsnif call are about 140 MB; smaller requests
+    # reserve theirs row by row, so chunks bound only what one large request would take at once.
+    chunk_rows: int = Field(
+        1 << 16, ge=1, description="rows one model call runs at a time: bounds activation memory per call"
+    )
     max_batch_rows: int = Field(1 << 16, ge=1, description="rows one batched model call may merge")
     max_wait_ms: float = Field(2.0, ge=0, description="how long a batch waits for more requests")
     max_rows: int = Field(1 << 20, ge=1, description="rows (rays, pixels) one request may ask for")
@@ -30,6 +50,8 @@ class InferenceSettings(BaseModel):
     def from_env(cls, data_dir: Path, **overrides) -> InferenceSettings:
         env = {
             "memory_budget_bytes": os.environ.get("NBAKE_INFERENCE_MEMORY_BYTES"),
+            "working_bytes": os.environ.get("NBAKE_INFERENCE_WORKING_BYTES"),
+            "reading_bytes": os.environ.get("NBAKE_INFERENCE_READING_BYTES"),
             "device": os.environ.get("NBAKE_INFERENCE_DEVICE"),
         }
         values = {k: v for k, v in env.items() if v} | {k: v for k, v in overrides.items() if v is not None}

@@ -25,6 +25,7 @@ import numpy as np
 
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
+from services.inference.settings import InferenceSettings
 from services.inference.wire import OCTET_STREAM, encode_binary
 from tests.bench.common import BenchSection
 from tests.bench.http_load import Connection
@@ -279,12 +280,15 @@ def inference(root: Path) -> BenchSection:
     )
     install_tokens(data_dir)
     budget = lsnif.in_process().nbytes + render.in_process().nbytes
+    fields = InferenceSettings.model_fields  # the server runs with its default working and reading pools
+    pools = fields["working_bytes"].default + fields["reading_bytes"].default
     requests = _inference_requests(lsnif, render)
     server = start_server(data_dir, ["--memory-bytes", str(budget), "--max-wait-ms", "2"], lsnif, render)
     try:
         port = int(server.url.rsplit(":", 1)[1])
         idle_rss = _rss_mb(server.process.pid)
         result = asyncio.run(_inference_load(port, requests, server.process.pid))
+        peak_rss = _rss_mb(server.process.pid, "VmHWM")
     finally:
         server.stop()
     for name in sorted(result["latencies"]):
@@ -306,13 +310,17 @@ def inference(root: Path) -> BenchSection:
         rss_idle_mb=idle_rss,
         rss_first_10s_mb=max(rss[: len(rss) // 6]),
         rss_max_mb=max(rss),
+        rss_peak_mb=peak_rss,
         rss_last_10s_mb=max(rss[-(len(rss) // 6) :]),
         budget_mb=budget / 2**20,
+        pools_mb=pools / 2**20,
+        bound_mb=idle_rss + (budget + pools) / 2**20,
     )
     section.notes.append(
         "each client picks its next request at random; errors are non-200 answers or broken connections; "
-        "RSS of the server process sampled every second: growth beyond the budget over idle, or from the "
-        "first to the last 10 s, would be a leak"
+        "RSS of the server process sampled every second, and rss_peak its own high-water mark (VmHWM): "
+        "growth from the first to the last 10 s would be a leak; bound: idle + model cache budget + the "
+        "default reading and working pools (what the server admits requests into)"
     )
     return section
 
@@ -379,8 +387,9 @@ async def _inference_load(port: int, requests: dict, pid: int) -> dict:
     return {"latencies": latencies, "errors": errors, "rss": rss}
 
 
-def _rss_mb(pid: int) -> float:
+def _rss_mb(pid: int, key: str = "VmRSS") -> float:
+    """The process's resident set, or with `VmHWM` its peak (the kernel's high-water mark), in MB."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{key}:"):
             return int(line.split()[1]) / 1024
     raise RuntimeError(f"no VmRSS for {pid}")

@@ -62,11 +62,22 @@ class ArraySpec:
 @dataclass(frozen=True)
 class Operation:
     """What an operation takes (typed parameters, input arrays) and whether concurrent requests with equal
-    parameters may be merged row-wise into one call (`batched`), which only row-independent models allow."""
+    parameters may be merged row-wise into one call (`batched`), which only row-independent models allow.
+
+    The memory one request needs, which the inference service admits before running it, beyond its
+    inputs: `row_bytes` per input row for as long as the answer lives (the outputs and their encoded
+    copy), `activation_row_bytes` per row of the chunk being computed (intermediate arrays, network
+    activations; a batched operation runs at most the service's `chunk_rows` rows at a time), and
+    `call_bytes` once per call (an image, a whole stored layer). Upper estimates, each kind's own, with
+    how they were found beside them; `python -m tests.bench bench_inference_memory` measures the
+    measured kinds' peaks against them."""
 
     params: type[BaseModel]
     inputs: Mapping[str, ArraySpec] = field(default_factory=dict)
     batched: bool = False
+    row_bytes: int = 0
+    activation_row_bytes: int = 0
+    call_bytes: int = 0
 
 
 @dataclass

@@ -25,6 +25,10 @@ from workers.scene.spec import Camera, Vec3
 SCENE, NEUTRAL = "scene", "neutral"
 MAX_SIZE = 4096
 MAX_SAMPLES = 1 << 24  # pixels x spp of one request: a 1024^2 frame at 16 spp, minutes on this CPU
+# Working memory the inference service admits a path-traced view with (`Operation.call_bytes`): a 512^2
+# view of an lsnif or lod artifact at 1 spp peaked at 49 and 53 MB over the process's RSS before it (the
+# wavefront and the image's accumulators). Not scaled by the view's size: a larger view needs more.
+RENDER_WORKING_BYTES = 64 << 20
 
 
 class CameraParams(BaseModel):

@@ -1,8 +1,15 @@
 """Queries and renders of an artifact, by id. Bodies are JSON (arrays base64) or binary (a JSON header
-line, then raw arrays); see `services.inference.wire` for the format, also documented in OpenAPI."""
+line, then raw arrays); see `services.inference.wire` for the format, also documented in OpenAPI.
+
+A query holds its memory (the service's reading pool for its body, then its working memory) until its
+answer has been sent, not only until it is computed: a sent answer is a copy of the outputs that lives
+in the transport's buffer while a slow client reads it, 16 of them about 90 MB in the memory test.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from contextlib import ExitStack
 from typing import Any
 
 import numpy as np
@@ -10,12 +17,13 @@ from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
+from starlette.types import Receive, Scope, Send
 
 from services.api.auth import CanRead
 from services.api.problems import PROBLEM_RESPONSES
 from services.inference import images, wire
 from services.inference.errors import MalformedBody
-from services.inference.service import server_timing
+from services.inference.service import InferenceService, server_timing
 from services.inference.state import StateDep
 from workers.models.registry import QUERY, RENDER
 
@@ -32,13 +40,32 @@ class RenderBody(BaseModel):
     params: dict[str, Any] = Field(default_factory=dict, description="the kind's typed render parameters")
 
 
+# Copies of a body alive while it is received and parsed, before the working pool counts it: binary, the
+# received chunks and their join (the arrays are views of it); JSON, the same, the parsed base64 strings
+# and the decoded bytes.
+RECEIVE_COPIES = {True: 2, False: 3}
+
+
+class _Held(Response):
+    """`answer`, sent; `release` runs once it is sent or the client is gone, whichever comes first."""
+
+    def __init__(self, answer: Response, release: Callable[[], None]) -> None:
+        self.answer, self.release = answer, release
+        self.background = None  # FastAPI attaches the route's background tasks here; these routes have none
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            await self.answer(scope, receive, send)
+        finally:
+            self.release()
+
+
 def _is_binary(content_type: str | None) -> bool:
     return (content_type or "").split(";")[0].strip() == wire.OCTET_STREAM
 
 
-async def _parse(request: Request) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    body = await request.body()
-    if _is_binary(request.headers.get("content-type")):
+def _parse(body: bytes, content_type: str | None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    if _is_binary(content_type):
         return wire.decode_binary(body)
     try:
         parsed = wire.QueryBody.model_validate_json(body or b"{}")
@@ -80,13 +107,46 @@ async def _parse(request: Request) -> tuple[dict[str, Any], dict[str, np.ndarray
 async def query(artifact_id: str, request: Request, state: StateDep, principal: CanRead) -> Response:
     """Batched kind-specific queries: concurrent requests for one model are merged into one call."""
     await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
-    params, arrays = await _parse(request)
-    served, answer = await run_in_threadpool(state.service.call, artifact_id, QUERY, params, arrays)
+    service = state.service
+    content_type, accept = request.headers.get("content-type"), request.headers.get("accept", "")
+    binary = wire.OCTET_STREAM in accept or (_is_binary(content_type) and "json" not in accept)
+    declared = request.headers.get("content-length", "")
+    size = int(declared) if declared.isdigit() else service.settings.max_body_bytes  # BodyLimit holds it
+    reading = service.admitted_body(RECEIVE_COPIES[_is_binary(content_type)] * size)
+    held = ExitStack()  # the thread pushes each release once it holds the bytes, so a cancelled wait too
+
+    def hold() -> None:
+        service.reading.acquire(reading, service.settings.request_timeout_s)
+        held.callback(service.reading.release, reading)
+
+    try:
+        if service.reading.try_acquire(reading):  # without a thread of the pool when nobody waits
+            held.callback(service.reading.release, reading)
+        else:
+            await run_in_threadpool(hold)
+        body = await request.body()
+        arguments = (service, held, artifact_id, body, content_type, binary)
+        response = await run_in_threadpool(_answer_query, *arguments)
+    except BaseException as error:
+        held.__exit__(type(error), error, error.__traceback__)  # the request is counted under its error
+        raise
+    return _Held(response, held.close)
+
+
+def _answer_query(
+    service: InferenceService,
+    held: ExitStack,
+    artifact_id: str,
+    body: bytes,
+    content_type: str | None,
+    binary: bool,
+) -> Response:
+    """Off the event loop: decoding, the model and encoding, in the service's working memory (entered
+    into `held`, so it lasts until the answer is sent)."""
+    params, arrays = _parse(body, content_type)
+    served, answer = held.enter_context(service.answering(artifact_id, QUERY, params, arrays, len(body)))
     head = {"artifact_id": artifact_id, "kind": served.loaded.kind, "meta": answer.meta}
-    accept = request.headers.get("accept", "")
-    if wire.OCTET_STREAM in accept or (
-        _is_binary(request.headers.get("content-type")) and "json" not in accept
-    ):
+    if binary:
         return Response(wire.encode_binary(head, answer.arrays), media_type=wire.OCTET_STREAM)
     return JSONResponse(wire.encode_json(head, answer.arrays))
 
@@ -109,7 +169,11 @@ async def render(
     position, target, up, fov, width, height); `Server-Timing: frame;dur=<ms>` says how long it took."""
     await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
     params = body.params if body else {}
-    _, answer = await run_in_threadpool(state.service.call, artifact_id, RENDER, params, {})
     media_type = images.media_type_for(request.headers.get("accept"))
-    data = await run_in_threadpool(images.encode, answer.arrays["image"], media_type)
-    return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})
+
+    def answer() -> Response:
+        with state.service.answering(artifact_id, RENDER, params, {}, 0) as (_, answer):
+            data = images.encode(answer.arrays["image"], media_type)
+            return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})
+
+    return await run_in_threadpool(answer)

@@ -27,9 +27,13 @@ from workers.models.explore.features import pixel_features
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.render.gbuffer import GBuffers
 from workers.render.variable_tracer import VariableTracer
-from workers.runtime.view_render import CameraParams, scene_bytes
+from workers.runtime.view_render import RENDER_WORKING_BYTES, CameraParams, scene_bytes
 from workers.scene.variable_scene import CompiledVariableScene
 from workers.scene.variables import vector_from_values
+
+# Working memory, estimated from the network's shapes (not measured): a query's output (12 bytes a pixel)
+# and its encoded copy; per pixel, its features and the network's hidden layers.
+QUERY_ROW_BYTES, QUERY_ACTIVATION_ROW_BYTES = 32, 2 << 10
 
 
 class ExploreRender(BaseModel):
@@ -120,8 +124,10 @@ class ExploreInference:
                 "hit": ArraySpec("bool", (None,), required=False),
             },
             batched=True,
+            row_bytes=QUERY_ROW_BYTES,
+            activation_row_bytes=QUERY_ACTIVATION_ROW_BYTES,
         ),
-        RENDER: Operation(params=ExploreRender),
+        RENDER: Operation(params=ExploreRender, call_bytes=RENDER_WORKING_BYTES),
     }
 
     def load(self, folder: Path, device: str) -> ExploreModel:

@@ -28,7 +28,13 @@ from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import HEIGHT_TO_RADIANS, mip_stack, sample_mipmapped
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.render.integrator import PathTracer
-from workers.runtime.view_render import SCENE, ViewRender, refuse_missing_scene, render_view
+from workers.runtime.view_render import (
+    RENDER_WORKING_BYTES,
+    SCENE,
+    ViewRender,
+    refuse_missing_scene,
+    render_view,
+)
 from workers.scene.compile import compile_scene
 from workers.scene.mesoscale import Appearance, Structure
 from workers.scene.portable import load_scene, neutral_scene
@@ -36,6 +42,10 @@ from workers.scene.spec import Camera, Diffuse, SceneObject, SphereShape
 
 GENERATE = "generate"
 MAX_WINDOW = 2048
+# Working memory, estimated from the decoder's shapes (not measured): a query's outputs and their encoded
+# copy, and per point its sampled features and the decoder's hidden layers; per call, a feature plane
+# and its mip stack at the default window (a larger window needs more: not scaled by its size).
+QUERY_ROW_BYTES, QUERY_ACTIVATION_ROW_BYTES, PLANE_BYTES = 32, 2 << 10, 16 << 20
 NEUTRAL_SURFACE = "mesogan"
 
 
@@ -148,9 +158,12 @@ class MesoganInference:
                 "light": ArraySpec("float32", (None, 3), required=False),
                 "view": ArraySpec("float32", (None, 3), required=False),
             },
+            row_bytes=QUERY_ROW_BYTES,
+            activation_row_bytes=QUERY_ACTIVATION_ROW_BYTES,
+            call_bytes=PLANE_BYTES,
         ),
-        GENERATE: Operation(params=GenerateParams),
-        RENDER: Operation(params=RenderParams),
+        GENERATE: Operation(params=GenerateParams, call_bytes=PLANE_BYTES),
+        RENDER: Operation(params=RenderParams, call_bytes=RENDER_WORKING_BYTES),
     }
 
     def load(self, folder: Path, device: str) -> MesoganModel:

@@ -26,12 +26,18 @@ from workers.models.prt.artifact import PrtArtifact, load
 from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import cube_of, latlong_of
-from workers.models.prt.network import PrtNetwork
+from workers.models.prt.network import MAX_PAIRS_PER_CHUNK, PrtNetwork
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
 from workers.runtime.threads import torch_threads
-from workers.runtime.view_render import SCENE, ViewRender, refuse_missing_scene, scene_bytes
+from workers.runtime.view_render import (
+    RENDER_WORKING_BYTES,
+    SCENE,
+    ViewRender,
+    refuse_missing_scene,
+    scene_bytes,
+)
 from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.spec import EnvironmentMap
@@ -40,6 +46,11 @@ DEFAULT_LIGHTING = EnvironmentMap(builtin="courtyard")
 UPLOAD = "environment"
 MAX_UPLOAD_TEXELS = 4096 * 2048
 SERVED_WIDTH = 1024  # procedural maps are generated this wide; larger maps are box-filtered down to it
+# Working memory, estimated from the network's shapes (not measured): a query's output (12 bytes a point)
+# and its encoded copy; per point, its hash-grid and SH features; per call, one chunk of pixel-wavelet
+# pairs through f (input features and two hidden layers, about 512 bytes a pair).
+QUERY_ROW_BYTES, QUERY_ACTIVATION_ROW_BYTES = 32, 4 << 10
+TRANSPORT_BYTES = MAX_PAIRS_PER_CHUNK * 512
 
 
 class Relighting(BaseModel):
@@ -161,7 +172,9 @@ def _unit(v: np.ndarray, name: str) -> np.ndarray:
 class PrtInference:
     operations: ClassVar[Mapping[str, Operation]] = {
         RENDER: Operation(
-            params=PrtRender, inputs={UPLOAD: ArraySpec("float32", (None, None, 3), required=False)}
+            params=PrtRender,
+            inputs={UPLOAD: ArraySpec("float32", (None, None, 3), required=False)},
+            call_bytes=RENDER_WORKING_BYTES + TRANSPORT_BYTES,
         ),
         QUERY: Operation(
             params=PrtQuery,
@@ -175,6 +188,9 @@ class PrtInference:
                 "object": ArraySpec("int64", (None,), required=False),
             },
             batched=True,
+            row_bytes=QUERY_ROW_BYTES,
+            activation_row_bytes=QUERY_ACTIVATION_ROW_BYTES,
+            call_bytes=TRANSPORT_BYTES,
         ),
     }
 

@@ -22,6 +22,11 @@ from workers.runtime.view_render import CameraParams
 from workers.scene.image_io import read_exr_channels
 
 MAIN_LAYER = "image"
+# Working memory: a pixel's values in every layer (up to 16 float32 channels) and their encoded copy; the
+# stored view's encoded copy, admitted as a 512x512 RGBA float32 image. Larger stored images, and a query
+# without `pixels` (every layer, whole), take more than that: not counted (reserving a large image's
+# bytes for each of them cut served requests by half in the inference load bench).
+PIXEL_BYTES, STORED_VIEW_BYTES = 128, 4 << 20
 
 
 class LayerQuery(BaseModel):
@@ -88,8 +93,12 @@ class RenderModel:
 
 class RenderInference:
     operations: ClassVar[Mapping[str, Operation]] = {
-        QUERY: Operation(params=LayerQuery, inputs={"pixels": ArraySpec("int64", (None, 2), required=False)}),
-        RENDER: Operation(params=LayerRender),
+        QUERY: Operation(
+            params=LayerQuery,
+            inputs={"pixels": ArraySpec("int64", (None, 2), required=False)},
+            row_bytes=PIXEL_BYTES,
+        ),
+        RENDER: Operation(params=LayerRender, call_bytes=STORED_VIEW_BYTES),
     }
 
     def load(self, folder: Path, device: str) -> RenderModel:
