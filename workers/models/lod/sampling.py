@@ -136,7 +136,7 @@ def throughput_estimates(
             blocked = tracer.rays.occluded(origin, light[lit], t_max)
             add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
-        sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
+        sampled, weight, _, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
         o, d = wavefront.rays_leaving(_f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale)
         hits = tracer.rays.intersect(o, d)
         keep = roulette_survivors(
