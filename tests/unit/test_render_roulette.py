@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from tests.unit.test_render_analytic import ball, scene_with, sphere_pixels
 from workers.render import wavefront
 from workers.render.bsdf import SurfaceBatch, bsdf_code, sample_bsdf
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene import spec
 from workers.scene.compile import compile_scene
-from tests.unit.test_render_analytic import ball, scene_with, sphere_pixels
 
 IOR = 1.5
 N = 10_000
