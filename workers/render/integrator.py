@@ -2,9 +2,10 @@
 paths (`workers.render.wavefront`), with Embree answering closest-hit and shadow queries in bulk.
 
 Next-event estimation and BSDF sampling are combined with the power heuristic; Russian roulette
-starts at `rr_depth`. `max_depth` counts path segments as Mitsuba does: 1 shows emitters only,
-2 is direct lighting. This is the API the training samplers call: `trace` for radiance along
-given rays, `first_hits` for surface records, `occluded` for visibility.
+starts at `rr_depth`, by Mitsuba's rule (throughput times the path's eta^2; `wavefront._roulette`).
+`max_depth` counts path segments as Mitsuba does: 1 shows emitters only, 2 is direct lighting. This is
+the API the training samplers call: `trace` for radiance along given rays, `first_hits` for surface
+records, `occluded` for visibility.
 
 Extension points, none of which names a model kind: geometry answers through `Intersector`s
 (`workers.render.intersector`; hits may carry predicted surfaces), materials are BSDF families
