@@ -16,6 +16,7 @@ import pytest
 from workers.models.lod import sampling
 from workers.models.lod.grid import LodGrid
 from workers.models.lod.sampling import (
+    RR_MAX_SURVIVAL,
     asset_tracer,
     boundary_pairs,
     box_exit,
@@ -23,6 +24,7 @@ from workers.models.lod.sampling import (
     sample_voxels,
     throughput_estimates,
 )
+from workers.models.lod.segments import roulette_survivors
 from workers.scene.compile import compile_scene
 from workers.scene.spec import (
     BoxShape,
@@ -359,3 +361,20 @@ def test_closed_box_inside_the_voxel():
     normal[np.arange(len(rows)), face] = np.sign(hit_points[np.arange(len(rows)), face])
     expected = np.maximum((wi * normal).sum(1), 0.0) / np.pi  # the box's outward face, seen from outside
     np.testing.assert_allclose(values[:, 0], expected, atol=1e-6)
+
+
+def test_roulette_undoes_the_radiance_scaling_of_a_refraction():
+    """A smooth refraction into glass (weight 1/eta^2 = 0.44, eta 1.5) loses no energy: the path survives
+    with the cap 0.95 (not 0.44) and carries beta x 0.44 / 0.95; a reflection (eta 1) of albedo 0.44
+    survives with 0.44, as before."""
+    n = 10_000
+    u = (np.arange(n) + 0.5) / n
+    for eta, survival in ((1.5, RR_MAX_SURVIVAL), (1.0, 1 / 1.5**2)):
+        beta = np.ones((n, 3))
+        keep = roulette_survivors(
+            beta, np.full((n, 3), 1 / 1.5**2), np.full(n, eta), u, np.zeros(n, np.int64), np.full(n, 0.5),
+            np.full((n, 3), -1.0), np.ones((n, 3)), np.zeros((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1)),
+            RR_MAX_SURVIVAL,
+        )  # fmt: skip
+        assert len(keep) == round(survival * n)
+        np.testing.assert_allclose(beta[keep], 1 / 1.5**2 / survival, rtol=1e-12)

@@ -27,7 +27,7 @@ def direction(theta_deg, n=N, below=False):
 
 
 def albedo_by_sampling(s, wo, rng):
-    _, weight, _, _ = sample_bsdf(s, wo, rng.random((len(wo), 2)), rng.random(len(wo)))
+    _, weight, _, _, _ = sample_bsdf(s, wo, rng.random((len(wo), 2)), rng.random(len(wo)))
     return weight.mean(0), weight.std(0) / np.sqrt(len(wo))
 
 
@@ -68,10 +68,10 @@ def test_lossless_cases_reflect_everything(kind, alpha):
     rng = np.random.default_rng(2)
     s = surface(kind, alpha)
     wo = direction(35)
-    _, weight, _, _ = sample_bsdf(s, wo, rng.random((N, 2)), rng.random(N))
+    _, weight, _, _, _ = sample_bsdf(s, wo, rng.random((N, 2)), rng.random(N))
     if kind == "dielectric":
         # Undo the radiance scaling on transmitted samples to count energy.
-        wi, weight, _, _ = sample_bsdf(s, wo, rng.random((N, 2)), rng.random(N))
+        wi, weight, _, _, _ = sample_bsdf(s, wo, rng.random((N, 2)), rng.random(N))
         weight = np.where(wi[:, 2:3] < 0, weight * 1.5**2, weight)
         assert weight.mean() == pytest.approx(1.0, abs=1e-9)
     elif alpha == 0:
@@ -107,7 +107,7 @@ def test_extreme_roughness_and_grazing_angles_stay_finite(kind, alpha, theta):
     s = surface(kind, alpha, n=n)
     for below in (False, True):
         wo = direction(theta, n=n, below=below and kind == "dielectric")
-        wi, weight, pdf, _ = sample_bsdf(s, wo, rng.random((n, 2)), rng.random(n))
+        wi, weight, pdf, _, _ = sample_bsdf(s, wo, rng.random((n, 2)), rng.random(n))
         f_cos, pdf2 = eval_bsdf(s, wo, wi)
         for a in (wi, weight, pdf, f_cos, pdf2):
             assert np.isfinite(a).all()

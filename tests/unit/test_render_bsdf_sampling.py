@@ -109,7 +109,7 @@ def chi_square_p_value(observed: np.ndarray, expected: np.ndarray) -> float:
 def sampling_p_value(s: SurfaceBatch, theta: float, inside: bool, seed: int) -> float:
     rng = np.random.default_rng(seed)
     batch = s.take(np.zeros(SAMPLES, np.int64))
-    wi, _, pdf, delta = sample_bsdf(
+    wi, _, pdf, delta, _ = sample_bsdf(
         batch, incident(theta, SAMPLES, inside), rng.random((SAMPLES, 2)), rng.random(SAMPLES)
     )
     covered = (pdf > 0) & ~delta
@@ -150,7 +150,7 @@ def test_sample_pdf_and_weight_are_evals(kind, alpha, theta, inside):
     rng = np.random.default_rng(5)
     s = surface(kind, alpha, n)
     wo = incident(theta, n, inside)
-    wi, weight, pdf, delta = sample_bsdf(s, wo, rng.random((n, 2)), rng.random(n))
+    wi, weight, pdf, delta, _ = sample_bsdf(s, wo, rng.random((n, 2)), rng.random(n))
     f_cos, eval_pdf = eval_bsdf(s, wo, wi)
     kept = ~delta & (pdf > 0)
     np.testing.assert_allclose(pdf[kept], eval_pdf[kept], rtol=1e-9)
@@ -173,7 +173,7 @@ def test_smooth_conductor_mirrors_with_its_colour(theta):
     s = surface("conductor", 0.0, N_DELTA)
     s.base[:] = BASE
     wo = incident(theta, N_DELTA)
-    wi, weight, pdf, delta = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
+    wi, weight, pdf, delta, _ = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
     assert delta.all() and (pdf == 0).all()
     np.testing.assert_allclose(wi, mirror(wo), atol=1e-12)
     np.testing.assert_allclose(weight, np.tile(BASE, (N_DELTA, 1)), rtol=1e-12)
@@ -192,7 +192,7 @@ def test_smooth_dielectric_reflects_with_fresnel_and_refracts_by_snell(theta, in
     rng = np.random.default_rng(7)
     s = surface("dielectric", 0.0, N_DELTA, ior)
     wo = incident(theta, N_DELTA, inside)
-    wi, weight, pdf, delta = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
+    wi, weight, pdf, delta, _ = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
     assert delta.all() and (pdf == 0).all()
     cos_o = np.cos(np.radians(theta)) * (-1 if inside else 1)
     f, _, eta_ti = fresnel_dielectric(np.array([cos_o]), np.array([ior]))
@@ -214,7 +214,7 @@ def test_smooth_plastic_coat_is_chosen_as_often_as_its_weight_says(theta):
     rng = np.random.default_rng(8)
     s = surface("plastic", 0.0, N_DELTA)
     wo = incident(theta, N_DELTA)
-    wi, weight, _, delta = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
+    wi, weight, _, delta, _ = sample_bsdf(s, wo, rng.random((N_DELTA, 2)), rng.random(N_DELTA))
     f = float(fresnel_dielectric(np.array([np.cos(np.radians(theta))]), np.array([1.5]))[0][0])
     p_coat = np.clip(f / (f + (1 - f) * np.mean(BASE)), 0.05, 1.0)
     assert binomial_ok(int(delta.sum()), N_DELTA, p_coat)
@@ -228,7 +228,7 @@ def test_smooth_white_plastic_returns_all_energy():
     rng = np.random.default_rng(9)
     s = surface("plastic", 0.0, n)
     s.base[:] = 1.0
-    _, weight, _, _ = sample_bsdf(s, incident(40, n), rng.random((n, 2)), rng.random(n))
+    _, weight, _, _, _ = sample_bsdf(s, incident(40, n), rng.random((n, 2)), rng.random(n))
     mean, err = weight.mean(0), weight.std(0) / np.sqrt(n)
     assert np.all(np.abs(mean - 1.0) < 4 * err + 1e-4), (mean, err)
     assert coat(0.0, 1.5).internal_reflectance == pytest.approx(0.5963, abs=1e-4)

@@ -38,7 +38,8 @@ class ToyLambert(BSDF):
     def sample(self, s: SurfaceBatch, wo, u, uc):
         wi = square_to_cosine_hemisphere(u)
         valid = wo[:, 2] > 0
-        return wi, s.base * valid[:, None], np.where(valid, wi[:, 2] * INV_PI, 0.0), np.zeros(len(wo), bool)
+        pdf, reflection = np.where(valid, wi[:, 2] * INV_PI, 0.0), np.ones(len(wo))
+        return wi, s.base * valid[:, None], pdf, np.zeros(len(wo), bool), reflection
 
 
 def with_material(scene: CompiledScene, name: str, material) -> CompiledScene:

@@ -129,7 +129,7 @@ def test_pbr_sampled_directions_follow_the_evaluated_pdf(params, theta, inside, 
     rng = np.random.default_rng(CHI_CASES.index((params, theta, inside, diffuse)))
     batch = s.take(np.zeros(SAMPLES, np.int64))
     wo = incident(theta, SAMPLES, inside)
-    wi, weight, pdf, delta = sample_bsdf(batch, wo, rng.random((SAMPLES, 2)), rng.random(SAMPLES))
+    wi, weight, pdf, delta, _ = sample_bsdf(batch, wo, rng.random((SAMPLES, 2)), rng.random(SAMPLES))
     covered = pdf > 0
     assert not delta.any()
     observed = np.append(observed_counts(wi, covered), SAMPLES - covered.sum())
@@ -147,7 +147,9 @@ def test_pbr_sampled_directions_follow_the_evaluated_pdf(params, theta, inside, 
 def albedo(m: spec.PbrMaterial, theta: float, inside: bool = False, n: int = 100_000) -> np.ndarray:
     """Directional albedo: the mean sample weight (f |cos| / pdf), and its standard error."""
     rng = np.random.default_rng(3)
-    _, weight, _, _ = sample_bsdf(rows(m, n), incident(theta, n, inside), rng.random((n, 2)), rng.random(n))
+    _, weight, _, _, _ = sample_bsdf(
+        rows(m, n), incident(theta, n, inside), rng.random((n, 2)), rng.random(n)
+    )
     return weight.mean(0), weight.std(0) / np.sqrt(n)
 
 
@@ -162,7 +164,7 @@ def test_white_metal_loses_only_what_single_scattering_ggx_loses(theta):
         )
         rng = np.random.default_rng(4)
         n = 100_000
-        _, w, _, _ = sample_bsdf(
+        _, w, _, _, _ = sample_bsdf(
             conductor.take(np.zeros(n, np.int64)), incident(theta, n), rng.random((n, 2)), rng.random(n)
         )
         assert np.all(mean <= 1 + 4 * err)
@@ -180,7 +182,7 @@ def test_white_glass_scatters_at_most_what_arrives(theta, inside):
     n = 100_000
     rng = np.random.default_rng(5)
     wo = incident(theta, n, inside)
-    wi, weight, _, _ = sample_bsdf(rows(m, n), wo, rng.random((n, 2)), rng.random(n))
+    wi, weight, _, _, _ = sample_bsdf(rows(m, n), wo, rng.random((n, 2)), rng.random(n))
     crossed = wi[:, 2] * wo[:, 2] < 0
     eta_ratio = 1.5 if not inside else 1 / 1.5  # the radiance scaling undone: power, not radiance
     power = np.where(crossed, weight[:, 0] * eta_ratio**2, weight[:, 0])
@@ -244,7 +246,7 @@ def test_energy_conserving_textured_roughness_albedo_is_one(theta):
     n = 200_000
     rng = np.random.default_rng(6)
     s = textured_roughness_rows(rng.random(n))
-    _, weight, _, _ = sample_bsdf(s, incident(theta, n), rng.random((n, 2)), rng.random(n))
+    _, weight, _, _, _ = sample_bsdf(s, incident(theta, n), rng.random((n, 2)), rng.random(n))
     mean, err = weight[:, 0].mean(), weight[:, 0].std() / np.sqrt(n)
     assert abs(mean - 1.0) < 4 * err + 1e-3, (mean, err)
 

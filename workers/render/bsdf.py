@@ -11,8 +11,11 @@ Conventions, in the local shading frame (z = normal): `wo` points to the camera 
 `wi` towards the light; both unit. `eval` returns f(wo, wi) * |cos(wi)| and the solid-angle pdf of
 `sample` producing wi; delta lobes are never returned by `eval` (so a surface with only delta lobes evaluates
 to 0, and the path tracer samples lights there with no shadow ray). `sample` returns wi, the weight
-f |cos| / pdf (what a path's throughput is multiplied by), the pdf (0 for delta lobes) and a delta flag.
-Transmission carries the 1/eta^2 radiance scaling. Two-sided families see wo.z > 0 (the caller flips the
+f |cos| / pdf (what a path's throughput is multiplied by), the pdf (0 for delta lobes), a delta flag and
+eta, the relative index of refraction of the sampled event: the far side's index over wo's side's for a
+transmission, 1 for a reflection (and for an invalid sample). Transmission carries the 1/eta^2 radiance
+scaling; the path tracer's Russian roulette undoes it with eta (`wavefront._roulette`). Families that
+only reflect leave eta at the 1 the batch starts with. Two-sided families see wo.z > 0 (the caller flips the
 frame); the others (dielectrics) see both sides and use the sign of wo.z to know which side they are on.
 """
 
@@ -80,7 +83,8 @@ class BSDF(ABC):
 
     @abstractmethod
     def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
-        """wi, weight f |cos| / pdf, pdf and whether the sampled lobe is a delta, per row."""
+        """wi, weight f |cos| / pdf, pdf, whether the sampled lobe is a delta, and the sampled event's
+        relative IOR eta (1 for a reflection), per row."""
 
     def eval_rows(self, s: SurfaceBatch, wo, wi, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
         """`eval` of the batch's `rows` written there into `out` (f_cos, pdf). By default a gather, `eval`
@@ -91,7 +95,7 @@ class BSDF(ABC):
             array[slice(None) if every else rows] = result
 
     def sample_rows(self, s: SurfaceBatch, wo, u, uc, rows: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
-        """`sample` of the batch's `rows` into `out` (wi, weight, pdf, delta), as `eval_rows`."""
+        """`sample` of the batch's `rows` into `out` (wi, weight, pdf, delta, eta), as `eval_rows`."""
         every = len(rows) == len(wo)
         results = (
             self.sample(s, wo, u, uc) if every else self.sample(s.take(rows), wo[rows], u[rows], uc[rows])
@@ -130,7 +134,7 @@ class CompiledBSDF(BSDF):
 
     def sample(self, s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
         n = len(wo)
-        out = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
+        out = _sample_outputs(n)
         self.sample_kernel(s, wo, u, uc, np.arange(n), out)
         return out
 
@@ -216,13 +220,18 @@ def eval_bsdf(s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarr
     return out
 
 
+def _sample_outputs(n: int) -> tuple[np.ndarray, ...]:
+    """Zeroed (wi, weight, pdf, delta) and eta = 1 (a reflection's) for `n` samples."""
+    return np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool), np.ones(n)
+
+
 def sample_bsdf(s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
     """Sample wi given wo, two uniforms `u` (N, 2) and a lobe-selection uniform `uc` (N,).
 
-    Returns (wi, weight (N, 3), pdf (N,), delta (N,) bool); weight is zero for invalid samples.
+    Returns (wi, weight (N, 3), pdf (N,), delta (N,) bool, eta (N,)); weight is zero for invalid samples.
     """
     n = len(wo)
-    out = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n, bool)
+    out = _sample_outputs(n)
     for family, rows in _groups(s.family):
         family.sample_rows(s, wo, u, uc, rows, out)
     return out

@@ -2,9 +2,10 @@
 paths (`workers.render.wavefront`), with Embree answering closest-hit and shadow queries in bulk.
 
 Next-event estimation and BSDF sampling are combined with the power heuristic; Russian roulette
-starts at `rr_depth`. `max_depth` counts path segments as Mitsuba does: 1 shows emitters only,
-2 is direct lighting. This is the API the training samplers call: `trace` for radiance along
-given rays, `first_hits` for surface records, `occluded` for visibility.
+starts at `rr_depth`, by Mitsuba's rule (throughput times the path's eta^2; `wavefront._roulette`).
+`max_depth` counts path segments as Mitsuba does: 1 shows emitters only, 2 is direct lighting. This is
+the API the training samplers call: `trace` for radiance along given rays, `first_hits` for surface
+records, `occluded` for visibility.
 
 Extension points, none of which names a model kind: geometry answers through `Intersector`s
 (`workers.render.intersector`; hits may carry predicted surfaces), materials are BSDF families
@@ -73,20 +74,26 @@ class SurfaceRecords:
 class _Paths:
     """The live paths of a wavefront: pixel index, current ray, throughput and the last scattering's pdf.
 
-    `t_min` is where the aggregate walk starts along the ray (past the voxel the ray left, else 0);
+    `eta2` is the product of the squared relative IORs of the path's transmissions (float64, as beta),
+    for Russian roulette (`wavefront._roulette`); `t_min` is where the aggregate walk starts along the ray
+    (past the voxel the ray left, else 0);
     `spread` is a camera ray's cone angle (radians; 0 once scattered), for mipmapped texture lookups."""
 
     idx: np.ndarray
     o: np.ndarray
     d: np.ndarray
     beta: np.ndarray
+    eta2: np.ndarray
     prev_pdf: np.ndarray
     prev_delta: np.ndarray
     t_min: np.ndarray
     spread: np.ndarray
 
     def take(self, rows: np.ndarray) -> _Paths:
-        arrays = (np.asarray(self.idx, np.int64), *map(_f64, (self.o, self.d, self.beta, self.prev_pdf)))
+        arrays = (
+            np.asarray(self.idx, np.int64),
+            *map(_f64, (self.o, self.d, self.beta, self.eta2, self.prev_pdf)),
+        )
         arrays += (np.asarray(self.prev_delta, np.bool_), _f64(self.t_min), _f64(self.spread))
         return _Paths(*wavefront.take_paths(np.asarray(rows, dtype=np.int64), arrays))
 
@@ -320,6 +327,7 @@ class PathTracer:
             o=_f64(origins),
             d=_f64(directions),
             beta=np.ones((n, 3)),
+            eta2=np.ones(n),
             prev_pdf=np.zeros(n),
             prev_delta=np.ones(n, bool),  # the camera ray: emitters it sees count fully
             t_min=np.zeros(n),
@@ -418,12 +426,12 @@ class PathTracer:
         shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
 
         sampled = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
-        n_idx, o, wi, n_beta, pdf, delta = wavefront.next_paths(
-            idx, beta, _sampled(sampled), (sh.fs, sh.ft, sh.ns), sh.position, sh.ng, sh.scale,
+        n_idx, o, wi, n_beta, eta2, pdf, delta = wavefront.next_paths(
+            idx, beta, paths.eta2, _sampled(sampled), (sh.fs, sh.ft, sh.ns), sh.position, sh.ng, sh.scale,
             np.ascontiguousarray(u[:, 6]), roulette,
         )  # fmt: skip
         zeros = np.zeros(len(n_idx))
-        return _Paths(n_idx, o, wi, n_beta, pdf, delta, zeros, zeros.copy()), shadow_rays
+        return _Paths(n_idx, o, wi, n_beta, eta2, pdf, delta, zeros, zeros.copy()), shadow_rays
 
     def _scatter_in_aggregate(
         self,
@@ -469,9 +477,9 @@ class PathTracer:
         t_min = self.aggregate.exit_distance(events.voxel, position, wi)
         pdf = np.full(n, UNIFORM_SPHERE_PDF)
         beta = paths.beta * phi / UNIFORM_SPHERE_PDF
-        paths = _Paths(paths.idx, position, wi, beta, pdf, np.zeros(n, bool), t_min, np.zeros(n))
+        paths = _Paths(paths.idx, position, wi, beta, paths.eta2, pdf, np.zeros(n, bool), t_min, np.zeros(n))
         if roulette:
-            keep = wavefront.roulette(beta, np.ascontiguousarray(u[:, 5]))
+            keep = wavefront.roulette(beta, paths.eta2, np.ascontiguousarray(u[:, 5]))
         else:
             keep = np.flatnonzero(max3(beta) > 0)
         return _Scattered(paths.take(keep), shadow_rays)
@@ -556,9 +564,9 @@ def _f64(a: np.ndarray) -> np.ndarray:
 
 
 def _sampled(sampled: tuple) -> tuple:
-    """`sample_bsdf`'s (wi, weight, pdf, delta) in the kernels' layout."""
-    wi, weight, pdf, delta = sampled
-    return _f64(wi), _f64(weight), _f64(pdf), np.ascontiguousarray(delta, dtype=np.bool_)
+    """`sample_bsdf`'s (wi, weight, pdf, delta, eta) in the kernels' layout."""
+    wi, weight, pdf, delta, eta = sampled
+    return _f64(wi), _f64(weight), _f64(pdf), np.ascontiguousarray(delta, dtype=np.bool_), _f64(eta)
 
 
 def _observe_environment_samples(

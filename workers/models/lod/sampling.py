@@ -136,11 +136,11 @@ def throughput_estimates(
             blocked = tracer.rays.occluded(origin, light[lit], t_max)
             add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
-        sampled, weight, _, _ = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
+        sampled, weight, _, _, eta = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
         o, d = wavefront.rays_leaving(_f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale)
         hits = tracer.rays.intersect(o, d)
         keep = roulette_survivors(
-            beta, _f64(weight), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, d, RR_MAX_SURVIVAL
+            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, d, RR_MAX_SURVIVAL
         )
         live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
         hits = hits.take(keep)

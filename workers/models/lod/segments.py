@@ -75,14 +75,16 @@ def boundary_pair_rows(grid_lo, extent, resolutions, level, cells, grow, wo, u_f
 
 
 @kernel
-def roulette_survivors(beta, weight, u_survive, prim, t, lo, hi, origins, directions, max_survival):
-    """Albedo-based Russian roulette after a BSDF sample: beta *= weight / q with q = min(max(weight),
-    max_survival) (in place), and the rows whose path goes on: survived, hit the asset, inside the voxel
-    box, with a non-zero throughput."""
+def roulette_survivors(beta, weight, eta, u_survive, prim, t, lo, hi, origins, directions, max_survival):
+    """Albedo-based Russian roulette after a BSDF sample of relative IOR `eta` (1 for a reflection): beta *=
+    weight / q with q = min(max(weight) * eta^2, max_survival) (in place), and the rows whose path goes on:
+    survived, hit the asset, inside the voxel box, with a non-zero throughput. The eta^2 undoes a
+    transmission's 1/eta^2 radiance scaling (`workers.render.bsdf`), as the path tracer's roulette does
+    (`wavefront._roulette`): a refraction into glass loses no energy, so it is no reason to end the path."""
     keep = np.empty(len(beta), np.int64)
     n_keep = 0
     for i in range(len(beta)):
-        q = _max3(weight[i, 0], weight[i, 1], weight[i, 2])
+        q = _max3(weight[i, 0], weight[i, 1], weight[i, 2]) * eta[i] * eta[i]
         q = q if q < max_survival or math.isnan(q) else max_survival
         scale = 1.0 / max(q, 1e-300)
         for c in range(3):

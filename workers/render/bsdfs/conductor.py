@@ -28,7 +28,7 @@ class Conductor(CompiledBSDF):
         _eval(rows, *contiguous(s.base, s.alpha, wo, wi), *out)
 
     def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
-        _sample(rows, *contiguous(s.base, s.alpha, wo, u), *out)
+        _sample(rows, *contiguous(s.base, s.alpha, wo, u), *out[:4])  # reflection only: eta stays 1
 
 
 @njit(cache=True, nogil=True, fastmath=False)

@@ -80,7 +80,7 @@ def _eval(rows, alpha, ior, wo, wi, f_cos, pdf):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _sample(rows, alpha, ior, wo, u, uc, wi, weight, pdf, delta):
+def _sample(rows, alpha, ior, wo, u, uc, wi, weight, pdf, delta, eta_out):
     for i in rows:
         a = max(alpha[i], ALPHA_MIN)
         smooth = alpha[i] <= 0
@@ -106,5 +106,7 @@ def _sample(rows, alpha, ior, wo, u, uc, wi, weight, pdf, delta):
         g1 = 1.0 if smooth else smith_g1(iz, ix * mx + iy * my + iz * mz, a)
         w = g1 * (1.0 if choose_r else eta_ti * eta_ti)
         weight[i, 0] = weight[i, 1] = weight[i, 2] = w
+        if not choose_r:
+            eta_out[i] = eta  # far side over wo's side: 1 / eta_ti, whose square the weight divides by
         if not smooth:
             pdf[i] = _eval_one(alpha[i], ior[i], wo[i], wi[i])[1]

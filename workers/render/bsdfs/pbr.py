@@ -267,4 +267,5 @@ class MetallicRoughness(BSDF):
         f_cos, pdf = self._eval(s, v, l)
         valid &= pdf > 0
         weight = np.where(valid[:, None], f_cos / np.maximum(pdf, 1e-300)[:, None], 0.0)
-        return _flip_z(l, side), weight, np.where(valid, pdf, 0.0), np.zeros(len(v), bool)
+        eta = np.where(valid & choose_transmit, 1.0 / eta_ti, 1.0)  # the sampled event's relative IOR
+        return _flip_z(l, side), weight, np.where(valid, pdf, 0.0), np.zeros(len(v), bool), eta

@@ -91,7 +91,9 @@ class Plastic(CompiledBSDF):
         _eval(rows, *contiguous(s.base, s.alpha, s.ior, wo, wi), *_coats(s, rows), *out)
 
     def sample_kernel(self, s: SurfaceBatch, wo, u, uc, rows, out):
-        _sample(rows, *contiguous(s.base, s.alpha, s.ior, wo, u, uc), *_coats(s, rows), *out)
+        _sample(
+            rows, *contiguous(s.base, s.alpha, s.ior, wo, u, uc), *_coats(s, rows), *out[:4]
+        )  # reflection only: eta stays 1
 
 
 @k.scalar
