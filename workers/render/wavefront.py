@@ -224,6 +224,19 @@ def _roulette(beta, eta2, u):
     return 1.0 / max(q, 1e-300) if u < q else 0.0
 
 
+@k.scalar
+def _leave_one(wi, fs, ft, ns, p, nrm, scale, origin, direction):
+    """The ray leaving surface point `p` along local direction `wi`, written into `origin` and `direction`:
+    the direction is wi in the frame (fs, ft, ns), the origin is offset off the surface to the side it
+    leaves by."""
+    x, y, z = wi[0], wi[1], wi[2]
+    dx = x * fs[0] + y * ft[0] + z * ns[0]
+    dy = x * fs[1] + y * ft[1] + z * ns[1]
+    dz = x * fs[2] + y * ft[2] + z * ns[2]
+    origin[0], origin[1], origin[2] = offset_one(p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale)
+    direction[0], direction[1], direction[2] = dx, dy, dz
+
+
 @kernel
 def roulette(beta, eta2, u):
     """Russian roulette on whole paths (in place on `beta`); the rows that survive with a throughput > 0."""
@@ -263,15 +276,7 @@ def next_paths(idx, beta, eta2, sampled, frames, position, ng, scale, u_roulette
                 b[c] *= factor
         if not max(b[0], b[1], b[2]) > 0:
             continue
-        x, y, z = wi[i, 0], wi[i, 1], wi[i, 2]
-        dx = x * fs[i, 0] + y * ft[i, 0] + z * ns[i, 0]
-        dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
-        dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
-        p, nrm = position[i], ng[i]
-        out_o[count, 0], out_o[count, 1], out_o[count, 2] = offset_one(
-            p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
-        )
-        out_d[count, 0], out_d[count, 1], out_d[count, 2] = dx, dy, dz
+        _leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], out_o[count], out_d[count])
         for c in range(3):
             out_beta[count, c] = b[c]
         out_eta2[count] = e2
@@ -318,13 +323,5 @@ def rays_leaving(wi, fs, ft, ns, position, ng, scale):
     n = len(wi)
     origins, directions = np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
-        x, y, z = wi[i, 0], wi[i, 1], wi[i, 2]
-        dx = x * fs[i, 0] + y * ft[i, 0] + z * ns[i, 0]
-        dy = x * fs[i, 1] + y * ft[i, 1] + z * ns[i, 1]
-        dz = x * fs[i, 2] + y * ft[i, 2] + z * ns[i, 2]
-        p, nrm = position[i], ng[i]
-        origins[i, 0], origins[i, 1], origins[i, 2] = offset_one(
-            p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], dx, dy, dz, scale[i]
-        )
-        directions[i, 0], directions[i, 1], directions[i, 2] = dx, dy, dz
+        _leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], origins[i], directions[i])
     return origins, directions
