@@ -13,9 +13,14 @@ Bounds, and why:
   a low variance estimate, and their mean drifts negative even for identical estimators.
 - Outliers: under agreement |z| > 4 has probability 6e-5 per block; heavy-tailed caustic noise
   and a 7-dof standard-error estimate fatten the tails, so we allow 2% of the blocks.
-- Mean relative error: with Gaussian noise E|ours - mitsuba| = sqrt(2/pi) sigma, so the MRE
-  that noise alone explains is mean(sqrt(2/pi) sigma / mitsuba); we require the observed MRE to
-  be at most 1.3x that (the sample mean over >= 192 blocks is within ~5% of its expectation).
+- Mean relative error: with Gaussian noise E|ours - mitsuba| = sqrt(2/pi) sigma, so the error
+  that noise alone explains is sum(sqrt(2/pi) sigma) / sum(mitsuba) over the lit blocks; we require
+  the observed sum|ours - mitsuba| / sum(mitsuba) to be at most 1.3x that (a sum over >= 150 blocks
+  is within ~5% of its expectation). Relative to the image's brightness, not per block: an average
+  of per-block relative errors is ruled by a handful of nearly black blocks whose relative noise is
+  50% (seen on the glTF scene: 3 of 471 block channels moved it by 0.007), so it stops being close
+  to its expectation. A bias anywhere still shows here in proportion to its light, and a local one
+  in the per-block z above.
 """
 
 from __future__ import annotations
@@ -79,8 +84,8 @@ def compare_renders(ours_at: Callable[[int], np.ndarray], theirs_at: Callable[[i
     totals_o, totals_m = ours.mean(axis=(1, 2)), theirs.mean(axis=(1, 2))  # (SEEDS, 3)
     total_se = np.sqrt(totals_o.var(0, ddof=1) / SEEDS + totals_m.var(0, ddof=1) / SEEDS)
     global_t = (totals_o.mean(0) - totals_m.mean(0)) / np.maximum(total_se, 1e-12)
-    mre = np.mean(np.abs(mean_o - mean_m)[lit] / mean_m[lit])
-    noise_mre = np.mean(np.sqrt(2 / np.pi) * se[lit] / mean_m[lit])
+    mre = np.sum(np.abs(mean_o - mean_m)[lit]) / np.sum(mean_m[lit])
+    noise_mre = np.sum(np.sqrt(2 / np.pi) * se[lit]) / np.sum(mean_m[lit])
     summary = (
         f"image-mean t {np.round(global_t, 2)}, |z|>4 in {np.mean(np.abs(z) > 4):.1%} of {z.size} blocks, "
         f"MRE {mre:.4f} vs noise-explained {noise_mre:.4f}, means {mean_o.mean():.5f} / {mean_m.mean():.5f}"
