@@ -5,8 +5,11 @@ killed mid-job) is in test_scaleout_cluster.py."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 import ray
+from ray.exceptions import RayActorError
 from ray.util.placement_group import placement_group, remove_placement_group
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
@@ -36,12 +39,25 @@ def test_a_reservation_the_cluster_cannot_place_fails_the_job_as_infrastructure(
         remove_placement_group(group)
 
 
+def wait_until_dead(actor, timeout_s: float = 60.0) -> None:
+    """ray.kill only asks for the kill: a call made right after it can still be served by the actor."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            ray.get(actor.produced.remote(), timeout=timeout_s)
+        except RayActorError:
+            return
+        time.sleep(0.05)
+    raise AssertionError("the killed sampler actor still answers")
+
+
 def test_a_placed_reservation_replaces_a_dead_sampler(ray_cluster):
     group = placement_group([{"CPU": 1}], strategy="PACK")
     ray.get(group.ready(), timeout=120)
     with pool_in(group) as pool:
         first = next(pool)
         ray.kill(pool.actors[0], no_restart=True)
+        wait_until_dead(pool.actors[0])
         pool.seek(1)  # asks the dead actor again: its batch comes from a replacement
         second = next(pool)
         assert pool.replacements == 1
