@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from workers.render import kernels as k
-from workers.render.environment import direction_lookup
+from workers.render.environment import lookup_rows
 from workers.render.jit import njit
 
 RAY_OFFSET = 2e-5  # relative to the magnitude of the hit triangle's coordinates
@@ -116,13 +116,13 @@ def add_escapes(radiance, rows, idx, beta, d, prev_pdf, prev_delta, env_map, env
     light-sampling pdf (selection included) come from the lat-long map `env_map` (`env_prob` the map's
     selection probability) or, without one (`NO_MAP`), from `env_radiance`, `env_pdf` per row."""
     weights = np.empty(len(rows))
+    if env_map.image.shape[0] > 0:
+        env_radiance, env_pdf = lookup_rows(d, rows, env_map)
+        for j in range(len(rows)):
+            env_pdf[j] *= env_prob
     for j in range(len(rows)):
         i = rows[j]
-        if env_map.image.shape[0] > 0:
-            r, g, b, pdf = direction_lookup(d[i, 0], d[i, 1], d[i, 2], env_map)
-            pdf *= env_prob
-        else:
-            r, g, b, pdf = env_radiance[j, 0], env_radiance[j, 1], env_radiance[j, 2], env_pdf[j]
+        r, g, b, pdf = env_radiance[j, 0], env_radiance[j, 1], env_radiance[j, 2], env_pdf[j]
         weight = 1.0 if prev_delta[i] else k.power_heuristic(prev_pdf[i], pdf)
         weights[j] = weight
         p = idx[i]
