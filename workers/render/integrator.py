@@ -421,14 +421,14 @@ class PathTracer:
             return paths.take(np.zeros(0, np.int64)), 0
 
         sh = self._shade(it, hits, d, self._footprint(hits, it, d, paths.spread))
-        u = rng.random((len(idx), 7))
+        u_select, u_light, u_bsdf, u_lobe, u_roulette = wavefront.vertex_uniforms(rng.random((len(idx), 7)))
 
-        shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
+        shadow_rays = self._next_event(idx, sh, beta, u_select, u_light, radiance, observer)
 
-        sampled = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
+        sampled = sample_bsdf(sh.surf, sh.wo_local, u_bsdf, u_lobe)
         n_idx, o, wi, n_beta, eta2, pdf, delta = wavefront.next_paths(
             idx, beta, paths.eta2, _sampled(sampled), (sh.fs, sh.ft, sh.ns), sh.position, sh.ng, sh.scale,
-            np.ascontiguousarray(u[:, 6]), roulette,
+            u_roulette, roulette,
         )  # fmt: skip
         zeros = np.zeros(len(n_idx))
         return _Paths(n_idx, o, wi, n_beta, eta2, pdf, delta, zeros, zeros.copy()), shadow_rays
@@ -534,14 +534,16 @@ class PathTracer:
         fs, ft, ns, wo_local = wavefront.shading_frames(_f64(d), _f64(ns), surf.two_sided)
         return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, wo_local)
 
-    def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
+    def _next_event(
+        self, idx, sh: Shading, beta, u_select, u_light, radiance, observer: PathObserver | None
+    ) -> int:
         """Add light-sampled direct lighting (MIS-weighted) at every vertex; returns shadow rays. Vertices
         with only delta lobes sample lights too and get nothing from them (`eval_bsdf` is 0 there, so they
         cast no shadow ray): cheaper than gathering the other rows apart."""
         if self.lights.count == 0:
             return 0
         rows = np.arange(len(idx))
-        ls = self.lights.sample(sh.position, u[:, 0], u[:, 1:3])
+        ls = self.lights.sample(sh.position, u_select, u_light)
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
         f_cos, bsdf_pdf = eval_bsdf(sh.surf, sh.wo_local, wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)

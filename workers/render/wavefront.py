@@ -294,6 +294,20 @@ def next_paths(idx, beta, eta2, sampled, frames, position, ng, scale, u_roulette
 
 
 @kernel
+def vertex_uniforms(u):
+    """A surface vertex's 7 uniforms per row (N, 7) as the contiguous arrays its kernels take: light
+    selection (N,), light sample (N, 2), BSDF sample (N, 2), lobe choice (N,), roulette (N,). One pass, where
+    NumPy copied each strided slice of `u` in its own pass (4% of cornell_box's CPU time)."""
+    n = len(u)
+    select, light, bsdf = np.empty(n), np.empty((n, 2)), np.empty((n, 2))
+    lobe, roulette = np.empty(n), np.empty(n)
+    for i in range(n):
+        select[i], light[i, 0], light[i, 1] = u[i, 0], u[i, 1], u[i, 2]
+        bsdf[i, 0], bsdf[i, 1], lobe[i], roulette[i] = u[i, 3], u[i, 4], u[i, 5], u[i, 6]
+    return select, light, bsdf, lobe, roulette
+
+
+@kernel
 def take_paths(rows, paths):
     """The wavefront arrays (idx, o, d, beta, eta2, prev_pdf, prev_delta, t_min, spread) at `rows`, in one
     pass."""
