@@ -140,8 +140,10 @@ def _lat_long(dx, dy, dz, rotation):
     z = dx * rotation[0, 2] + dy * rotation[1, 2] + dz * rotation[2, 2]
     length = max(math.sqrt(x * x + y * y + z * z), 1e-300)
     x, y, z = x / length, y / length, z / length
-    u = math.atan2(x, -z) / (2.0 * math.pi) % 1.0
-    if u >= 1.0:  # -tiny % 1.0 rounds to 1.0
+    u = math.atan2(x, -z) / (2.0 * math.pi)  # in [-0.5, 0.5]: u % 1.0, without fmod's library call
+    if u < 0.0:
+        u += 1.0
+    if u >= 1.0:  # -tiny + 1.0 rounds to 1.0
         u = 0.0
     return u, math.acos(min(max(y, -1.0), 1.0)) / math.pi, math.sqrt(x * x + z * z)
 
@@ -155,8 +157,9 @@ def _bilinear(image, u, v):
     x0f = math.floor(x)
     y0f = min(math.floor(y), height - 2) if height > 1 else 0.0
     fx, fy = x - x0f, y - y0f
-    x0 = int(x0f) % width
-    x1 = (x0 + 1) % width
+    x0 = int(x0f)  # >= -1: wrapped without an integer division
+    x0 = x0 + width if x0 < 0 else x0
+    x1 = x0 + 1 if x0 + 1 < width else 0
     y0 = int(y0f)
     y1 = min(y0 + 1, height - 1)
     w00, w01, w10, w11 = (1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy
