@@ -23,11 +23,12 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
+from workers.render.jit import njit
 from workers.scene.spec import ColorOrTexture
 
 
@@ -40,6 +41,8 @@ class SurfaceBatch:
     alpha: np.ndarray  # (N,) GGX alpha; 0 means perfectly smooth
     ior: np.ndarray  # (N,) interior over exterior
     extra: np.ndarray | None = None  # (N, K) family-specific parameters (`MaterialParameters.extra`)
+    # the rows grouped by family, computed by the first `eval_bsdf` or `sample_bsdf` (`_groups`)
+    by_family: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     def take(self, idx: np.ndarray) -> SurfaceBatch:
         extra = None if self.extra is None else self.extra[idx]
@@ -202,20 +205,39 @@ def contiguous(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
 
 
-def _groups(family: np.ndarray):
-    """(family, rows) for each family present."""
-    if len(family) and family.min() == family.max():
-        yield _registry.families[int(family[0])], np.arange(len(family))
-        return
-    for code in np.unique(family):
-        yield _registry.families[int(code)], np.flatnonzero(family == code)
+def _groups(s: SurfaceBatch):
+    """(family, rows) for each family present, rows ascending; grouped once per batch (its eval and its
+    sample share the grouping)."""
+    if s.by_family is None:
+        s.by_family = _rows_by_family(np.asarray(s.family, np.int8), len(_registry.families))
+    rows, starts = s.by_family
+    for code in range(len(starts) - 1):
+        if starts[code + 1] > starts[code]:
+            yield _registry.families[code], rows[starts[code] : starts[code + 1]]
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _rows_by_family(family, count):
+    """The rows grouped by family code, ascending within each (a counting sort: one pass, where a
+    `np.unique` and a `flatnonzero` per family took several), and where each code's rows start
+    (count + 1 entries)."""
+    starts = np.zeros(count + 1, np.int64)
+    for code in family:
+        starts[code + 1] += 1
+    for code in range(count):
+        starts[code + 1] += starts[code]
+    rows, fill = np.empty(len(family), np.int64), starts[:-1].copy()
+    for i in range(len(family)):
+        rows[fill[family[i]]] = i
+        fill[family[i]] += 1
+    return rows, starts
 
 
 def eval_bsdf(s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """f(wo, wi) |cos wi| (N, 3) and the pdf of sampling wi (N,)."""
     n = len(wo)
     out = np.zeros((n, 3)), np.zeros(n)
-    for family, rows in _groups(s.family):
+    for family, rows in _groups(s):
         family.eval_rows(s, wo, wi, rows, out)
     return out
 
@@ -232,6 +254,6 @@ def sample_bsdf(s: SurfaceBatch, wo: np.ndarray, u: np.ndarray, uc: np.ndarray):
     """
     n = len(wo)
     out = _sample_outputs(n)
-    for family, rows in _groups(s.family):
+    for family, rows in _groups(s):
         family.sample_rows(s, wo, u, uc, rows, out)
     return out

@@ -20,13 +20,21 @@ class RayScene:
         # Embree builds its BVH lazily on the first query: build it now, once, not inside a worker thread.
         self.intersect(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray | None = None) -> Hits:
+        """Closest hits; with `t_max` (N,), only those up to it (float32 rounded up: a farther hit may
+        still be reported), which lets Embree skip what lies beyond: callers that only keep hits
+        closer than a bound pass it."""
         if len(origins) == 0:
             empty = np.zeros(0)
             return Hits(np.zeros(0, np.int32), empty, empty, empty)
+        dists = None
+        if t_max is not None:
+            bound = np.minimum(t_max, 3.0e38).astype(np.float32)
+            dists = np.nextafter(bound, np.float32(np.inf))
         out = self._scene.run(
             np.ascontiguousarray(origins, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
+            dists=dists,
             output=1,
         )
         return Hits(out["primID"], out["tfar"].astype(np.float64), out["u"], out["v"])
@@ -53,10 +61,11 @@ class SubsetRayScene:
         self.triangle_ids = np.asarray(triangle_ids, np.int64)
         self._scene = RayScene(positions[self.triangle_ids], robust) if len(self.triangle_ids) else None
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray | None = None) -> Hits:
+        """As `RayScene.intersect`."""
         if self._scene is None:
             return Hits.misses(len(origins))
-        hits = self._scene.intersect(origins, directions)
+        hits = self._scene.intersect(origins, directions, t_max)
         found = hits.prim >= 0
         hits.prim = np.where(found, self.triangle_ids[np.where(found, hits.prim, 0)], -1)
         return hits

@@ -136,6 +136,7 @@ class _Interaction:
     ns: np.ndarray
     uv: np.ndarray
     scale: np.ndarray  # coordinate magnitude that float32 rounding errors are relative to
+    material: np.ndarray  # scene material ids
 
 
 class PathTracer:
@@ -166,15 +167,16 @@ class PathTracer:
             scene, self.materials.emission_scale if self.materials.emission_textured else None
         )
         positions = scene.positions.astype(np.float64)
-        self._ng = np.ascontiguousarray(scene.geometric_normals, dtype=np.float64)
+        ng = np.ascontiguousarray(scene.geometric_normals, dtype=np.float64)
         self._ns = np.ascontiguousarray(scene.shading_normals, dtype=np.float64)
         self._uv = np.ascontiguousarray(scene.uvs, dtype=np.float64)
         self._emission = np.ascontiguousarray(scene.emission, dtype=np.float64)
-        self._two_sided_emission = np.ascontiguousarray(scene.two_sided_emission, dtype=np.bool_)
-        self._coordinate_scale = np.abs(positions).max(axis=(1, 2))
         # Triangles whose shading normals differ from the geometric one need interpolation.
-        deviation = np.abs(self._ns - self._ng[:, None, :]).max(axis=(1, 2))
-        self._smooth = deviation > 1e-6
+        smooth = np.abs(self._ns - ng[:, None, :]).max(axis=(1, 2)) > 1e-6
+        self._triangles = wavefront.triangle_records(
+            ng, np.abs(positions).max(axis=(1, 2)), smooth, scene.material_ids, self._emission,
+            scene.two_sided_emission,
+        )  # fmt: skip
         self._needs_uv = self.materials.needs_uv
         with np.errstate(divide="ignore"):
             uv_edges = self._uv[:, 1:] - self._uv[:, :1]
@@ -190,26 +192,25 @@ class PathTracer:
         self, hits: Hits, origins: np.ndarray, directions: np.ndarray, need_uv: bool
     ) -> _Interaction:
         """Surface data at hits (`wavefront.surface_points`): the position is o + t d (float32 t: error far
-        below the ray offset); predicted surfaces (`Hits.surface`) replace both normals."""
-        position, ng, ns, uv, scale = wavefront.surface_points(
+        below the ray offset); predicted surfaces (`Hits.surface`) replace both normals and the material."""
+        position, ng, ns, uv, scale, material = wavefront.surface_points(
             _f64(origins),
             _f64(directions),
             _f64(hits.t),
             np.asarray(hits.prim, dtype=np.int64),
             _f64(hits.u),
             _f64(hits.v),
-            self._ng,
+            self._triangles,
             self._ns,
-            self._smooth,
             self._uv,
-            self._coordinate_scale,
             need_uv,
         )
         if hits.surface is not None and hits.surface.where.any():
             predicted = np.flatnonzero(hits.surface.where)
             ng[predicted] = hits.surface.normal[predicted]
             ns[predicted] = hits.surface.normal[predicted]
-        return _Interaction(position, ng, ns, uv, scale)
+            material[predicted] = hits.surface.material[predicted]
+        return _Interaction(position, ng, ns, uv, scale, material)
 
     @staticmethod
     def offset(position: np.ndarray, ng: np.ndarray, direction: np.ndarray, scale: np.ndarray | None = None):
@@ -252,7 +253,7 @@ class PathTracer:
         sub = hits.take(sel)
         it = self._interaction(sub, origins[sel], directions[sel], need_uv=True)
         prim = sub.prim
-        mat = self._material_ids(sub)
+        mat = it.material
         rec.t[sel], rec.position[sel], rec.uv[sel] = sub.t, it.position, it.uv
         rec.geometric_normal[sel], rec.shading_normal[sel], rec.prim[sel] = it.ng, it.ns, prim
         rec.material_id[sel] = mat
@@ -281,12 +282,6 @@ class PathTracer:
         corners = self.scene.tangents[hits.prim].astype(np.float64)
         return (1.0 - b1 - b2) * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
 
-    def _material_ids(self, hits: Hits) -> np.ndarray:
-        mat = self.scene.material_ids[hits.prim]
-        if hits.surface is not None:
-            mat = np.where(hits.surface.where, hits.surface.material, mat)
-        return mat
-
     def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
         surf = self.materials.surfaces(mat, uv, footprint)
         if hits.surface is not None and hits.surface.where.any():
@@ -296,9 +291,7 @@ class PathTracer:
     def _emitted(self, prim: np.ndarray, d: np.ndarray, ng: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Radiance the hit triangles `prim` emit back along the rays `d`."""
         prim = np.asarray(prim, dtype=np.int64)
-        emitted = wavefront.emitted_radiance(
-            prim, _f64(d), _f64(ng), self._emission, self._two_sided_emission
-        )
+        emitted = wavefront.emitted_radiance(prim, _f64(d), _f64(ng), self._triangles, self._emission)
         if self.materials.emission_textured:
             emitted = emitted * self.materials.emission_scale(self.scene.material_ids[prim], uv)
         return emitted
@@ -421,14 +414,14 @@ class PathTracer:
             return paths.take(np.zeros(0, np.int64)), 0
 
         sh = self._shade(it, hits, d, self._footprint(hits, it, d, paths.spread))
-        u = rng.random((len(idx), 7))
+        u_select, u_light, u_bsdf, u_lobe, u_roulette = wavefront.vertex_uniforms(rng.random((len(idx), 7)))
 
-        shadow_rays = self._next_event(idx, sh, beta, u, radiance, observer)
+        shadow_rays = self._next_event(idx, sh, beta, u_select, u_light, radiance, observer)
 
-        sampled = sample_bsdf(sh.surf, sh.wo_local, u[:, 3:5], u[:, 5])
+        sampled = sample_bsdf(sh.surf, sh.wo_local, u_bsdf, u_lobe)
         n_idx, o, wi, n_beta, eta2, pdf, delta = wavefront.next_paths(
             idx, beta, paths.eta2, _sampled(sampled), (sh.fs, sh.ft, sh.ns), sh.position, sh.ng, sh.scale,
-            np.ascontiguousarray(u[:, 6]), roulette,
+            u_roulette, roulette,
         )  # fmt: skip
         zeros = np.zeros(len(n_idx))
         return _Paths(n_idx, o, wi, n_beta, eta2, pdf, delta, zeros, zeros.copy()), shadow_rays
@@ -526,7 +519,7 @@ class PathTracer:
         return self._shade(it, hits, directions)
 
     def _shade(self, it: _Interaction, hits: Hits, d: np.ndarray, footprint=None) -> Shading:
-        material_ids = self._material_ids(hits)
+        material_ids = it.material
         surf = self._surfaces(hits, material_ids, it.uv, footprint)
         ns = it.ns
         if self.materials.normal_mapped:
@@ -534,14 +527,16 @@ class PathTracer:
         fs, ft, ns, wo_local = wavefront.shading_frames(_f64(d), _f64(ns), surf.two_sided)
         return Shading(it.position, it.ng, it.scale, surf, fs, ft, ns, wo_local)
 
-    def _next_event(self, idx, sh: Shading, beta, u, radiance, observer: PathObserver | None) -> int:
+    def _next_event(
+        self, idx, sh: Shading, beta, u_select, u_light, radiance, observer: PathObserver | None
+    ) -> int:
         """Add light-sampled direct lighting (MIS-weighted) at every vertex; returns shadow rays. Vertices
         with only delta lobes sample lights too and get nothing from them (`eval_bsdf` is 0 there, so they
         cast no shadow ray): cheaper than gathering the other rows apart."""
         if self.lights.count == 0:
             return 0
         rows = np.arange(len(idx))
-        ls = self.lights.sample(sh.position, u[:, 0], u[:, 1:3])
+        ls = self.lights.sample(sh.position, u_select, u_light)
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
         f_cos, bsdf_pdf = eval_bsdf(sh.surf, sh.wo_local, wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)

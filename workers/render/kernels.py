@@ -166,7 +166,18 @@ def guided_search(cdf, guide, u):
     (Chen and Asau's cutpoints): with as many cutpoints as entries the answer is about one entry away, so
     a search costs two memory loads instead of log2 len(cdf) dependent ones (the large tables of an
     environment map's rows miss the cache). Scans both ways, so rounding of u * len(guide) cannot err."""
-    i = guide[min(int(u * len(guide)), len(guide) - 1)]
+    return search_from(cdf, guide_start(guide, u), u)
+
+
+@scalar
+def guide_start(guide, u):
+    """The guide's cutpoint for u: where `guided_search` starts (the one load of the guide table)."""
+    return guide[min(int(u * len(guide)), len(guide) - 1)]
+
+
+@scalar
+def search_from(cdf, i, u):
+    """`search_right(cdf, u)` by scanning both ways from entry i."""
     while i > 0 and cdf[i - 1] > u:
         i -= 1
     while i < len(cdf) and cdf[i] <= u:

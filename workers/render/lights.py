@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from workers.render import kernels
-from workers.render.environment import NO_MAP, ConstantEnvironment, EnvironmentMapLight, sample_one
+from workers.render.environment import NO_MAP, ConstantEnvironment, EnvironmentMapLight, sample_rows
 from workers.render.jit import njit
 from workers.render.sampling import luminance, normalize
 from workers.scene import spec
@@ -244,6 +244,7 @@ def _sample_lights(p, u_select, u, lights, env):
     kind, tri, bary = np.empty(n, np.int8), np.zeros(n, np.int64), np.zeros((n, 2))
     cdf = lights.cdf
     count = len(cdf)
+    env_rows, env_count = np.empty(n, np.int64), 0  # sampled after the loop, in blocks (`sample_rows`)
     for i in range(n):
         entry = min(kernels.search_right(cdf, u_select[i]), count - 1)
         k, which, select = lights.kinds[entry], lights.index[entry], lights.prob[entry]
@@ -289,11 +290,10 @@ def _sample_lights(p, u_select, u, lights, env):
                 direction[i, c] = lights.dir_to_light[which, c]
                 radiance[i, c] = lights.dir_irradiance[which, c]
             pdf[i], delta[i] = select, True
-        elif env.image.shape[0] > 0:
-            dx, dy, dz, env_pdf, r, g, b = sample_one(u[i, 0], u[i, 1], env)
-            direction[i, 0], direction[i, 1], direction[i, 2] = dx, dy, dz
-            radiance[i, 0], radiance[i, 1], radiance[i, 2] = r, g, b
-            pdf[i] = select * env_pdf
         else:
             pdf[i] = select
+            env_rows[env_count] = i
+            env_count += 1
+    if env.image.shape[0] > 0:
+        sample_rows(u, env_rows[:env_count], env, direction, pdf, radiance)
     return direction, distance, radiance, pdf, delta, kind, tri, bary

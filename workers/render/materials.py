@@ -14,6 +14,7 @@ import numpy as np
 
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
+from workers.render.jit import njit
 from workers.scene import spec
 from workers.scene.compile import CompiledScene
 from workers.scene.textures import MipChain, evaluate_texture, load_image_texture
@@ -54,18 +55,14 @@ class MaterialTable:
     def surfaces(self, material_ids: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
         """The rows' SurfaceBatch; image textures are filtered over `footprint` (log2 UV width per row,
         `MipChain.lookup`) where it is given."""
-        base = self.base[material_ids]
+        family, base, alpha, ior, extra = _gather(
+            np.asarray(material_ids, np.int64), self.family, self.base, self.alpha, self.ior, self.extra
+        )
         for i, (texture, image) in self.textures.items():
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
                 base[sel] = evaluate_texture(texture, image, uv[sel], _rows(footprint, sel))
-        batch = SurfaceBatch(
-            self.family[material_ids],
-            base,
-            self.alpha[material_ids],
-            self.ior[material_ids],
-            self.extra[material_ids] if self.extra.shape[1] else None,
-        )
+        batch = SurfaceBatch(family, base, alpha, ior, extra if self.extra.shape[1] else None)
         for i, slots in self.slots.items():
             sel = np.flatnonzero(material_ids == i)
             if len(sel):
@@ -127,6 +124,22 @@ class MaterialTable:
     def roughness(self, material_ids: np.ndarray) -> np.ndarray:
         """Roughness for the AOV: the GGX alpha, and 1 for Lambertian surfaces."""
         return self._roughness[material_ids]
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _gather(material_ids, family, base, alpha, ior, extra):
+    """The material table's rows of `material_ids`, in one pass (five NumPy gathers took 4% of a render)."""
+    n, k = len(material_ids), extra.shape[1]
+    out_family, out_base = np.empty(n, np.int8), np.empty((n, 3))
+    out_alpha, out_ior, out_extra = np.empty(n), np.empty(n), np.empty((n, k))
+    for i in range(n):
+        m = material_ids[i]
+        out_family[i], out_alpha[i], out_ior[i] = family[m], alpha[m], ior[m]
+        for c in range(3):
+            out_base[i, c] = base[m, c]
+        for c in range(k):
+            out_extra[i, c] = extra[m, c]
+    return out_family, out_base, out_alpha, out_ior, out_extra
 
 
 def _mip_chain(texture: spec.Texture, field: str, scene: CompiledScene) -> MipChain | None:
