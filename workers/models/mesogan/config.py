@@ -73,6 +73,9 @@ class MesoganConfig(TrainedKindConfig):
     r1_gamma: float = Field(1.0, ge=0)
     mean_color_weight: float = Field(10.0, ge=0, description="generator: L1 of fake and real block means")
     moment_block: int = Field(4, ge=1, description="pixels per side of the blocks whose means are matched")
+    structure_weight: float = Field(
+        0.0, ge=0, description="generator: L1 of fake and real views' coverage and mean first-hit height"
+    )
     batch_size: int = Field(8, ge=1)
     train: TrainConfig = TrainConfig(
         steps=2000,
