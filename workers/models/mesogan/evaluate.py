@@ -18,6 +18,7 @@ from workers.models.mesogan.config import STRUCTURE_RANGES
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, View, first_hit_heights, instance_tracer, stack_views
 from workers.models.mesogan.train import fake_views, view_structure
+from workers.scene.mesoscale import Structure
 
 HELD_OUT_SEED_OFFSET = 1 << 20  # held-out instances come from a seed no training batch uses
 PATCH = 3
@@ -79,34 +80,34 @@ def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
     }
 
 
-# The structure probes: one parameter set to either end of its trained range, the rest as drawn.
+# The structure probes: the statistic each parameter moves, and the names of its range's two ends.
 PROBES = {"density": ("coverage", "sparse", "dense"), "length": ("height", "short", "long")}
 
 
 def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[str, float]:
-    """How the generated pile follows its structure labels, against the real strands under the same
-    labels: for `count` held-out instances (camera, light, colour and the other parameters as drawn),
-    with strand density set to either end of its trained range, the mean coverage of the views (the
-    fraction of pixel-centre rays the pile stops), and with strand length so set, the mean height where
-    the rays stop (0 at the skin). Real figures come from the first hits of the same cameras on strand
-    geometry grown with those parameters (no path tracing needed); generated ones from renders of one
-    latent and noise per instance, so only the label differs between the two ends."""
+    """How the generated pile follows its structure labels, against real strands under the same labels.
+    Strand density is set to either end of its trained range (the other parameters at the middle of
+    theirs) and the mean coverage of `count` held-out views is measured (the fraction of pixel-centre
+    rays the pile stops); likewise strand length and the mean height where the rays stop (0 at the
+    skin). The views keep their held-out cameras, lights and colours. Real figures are the first hits of
+    those cameras on one strand instance grown with each end's parameters (no path tracing needed);
+    generated ones come from renders of one latent and noise per view, so only the label differs
+    between the two ends."""
     c = model.config
     held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
-    instances = [held_out.instance(j).instance for j in range(count)]
+    instances = [held_out.draw(j) for j in range(count)]
+    middle = {k: (lo + hi) / 2 for k, (lo, hi) in STRUCTURE_RANGES.items()}
+    blank = np.zeros((c.image_size, c.image_size, 3))
     figures: dict[str, float] = {}
     for parameter, (statistic, low, high) in PROBES.items():
         lo, hi = STRUCTURE_RANGES[parameter]
         for end, value in ((low, lo), (high, hi)):
+            structure = Structure(**(middle | {parameter: value}))
+            tracer = instance_tracer(c, dataclasses.replace(instances[0], structure=structure))
             views = []
             for instance in instances:
-                probe = dataclasses.replace(
-                    instance, structure=instance.structure.model_copy(update={parameter: value})
-                )
-                heights = first_hit_heights(instance_tracer(c, probe), probe.camera)
-                views.append(
-                    View(probe, np.zeros((*heights.shape, 3)).reshape(c.image_size, c.image_size, 3), heights)
-                )
+                probe = dataclasses.replace(instance, structure=structure)
+                views.append(View(probe, blank, first_hit_heights(tracer, probe.camera)))
             batch = stack_views(views)
             with torch.no_grad():
                 torch.manual_seed(0)

@@ -189,12 +189,15 @@ class SlabSource:
         self.seed = seed
         self._views: dict[int, View] = {}
 
+    def draw(self, j: int) -> Instance:
+        """Instance j's labels and camera, without rendering it."""
+        return draw_instance(self.config.mesogan, np.random.default_rng([self.seed, INSTANCE_STREAM, j]))
+
     def instance(self, j: int) -> View:
         """Instance j's view, rendered on first use."""
         if j not in self._views:
             c = self.config.mesogan
-            instance = draw_instance(c, np.random.default_rng([self.seed, INSTANCE_STREAM, j]))
-            self._views[j] = render_instance(c, instance, c.training_spp, seed=j)
+            self._views[j] = render_instance(c, self.draw(j), c.training_spp, seed=j)
         return self._views[j]
 
     def batch(self, index: int) -> Batch:
