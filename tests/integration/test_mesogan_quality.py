@@ -1,8 +1,9 @@
 """A trained mesogan generates slab views closer to held-out path-traced ones than trivial baselines: in
 block means (colour and shading under the labels) and in the Laplacian-pyramid patch distribution (SWD),
 against a black image and against the same networks untrained. And it follows its labels (the issue's
-"Conditioning"): a denser label makes a more opaque pile, a longer one a higher pile, and a colour label
-changes the rendered colour its way while density never reads it."""
+"Conditioning"): a denser label makes the views' pile more opaque and a longer one stops rays higher, as
+real strands under the same labels do, and a colour label changes the rendered colour its way while
+density never reads it."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from workers.models.mesogan.config import PRESETS, MesoganConfig
 from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
-from workers.models.mesogan.train import fake_images, phases
+from workers.models.mesogan.train import fake_views, phases
 from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.threads import torch_threads
@@ -47,19 +48,24 @@ def test_a_trained_model_beats_black_and_untrained_on_held_out_views(trained):
     assert scores["swd"] < scores["swd_black"], scores
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the quick model does not learn the structure labels yet: opacity and mean height are flat "
-    "in them to 0.02 after 60-200 steps (issue 17: measured in the stop-24 note)",
-)
 def test_a_trained_model_moves_geometry_with_its_structure_labels(trained):
-    model, _, _ = trained
+    """Coverage of held-out views follows the density label and the height where rays stop follows the
+    length label, each by a good part of what real strands under the same labels do, and at their level.
+    Before the structure term (`structure_weight`), coverage was 0.76 at both ends of the density range
+    against 0.08 and 0.48 for real strands; a generator that ignores its labels has no spread."""
+    model, _, source = trained
     with torch_threads(1):
-        response = structure_response(model)
-    # density 10 against 80 strands per squared slab height: real fur covers about 6% against 40% of a
-    # view at 60 degrees, so a quarter of that spread in vertical opacity is the least a model must show
-    assert response["opacity_dense"] > response["opacity_sparse"] + 0.08, response
-    assert response["mean_height_long"] > response["mean_height_short"] + 0.05, response
+        r = structure_response(model, source, 8)
+    for statistic, low, high in (("coverage", "sparse", "dense"), ("height", "short", "long")):
+        spread = r[f"{statistic}_{high}"] - r[f"{statistic}_{low}"]
+        real_spread = r[f"{statistic}_{high}_real"] - r[f"{statistic}_{low}_real"]
+        assert real_spread > 0.05, (statistic, r)  # the training data do vary with the label
+        # seed 3 shows 0.59 (coverage) and 0.55 (height) of the real spread, seeds 4 and 5 0.74 to 2.1;
+        # the mapping made to read a constant structure gave 0.0
+        assert spread > real_spread / 3, (statistic, r)
+        level = (r[f"{statistic}_{high}"] + r[f"{statistic}_{low}"]) / 2
+        real_level = (r[f"{statistic}_{high}_real"] + r[f"{statistic}_{low}_real"]) / 2
+        assert abs(level - real_level) < 0.15, (statistic, r)
 
 
 def test_a_trained_model_renders_a_colour_label_its_way(trained):
@@ -70,8 +76,8 @@ def test_a_trained_model_renders_a_colour_label_its_way(trained):
     blue["appearance"] = torch.tensor([0.1, 0.1, 0.8]).expand_as(views["appearance"])
     with torch_threads(1), torch.no_grad():
         torch.manual_seed(0)
-        reds = fake_images(model, red).mean((0, 2, 3))
+        reds = fake_views(model, red).image.mean((0, 2, 3))
         torch.manual_seed(0)
-        blues = fake_images(model, blue).mean((0, 2, 3))
+        blues = fake_views(model, blue).image.mean((0, 2, 3))
     # density never reads appearance (tests/unit/test_mesogan_networks.py checks the routing)
     assert reds[0] - reds[2] > blues[0] - blues[2] + 0.05, (reds, blues)

@@ -14,7 +14,7 @@ from workers.models.mesogan.aggregate import NeuralMaterial, ShellAggregate, pac
 from workers.models.mesogan.config import PRESETS, MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering
 from workers.models.mesogan.networks import MesoGAN
-from workers.models.mesogan.sampling import Instance, hemisphere, slab_scene, stack_views, to_scene
+from workers.models.mesogan.sampling import Instance, View, hemisphere, slab_scene, stack_views, to_scene
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes, render_slab
 from workers.models.mesogan.volume import mip_stack
@@ -145,7 +145,7 @@ def test_the_shell_path_traced_over_a_flat_slab_matches_the_training_renderer():
         position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=16, height=16
     )
     instance = Instance(Structure(), Appearance(hue=0.3), hemisphere(math.radians(40), 2.0), camera, 0)
-    batch = stack_views([(instance, np.zeros((16, 16, 3)))])
+    batch = stack_views([View(instance, np.zeros((16, 16, 3)), np.zeros(16 * 16))])
     side = round(config.tile * config.tiles / config.texel)  # texels over the slab's base
     window = Window((-side // 2, -side // 2), (side, side), config.texel)
     with torch.no_grad():
@@ -154,7 +154,7 @@ def test_the_shell_path_traced_over_a_flat_slab_matches_the_training_renderer():
             draw_noise(model, config, 1, 0), window,
         )  # fmt: skip
         trained_view = torch.stack(
-            [render_slab(model, config, planes, window, batch, jitter=True)[0] for _ in range(16)]
+            [render_slab(model, config, planes, window, batch, jitter=True).image[0] for _ in range(16)]
         ).mean((0, 2, 3))
     spec = slab_scene(config, instance)
     scene = compile_scene(spec.model_copy(update={"objects": [o for o in spec.objects if o.name == "skin"]}))

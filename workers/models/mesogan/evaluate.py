@@ -1,22 +1,24 @@
 """Generation quality without a pretrained network: the sliced Wasserstein distance between Laplacian-
 pyramid patches of generated and path-traced slab views (Karras et al. 2018's SWD, after Rabin et al.
 2011), measured on held-out instances (their own seed stream) rendered under the same labels; and the
-conditioning: how the generated density's mean height follows the strand length parameter and its
-vertical opacity the strand density parameter.
+conditioning: how the coverage of generated views follows the strand density label and the height where
+their rays stop the strand length label, beside the same figures of real strands.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from workers.models.mesogan.config import STRUCTURE_RANGES
 from workers.models.mesogan.networks import MesoGAN
-from workers.models.mesogan.sampling import SlabSource, stack_views
-from workers.models.mesogan.slab import Window, draw_noise, generate_planes
-from workers.models.mesogan.train import fake_images
-from workers.models.mesogan.volume import HEIGHT_TO_RADIANS
+from workers.models.mesogan.sampling import SlabSource, View, first_hit_heights, instance_tracer, stack_views
+from workers.models.mesogan.train import fake_views, view_structure
+from workers.scene.mesoscale import Structure
 
 HELD_OUT_SEED_OFFSET = 1 << 20  # held-out instances come from a seed no training batch uses
 PATCH = 3
@@ -66,7 +68,7 @@ def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
     """SWD and mean block error of the model's renders of `batch`'s labels, and of a black image."""
     with torch.no_grad():
         torch.manual_seed(0)
-        fake = fake_images(model, batch)
+        fake = fake_views(model, batch).image
     real = batch["image"]
     black = torch.zeros_like(real)
     block = model.config.moment_block
@@ -78,50 +80,42 @@ def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
     }
 
 
-def density_profile(model: MesoGAN, structure: Tensor, seed: int, heights: int = 16) -> Tensor:
-    """Density (R^2 texels, `heights`) of the slab generated for `structure` (normalised (3,)) at the
-    level-0 texels of the training window and `heights` evenly spaced heights in the slab."""
-    config = model.config
-    window = Window.centred(config.plane_resolution, config.texel)
-    generator = torch.Generator().manual_seed(seed)
-    latent = torch.randn(1, config.latent_dims, generator=generator)
-    with torch.no_grad():
-        planes = generate_planes(
-            model, config, structure[None], latent, draw_noise(model, config, 1, seed), window
-        )
-        features = planes[0].flatten(1).T  # (R^2, C) at level 0
-        h = (torch.arange(heights) + 0.5) / heights
-        f = features[:, None].expand(-1, heights, -1)
-        hh = h[None].expand(len(features), -1)
-        density, _ = model.decoder.density(f, hh * HEIGHT_TO_RADIANS, torch.zeros_like(hh))
-    return density
+# The structure probes: the statistic each parameter moves, and the names of its range's two ends.
+PROBES = {"density": ("coverage", "sparse", "dense"), "length": ("height", "short", "long")}
 
 
-def mean_height(density: Tensor) -> float:
-    """The density-weighted mean height of a profile: a longer pile puts density higher."""
-    h = (torch.arange(density.shape[-1]) + 0.5) / density.shape[-1]
-    return float((density * h).sum() / density.sum().clamp(min=1e-12))
-
-
-def vertical_opacity(density: Tensor) -> float:
-    """Mean over texels of 1 - transmittance of a vertical ray through the slab (unit height): a denser
-    pile hides more of the skin."""
-    return float((1 - torch.exp(-density.mean(-1))).mean())
-
-
-def structure_response(model: MesoGAN, seeds: int = 4) -> dict[str, float]:
-    """Mean generated height at the shortest and the longest trained strand length, and vertical opacity
-    at the lowest and the highest trained density (other parameters at the middle of their ranges),
-    averaged over `seeds` instances: the conditioning figures (a structure label moves geometry its way)."""
-    probes = {
-        "mean_height_short": ([0.0, 0.5, 0.5], mean_height),
-        "mean_height_long": ([1.0, 0.5, 0.5], mean_height),
-        "opacity_sparse": ([0.5, 0.0, 0.5], vertical_opacity),
-        "opacity_dense": ([0.5, 1.0, 0.5], vertical_opacity),
-    }
-    return {
-        name: float(
-            np.mean([measure(density_profile(model, torch.tensor(s), seed)) for seed in range(seeds)])
-        )
-        for name, (s, measure) in probes.items()
-    }
+def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[str, float]:
+    """How the generated pile follows its structure labels, against real strands under the same labels.
+    Strand density is set to either end of its trained range (the other parameters at the middle of
+    theirs) and the mean coverage of `count` held-out views is measured (the fraction of pixel-centre
+    rays the pile stops); likewise strand length and the mean height where the rays stop (0 at the
+    skin). The views keep their held-out cameras, lights and colours. Real figures are the first hits of
+    those cameras on one strand instance grown with each end's parameters (no path tracing needed);
+    generated ones come from renders of one latent and noise per view, so only the label differs
+    between the two ends."""
+    c = model.config
+    held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
+    instances = [held_out.draw(j) for j in range(count)]
+    middle = {k: (lo + hi) / 2 for k, (lo, hi) in STRUCTURE_RANGES.items()}
+    blank = np.zeros((c.image_size, c.image_size, 3))
+    figures: dict[str, float] = {}
+    for parameter, (statistic, low, high) in PROBES.items():
+        lo, hi = STRUCTURE_RANGES[parameter]
+        for end, value in ((low, lo), (high, hi)):
+            structure = Structure(**(middle | {parameter: value}))
+            tracer = instance_tracer(c, dataclasses.replace(instances[0], structure=structure))
+            views = []
+            for instance in instances:
+                probe = dataclasses.replace(instance, structure=structure)
+                views.append(View(probe, blank, first_hit_heights(tracer, probe.camera)))
+            batch = stack_views(views)
+            with torch.no_grad():
+                torch.manual_seed(0)
+                fake = fake_views(model, batch)
+            coverage, height = view_structure(batch)
+            real, generated = (
+                (coverage, fake.opacity) if statistic == "coverage" else (height, fake.hit_height)
+            )
+            figures[f"{statistic}_{end}"] = float(generated.mean())
+            figures[f"{statistic}_{end}_real"] = float(real.mean())
+    return figures

@@ -88,7 +88,7 @@ class MesoganMethod:
         plane_bytes = sum(level.numel() * 2 for level in material.stack)
         method_metrics = {
             **{f"held_out_{k}": v for k, v in scores.items()},
-            **structure_response(model),
+            **structure_response(model, source, config.evaluation_instances),
             # the frame's error where the shell is seen, against path tracing there at 1 spp
             "flip_covered_pixels": flip(reference, result.image, mask=covered),
             "flip_covered_pixels_path_tracing_1spp": flip(reference, view.frame(1).image, mask=covered),

@@ -4,8 +4,11 @@ Instance j of a source is a pure function of (seed, j): structure parameters dra
 `STRUCTURE_RANGES`, a colour, a directional light from a random upper-hemisphere direction plus a constant
 ambient sky, and a camera on the hemisphere at one of the configured distances (multi-scale) looking at
 the slab's centre tile with its neighbours around it. The image is HDR, tonemapped x / (x + 1) for the
-discriminator. A batch draws `batch_size` instances of a pool of `pool` (each rendered once per process
-and cached), so batches are a pure function of (seed, index) and a job can bound its rendering cost.
+discriminator. Each view also carries the height at which every pixel-centre ray first meets the geometry
+(0 on the skin): the coverage and height of the pile as the camera sees it, which the generator's
+structure terms match (`train`) and the conditioning figures compare against (`evaluate`). A batch draws
+`batch_size` instances of a pool of `pool` (each rendered once per process and cached), so batches are a
+pure function of (seed, index) and a job can bound its rendering cost.
 
 Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
 """
@@ -38,6 +41,9 @@ from workers.scene.spec import (
 )
 
 SKIN = (0.08, 0.07, 0.06)  # the base under the strands
+# A first hit this high above the base is a strand: the skin is at 0 and Embree's float32 hits land
+# within 1e-5 of it; strand hits this low are a vanishing fraction of a view.
+ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
 
 
@@ -146,11 +152,33 @@ def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
     return to_local(origins), to_local(directions), radius
 
 
-def render_instance(config: MesoganConfig, instance: Instance, spp: int, seed: int) -> np.ndarray:
-    """The instance's HDR image (H, W, 3), path-traced with the real strand geometry."""
-    tracer = PathTracer(compile_scene(slab_scene(config, instance)))
+@dataclass
+class View:
+    """A rendered instance: its HDR image (H, W, 3) and the height of each pixel-centre ray's first hit
+    (H * W,), rows in image order (0 where the ray reaches the skin)."""
+
+    instance: Instance
+    image: np.ndarray
+    hit_height: np.ndarray
+
+
+def first_hit_heights(tracer: PathTracer, camera: Camera) -> np.ndarray:
+    """(H * W,) height of each pixel-centre ray's first hit in the slab, 0 on the skin."""
+    origins, directions, _ = camera_rays(camera)
+    hits = tracer.first_hits(to_scene(origins), to_scene(directions))
+    height = origins[:, 2] + np.where(hits.hit, hits.t, 0.0) * directions[:, 2]
+    return np.clip(height, 0.0, 1.0)
+
+
+def instance_tracer(config: MesoganConfig, instance: Instance) -> PathTracer:
+    return PathTracer(compile_scene(slab_scene(config, instance)))
+
+
+def render_instance(config: MesoganConfig, instance: Instance, spp: int, seed: int) -> View:
+    """The instance path-traced with the real strand geometry, and its first hits."""
+    tracer = instance_tracer(config, instance)
     settings = RenderSettings(spp=spp, max_depth=config.max_depth, seed=seed, threads=1)
-    return render(tracer, settings).image
+    return View(instance, render(tracer, settings).image, first_hit_heights(tracer, instance.camera))
 
 
 class SlabSource:
@@ -159,15 +187,18 @@ class SlabSource:
     def __init__(self, config: SlabSourceConfig, seed: int) -> None:
         self.config = config
         self.seed = seed
-        self._images: dict[int, tuple[Instance, np.ndarray]] = {}
+        self._views: dict[int, View] = {}
 
-    def instance(self, j: int) -> tuple[Instance, np.ndarray]:
-        """Instance j and its HDR image, rendered on first use."""
-        if j not in self._images:
+    def draw(self, j: int) -> Instance:
+        """Instance j's labels and camera, without rendering it."""
+        return draw_instance(self.config.mesogan, np.random.default_rng([self.seed, INSTANCE_STREAM, j]))
+
+    def instance(self, j: int) -> View:
+        """Instance j's view, rendered on first use."""
+        if j not in self._views:
             c = self.config.mesogan
-            instance = draw_instance(c, np.random.default_rng([self.seed, INSTANCE_STREAM, j]))
-            self._images[j] = instance, render_instance(c, instance, c.training_spp, seed=j)
-        return self._images[j]
+            self._views[j] = render_instance(c, self.draw(j), c.training_spp, seed=j)
+        return self._views[j]
 
     def batch(self, index: int) -> Batch:
         c = self.config.mesogan
@@ -175,13 +206,16 @@ class SlabSource:
         return stack_views([self.instance(int(j)) for j in ids])
 
 
-def stack_views(views: list[tuple[Instance, np.ndarray]]) -> Batch:
-    """Tensors of labelled views: tonemapped images (B, 3, H, W), rays (B, HW, 3), labels (B, ...)."""
+def stack_views(views: list[View]) -> Batch:
+    """Tensors of labelled views: tonemapped images (B, 3, H, W), first-hit heights (B, HW), rays
+    (B, HW, 3), labels (B, ...)."""
     rows: dict[str, list[np.ndarray]] = {}
-    for instance, image in views:
+    for view in views:
+        instance = view.instance
         origins, directions, radius = camera_rays(instance.camera)
         row = {
-            "image": np.transpose(image, (2, 0, 1)),
+            "image": np.transpose(view.image, (2, 0, 1)),
+            "hit_height": view.hit_height,
             "origins": origins,
             "directions": directions,
             "pixel_radius": np.array(radius),

@@ -127,6 +127,18 @@ def query(
     )
 
 
+@dataclass
+class SlabRender:
+    """What the batch's cameras see of the generated slabs: HDR images (B, 3, H, W), and per pixel-centre
+    ray (B, H * W) the opacity of the pile (1 - transmittance down to the skin) and the expected height
+    at which the ray is stopped (0 at the skin): in expectation over instances, the fraction of real
+    views' rays that hit a strand and the mean height of their first hits (`sampling.View`)."""
+
+    image: Tensor
+    opacity: Tensor
+    hit_height: Tensor
+
+
 def render_slab(
     model: MesoGAN,
     config: MesoganConfig,
@@ -134,8 +146,8 @@ def render_slab(
     window: Window,
     batch: dict[str, Tensor],
     jitter: bool,
-) -> Tensor:
-    """HDR images (B, 3, H, W) of the batch's cameras looking at the generated slabs under its labels.
+) -> SlabRender:
+    """The batch's cameras looking at the generated slabs under its labels.
 
     Radiance at a sample is E rho(light) + A 2 pi mean_k rho(w_k) over `ambient_directions` uniform
     upper-hemisphere directions w_k: the same estimate of the incident integral the path tracer makes with
@@ -147,6 +159,8 @@ def render_slab(
     density, hidden = query(model, config, stack, window, inside)
     _, base_hidden = query(model, config, stack, window, base)
     weights, remaining = composite(density, inside.deltas)
+    hit_height = (weights * inside.height).sum(-1)
+    opacity = 1.0 - remaining
     hidden = torch.cat([hidden, base_hidden], -2)
     weights = torch.cat([weights, remaining[..., None]], -1)
     view = -batch["directions"][..., None, :].expand(*hidden.shape[:-1], 3)
@@ -160,7 +174,8 @@ def render_slab(
             radiance = radiance + (config.ambient * 2 * math.pi / config.ambient_directions) * rho
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
     size = math.isqrt(pixels.shape[1])
-    return pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+    image = pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+    return SlabRender(image, opacity, hit_height)
 
 
 def uniform_hemisphere(shape, device, random: bool) -> Tensor:
