@@ -13,8 +13,9 @@ out/bench-explore-<scene>-<seed>.png.
 Each run is measured twice: its weights as they are, and an exponential average of them (decay 0.9 every
 `progress_every` steps, about the last 50 steps). At the bench's constant rate the weights themselves
 oscillate: one seed's DSSIM was 0.10 and 0.16 ten steps apart, so one snapshot's active / uniform ratio
-said little; the average cuts that noise and lowered both methods' DSSIM by a quarter to a third
-(explore4 notes). `EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds.
+said little; the average cuts that noise and lowered DSSIM by up to a half (0.044 to 0.025 after 120
+CPU s; never more than 1% higher; explore4 notes). `EXPLORE_BENCH_SEEDS` (comma-separated) repeats
+every run with other seeds.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
