@@ -8,7 +8,14 @@ Table 5.3). Both are measured every `EVAL_EVERY` seconds of training (evaluation
 fixed hard configurations (`HARD`: the variable that carries the scene's hardest effect at its hard end,
 the sphere near a mirror finish, the box by the mirror; the others seeded uniform draws) against
 `REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third table and plotted to
-out/bench-explore-<scene>.png.
+out/bench-explore-<scene>-<seed>.png.
+
+Each run is measured twice: its weights as they are, and an exponential average of them (decay 0.9 every
+`progress_every` steps, about the last 50 steps). At the bench's constant rate the weights themselves
+oscillate: one seed's DSSIM was 0.10 and 0.16 ten steps apart, so one snapshot's active / uniform ratio
+said little; the average cuts that noise and lowered DSSIM by up to a half (0.044 to 0.025 after 120
+CPU s; never more than 1% higher; explore4 notes). `EXPLORE_BENCH_SEEDS` (comma-separated) repeats
+every run with other seeds.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
@@ -23,6 +30,7 @@ the network's DSSIM and the ratio of the two times.
 from __future__ import annotations
 
 import contextlib
+import copy
 import multiprocessing
 import os
 import time
@@ -56,7 +64,9 @@ EVAL_EVERY = SECONDS / 6
 SIZE = 32
 REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
 CONFIGURATIONS = 8
-SEED = 11
+SEED = 11  # of the configurations and the references
+SEEDS = tuple(int(x) for x in os.environ.get("EXPLORE_BENCH_SEEDS", str(SEED)).split(","))  # of the runs
+AVERAGE_DECAY = 0.9  # per progress event, every `progress_every` (5) steps
 PATH_TRACING_SPP = (1, 4, 16, 64, 256)
 # The hard end of each scene's hardest variable (normalised): a sphere near a mirror finish (roughness
 # 0.02-0.09: sharp reflections of the room and the light), a box by the mirror (its reflection beside it)
@@ -90,27 +100,40 @@ class _BudgetSpent(Exception):
 
 
 def train_for(
-    scene: str, mode: str, references: list[np.ndarray], vectors: np.ndarray
+    scene: str, mode: str, seed: int, references: list[np.ndarray], vectors: np.ndarray
 ) -> tuple[list[dict], dict[str, torch.Tensor], dict]:
-    """Train `mode` for SECONDS of its process's CPU time: the error curve measured every EVAL_EVERY
-    seconds, the trained weights and the explorer's figures (runs in a process of its own)."""
+    """Train `mode` from `seed` for SECONDS of its process's CPU time: the error curve (of the weights and of
+    their average) measured every EVAL_EVERY seconds, the trained weights and the explorer's figures (runs
+    in a process of its own)."""
     torch.set_num_threads(1)
     config = KIND.resolve_config("default", {**OVERRIDES, "exploration": mode})
-    spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin(scene)), config), SEED)
+    spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin(scene)), config), seed)
     source = spec.build()
     tracers = [source.tracer.at(v) for v in vectors]
-    torch.manual_seed(SEED)
+    torch.manual_seed(seed)
     model = PixelGenerator(source.dimensions, config.mlp)
-    explorer = Explorer(config, source.dimensions, model, SEED)
+    averaged = copy.deepcopy(model)
+    explorer = Explorer(config, source.dimensions, model, seed)
     phase = Phase("main", explorer.loss, on_optimizer=explorer.attach)
     curve: list[dict] = []
     clock = {"trained": 0.0, "since": time.process_time(), "next_eval": EVAL_EVERY}
 
     def measure(steps: int) -> None:
         errors = configuration_errors(model, tracers, vectors, references, source.box).means()
-        curve.append({"seconds": clock["trained"], "steps": steps, **errors})
+        mean = configuration_errors(averaged, tracers, vectors, references, source.box).means()
+        curve.append(
+            {
+                "seconds": clock["trained"],
+                "steps": steps,
+                **errors,
+                **{f"avg_{k}": v for k, v in mean.items()},
+            }
+        )
 
     def on_progress(event: Progress) -> None:
+        with torch.no_grad():
+            for mean, weight in zip(averaged.parameters(), model.parameters(), strict=True):
+                mean.lerp_(weight, 1 - AVERAGE_DECAY)
         clock["trained"] += time.process_time() - clock["since"]
         if clock["trained"] >= clock["next_eval"] or clock["trained"] >= SECONDS:
             measure(event.step)
@@ -138,30 +161,34 @@ def run() -> list[BenchSection]:
     references = {
         s: reference_images(tracers[s], SIZE, REFERENCE_SPP, config.max_depth, SEED + 2) for s in SCENES
     }
-    runs = [(scene, mode) for scene in SCENES for mode in MODES]
+    runs = [(scene, mode, seed) for scene in SCENES for mode in MODES for seed in SEEDS]
     with ProcessPoolExecutor(WORKERS, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {r: pool.submit(train_for, *r, references[r[0]], vectors[r[0]]) for r in runs}
         results = {r: future.result() for r, future in futures.items()}
     for scene in SCENES:
-        curves = {mode: results[scene, mode][0] for mode in MODES}
-        for mode in MODES:
-            _, _, statistics = results[scene, mode]
-            for point in curves[mode]:
-                curves_section.add(scene=scene, method=mode, **point)
-            final = curves[mode][-1]
-            comparison.add(
-                scene=scene, method=mode, seconds=round(final["seconds"], 1), steps=final["steps"],
-                dssim=final["dssim"], mape=final["mape"],
-                acceptance=statistics["acceptance_rate"], rendered=statistics["patches_rendered"],
-            )  # fmt: skip
-        active, uniform = curves["active"][-1], curves["uniform"][-1]
+        ratios: dict[str, list[float]] = {"dssim": [], "avg_dssim": [], "mape": [], "avg_mape": []}
+        for seed in SEEDS:
+            curves = {mode: results[scene, mode, seed][0] for mode in MODES}
+            for mode in MODES:
+                _, _, statistics = results[scene, mode, seed]
+                for point in curves[mode]:
+                    curves_section.add(scene=scene, method=mode, seed=seed, **point)
+                final = curves[mode][-1]
+                comparison.add(
+                    scene=scene, method=mode, seed=seed, seconds=round(final["seconds"], 1),
+                    steps=final["steps"], dssim=final["dssim"], avg_dssim=final["avg_dssim"],
+                    mape=final["mape"], avg_mape=final["avg_mape"],
+                    acceptance=statistics["acceptance_rate"], rendered=statistics["patches_rendered"],
+                )  # fmt: skip
+            for key, values in ratios.items():
+                values.append(curves["active"][-1][key] / curves["uniform"][-1][key])
+            _plot(scene, seed, curves)
         comparison.notes.append(
-            f"{scene}: active/uniform DSSIM {active['dssim'] / uniform['dssim']:.3f}, "
-            f"MAPE {active['mape'] / uniform['mape']:.3f} after {SECONDS:.0f} CPU s each"
+            f"{scene}: active/uniform after {SECONDS:.0f} CPU s each, mean over seeds {list(SEEDS)}: "
+            + ", ".join(f"{key} {np.mean(values):.3f}" for key, values in ratios.items())
         )
-        _plot(scene, curves)
         model = PixelGenerator(sources[scene].dimensions, config.mlp)
-        model.load_state_dict(results[scene, "active"][1])
+        model.load_state_dict(results[scene, "active", SEEDS[0]][1])
         frames.add(
             **_frame_row(
                 scene, model, tracers[scene][0], vectors[scene][0], references[scene][0], sources[scene].box,
@@ -198,7 +225,7 @@ def _frame_row(scene, model, tracer, v, reference, box, config) -> dict:
     return row
 
 
-def _plot(scene: str, curves: dict[str, list[dict]]) -> None:
+def _plot(scene: str, seed: int, curves: dict[str, list[dict]]) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -207,8 +234,15 @@ def _plot(scene: str, curves: dict[str, list[dict]]) -> None:
     figure, axes = plt.subplots(1, 2, figsize=(9, 3.5))
     for mode, curve in curves.items():
         seconds = [p["seconds"] for p in curve]
-        axes[0].plot(seconds, [p["dssim"] for p in curve], marker="o", label=mode)
-        axes[1].plot(seconds, [p["mape"] for p in curve], marker="o", label=mode)
+        for axis, key in zip(axes, ("dssim", "mape"), strict=True):
+            line = axis.plot(seconds, [p[key] for p in curve], marker="o", label=mode)[0]
+            axis.plot(
+                seconds,
+                [p[f"avg_{key}"] for p in curve],
+                ls="--",
+                color=line.get_color(),
+                label=f"{mode}, averaged",
+            )
     for axis, name in zip(axes, ("DSSIM", "MAPE"), strict=True):
         axis.set_xlabel("training CPU seconds")
         axis.set_ylabel(name)
@@ -216,5 +250,5 @@ def _plot(scene: str, curves: dict[str, list[dict]]) -> None:
         axis.legend()
     figure.tight_layout()
     Path("out").mkdir(exist_ok=True)
-    figure.savefig(f"out/bench-explore-{scene}.png", dpi=100)
+    figure.savefig(f"out/bench-explore-{scene}-{seed}.png", dpi=100)
     plt.close(figure)
