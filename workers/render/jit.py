@@ -1,7 +1,7 @@
 """Numba's `njit` for every compiled kernel of the project, with an on-disk cache that cannot go stale.
 
 Numba keys a cached kernel on the timestamp and size of the one file that defines it, but our kernels
-inline helpers from other files (`workers.render.kernels` into the BSDFs, lights and wavefront kernels):
+link in helpers from other files (`workers.render.kernels` into the BSDFs, lights and wavefront kernels):
 after a change there alone, during development or in an upgrade that replaces only that file, Numba would
 load the old machine code. So the cache lives in a folder named by the digest of every kernel source of
 the package (each file that uses Numba) and of Numba's version: a change to any of them starts a fresh

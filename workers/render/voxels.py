@@ -267,7 +267,7 @@ def _walk_rays(
                 break
 
 
-@njit(cache=True, nogil=True, fastmath=False, inline="always")
+@njit(cache=True, nogil=True, fastmath=False)  # no IR inlining: as `workers.render.kernels.scalar`
 def _record(points, t, count, i, o, d, t_at) -> None:
     """Append the point at t_at to ray i if it still has room."""
     k = count[i]

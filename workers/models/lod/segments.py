@@ -16,7 +16,8 @@ from workers.render.wavefront import offset_one
 kernel = njit(cache=True, nogil=True, fastmath=False)
 
 
-@njit(cache=True, nogil=True, fastmath=False, inline="always")
+# helpers below: plain compiled functions, no IR-level inlining (as `workers.render.kernels.scalar`)
+@kernel
 def _exit_distance(lo, hi, i, o0, o1, o2, d0, d1, d2):
     """Distance along (d0, d1, d2) at which a ray from (o0, o1, o2), inside box i, leaves it (>= 0)."""
     t = math.inf
@@ -28,7 +29,7 @@ def _exit_distance(lo, hi, i, o0, o1, o2, d0, d1, d2):
     return max(t, 0.0)
 
 
-@njit(cache=True, nogil=True, fastmath=False, inline="always")
+@kernel
 def _max3(a, b, c):
     """The largest of three, NaN if any is NaN (as `workers.render.sampling.max3`)."""
     if math.isnan(a) or math.isnan(b) or math.isnan(c):
