@@ -73,6 +73,9 @@ class PrtConfig(TrainedKindConfig):
     train_top_wavelets: int = Field(48, ge=0, description="per step: largest |L_k| (paper 150)")
     train_uniform_wavelets: int = Field(48, ge=0, description="per step: uniform among the rest (paper 150)")
     pixels_per_step: int = Field(128, ge=4, description="paper 2048, an equal share from each pixel map")
+    lightings_per_step: int = Field(
+        1, ge=1, description="lightings per step (paper 1), each with its own wavelets and share of pixels"
+    )
     grid: HashGridConfig = HashGridConfig(
         levels=8, features_per_level=2, log2_table_size=14, base_resolution=8, per_level_scale=1.5
     )
