@@ -75,7 +75,8 @@ class PrtConfig(TrainedKindConfig):
     pixels_per_step: int = Field(128, ge=4, description="paper 2048, an equal share from each pixel map")
     # env_lit_objects, default preset, 2000 steps, held-out indirect PSNR (train seeds 0 / 1; same rows):
     # 1 lighting (the paper) 20.15 / 18.58 dB, 4 lightings 20.42 / 21.32 (no indirect: 12.7). Training CPU
-    # 66-79 s -> 138-151 s; 1 lighting for 8000 steps (237 s) reached 20.73 (seed 0). Quick keeps 1.
+    # 66-79 s -> 138-151 s; 1 lighting for 8000 steps (237 s) reached 20.73 (seed 0); 8 lightings 21.90 /
+    # 21.20 for 187-203 s (building each lighting is most of that cost). Quick keeps 1.
     lightings_per_step: int = Field(
         4, ge=1, description="lightings per step (paper 1), each with its own wavelets and share of pixels"
     )
