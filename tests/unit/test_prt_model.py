@@ -178,3 +178,36 @@ def test_per_wavelet_transport_targets_sum_to_the_row_dotted_with_the_lighting()
     np.testing.assert_allclose(
         by_wavelet.numpy(), np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)), rtol=1e-6
     )
+
+
+def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wavelets():
+    from workers.models.prt.train import prt_loss
+    from workers.nn.losses import mu_law_l2
+
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(2)
+    model = PrtNetwork(config)
+    for parameter in model.parameters():  # a network whose every wavelet gives a different transport
+        torch.nn.init.normal_(parameter, std=0.5)
+    n = 5  # pixels: 3 in the first group (it takes the remainder), 2 in the second
+    batch = {
+        "position": torch.rand(n, 3), "normal": torch.tensor([[0.0, 1.0, 0.0]]).repeat(n, 1),
+        "reflected": torch.nn.functional.normalize(torch.randn(n, 3), dim=-1), "kd": torch.rand(n, 3),
+        "ks": torch.rand(n, 3), "roughness": torch.rand(n, 1),
+        "wavelets": torch.tensor([[0, 3, 9], [1, 20, 40]]), "coefficients": torch.randn(2, 3, 3),
+        "target": torch.rand(n, 3),
+    }  # fmt: skip
+    with torch.no_grad():
+        spatial, rest = model.pixel_features(batch)
+        first = model.transport(spatial[:3], rest[:3], batch["wavelets"][0])
+        second = model.transport(spatial[3:], rest[3:], batch["wavelets"][1])
+        expected = mu_law_l2(
+            torch.cat(
+                [
+                    torch.einsum("pkc,kc->pc", first, batch["coefficients"][0]),
+                    torch.einsum("pkc,kc->pc", second, batch["coefficients"][1]),
+                ]
+            ),
+            batch["target"],
+        )
+        assert torch.allclose(prt_loss(model, batch), expected, rtol=1e-6)

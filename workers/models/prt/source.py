@@ -1,6 +1,8 @@
-"""Training batches of the `prt` kind (Sec. 5): every batch draws a fresh lighting from the training
-distribution, takes its Haar transform and picks wavelets (largest + uniform), then samples pixels from the
-pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L.
+"""Training batches of the `prt` kind (Sec. 5): every batch draws fresh lightings from the training
+distribution (the paper one, here `lightings_per_step`: one lighting's gradient pulls the whole network
+towards a single sun or sky, and which lightings came first decided the result), takes each one's Haar
+transform and picks its wavelets (largest + uniform), then samples an equal share of the pixels for each
+from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L.
 Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss).
 Batch i is a pure function of (seed, i)."""
 
@@ -65,20 +67,37 @@ class PrtSource:
         self.data = training_set(config.scene, config.prt, seed, self.objects)
 
     def batch(self, index: int) -> Batch:
+        """`lightings_per_step` lightings, each with its own wavelets and an equal share of the pixels:
+        `wavelets` [G, K], `coefficients` [G, K, 3], pixels group after group."""
         c = self.config.prt
         rng = batch_rng(self.seed, index)
-        env = training_lighting(c.lighting, rng)
-        with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
-            cube = unit_mean(lighting_cube(env, c.cube_size, c.lighting.map_width))
-            chosen = training_selection(cube, c.train_top_wavelets, c.train_uniform_wavelets, rng)
-        pixels = sample_pixels(self.data, c.pixels_per_step, rng)
-        target = np.einsum("pjc,jc->pc", self.data.rows[pixels].astype(np.float64), cube.reshape(-1, 3))
-        batch = self.data.inputs.take(pixels).tensors(self.data.box)
+        groups = c.lightings_per_step
+        shares = np.full(groups, c.pixels_per_step // groups)
+        shares[0] += c.pixels_per_step - shares.sum()
+        wavelets, values, pixels, targets = [], [], [], []
+        for share in shares:
+            env = training_lighting(c.lighting, rng)
+            with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
+                cube = unit_mean(lighting_cube(env, c.cube_size, c.lighting.map_width))
+                chosen = training_selection(cube, c.train_top_wavelets, c.train_uniform_wavelets, rng)
+            picked = sample_pixels(self.data, int(share), rng)
+            rows = self.data.rows[picked].astype(np.float64)
+            targets.append(np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)))
+            wavelets.append(chosen.indices.long())
+            values.append(chosen.values.float())
+            pixels.append(picked)
+        picked = np.concatenate(pixels)
+        batch = self.data.inputs.take(picked).tensors(self.data.box)
         batch.update(
-            wavelets=chosen.indices.long(),
-            coefficients=chosen.values.float(),
-            target=torch.from_numpy(target.astype(np.float32)),
+            wavelets=torch.stack(wavelets),
+            coefficients=torch.stack(values),
+            target=torch.from_numpy(np.concatenate(targets).astype(np.float32)),
         )
         if c.transport_weight > 0:
-            batch["transport"] = wavelet_transport(self.data.rows[pixels], chosen.indices, c.cube_size)
+            batch["transport"] = torch.cat(
+                [
+                    wavelet_transport(self.data.rows[p], w, c.cube_size)
+                    for p, w in zip(pixels, wavelets, strict=True)
+                ]
+            )
         return batch

@@ -7,6 +7,7 @@ mean squared target so the weight does not depend on the scene's brightness."""
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -16,13 +17,29 @@ from workers.runtime.sources import Batch
 
 
 def prt_loss(model: PrtNetwork, batch: Batch, mu: float = 10.0, transport_weight: float = 0.0) -> Tensor:
+    """The loss of a batch of G lightings (`source.PrtSource.batch`): pixels come group after group, each
+    group lit by its own lighting through its own wavelets."""
     spatial, rest = model.pixel_features(batch)
-    transport = model.transport(spatial, rest, batch["wavelets"])
-    prediction = torch.einsum("pkc,kc->pc", transport, batch["coefficients"])  # Eq. 3
+    wavelets, coefficients = batch["wavelets"], batch["coefficients"]
+    bounds = np.cumsum([0, *_shares(len(spatial), len(wavelets))])
+    transports = [
+        model.transport(spatial[a:b], rest[a:b], w)
+        for a, b, w in zip(bounds[:-1], bounds[1:], wavelets, strict=True)
+    ]
+    prediction = torch.cat(
+        [torch.einsum("pkc,kc->pc", t, c) for t, c in zip(transports, coefficients, strict=True)]
+    )  # Eq. 3
     loss = mu_law_l2(prediction, batch["target"], mu)
     if transport_weight > 0:
-        target = batch["transport"]
+        transport, target = torch.cat(transports), batch["transport"]
         loss = loss + transport_weight * ((transport - target) ** 2).mean() / target.square().mean().clamp(
             min=1e-12
         )
     return loss
+
+
+def _shares(pixels: int, groups: int) -> list[int]:
+    """Pixels per lighting group: equal, the first takes the remainder (as `source.PrtSource.batch`)."""
+    shares = [pixels // groups] * groups
+    shares[0] += pixels - sum(shares)
+    return shares
