@@ -71,16 +71,13 @@ class PrtSource:
         `wavelets` [G, K], `coefficients` [G, K, 3], pixels group after group."""
         c = self.config.prt
         rng = batch_rng(self.seed, index)
-        groups = c.lightings_per_step
-        shares = np.full(groups, c.pixels_per_step // groups)
-        shares[0] += c.pixels_per_step - shares.sum()
         wavelets, values, pixels, targets = [], [], [], []
-        for share in shares:
+        for share in lighting_shares(c.pixels_per_step, c.lightings_per_step):
             env = training_lighting(c.lighting, rng)
             with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
                 cube = unit_mean(lighting_cube(env, c.cube_size, c.lighting.map_width))
                 chosen = training_selection(cube, c.train_top_wavelets, c.train_uniform_wavelets, rng)
-            picked = sample_pixels(self.data, int(share), rng)
+            picked = sample_pixels(self.data, share, rng)
             rows = self.data.rows[picked].astype(np.float64)
             targets.append(np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)))
             wavelets.append(chosen.indices.long())
@@ -101,3 +98,10 @@ class PrtSource:
                 ]
             )
         return batch
+
+
+def lighting_shares(pixels: int, groups: int) -> list[int]:
+    """Pixels per lighting group of a batch: equal, the first takes the remainder."""
+    shares = [pixels // groups] * groups
+    shares[0] += pixels - sum(shares)
+    return shares

@@ -12,6 +12,7 @@ import torch
 from torch import Tensor
 
 from workers.models.prt.network import PrtNetwork
+from workers.models.prt.source import lighting_shares
 from workers.nn.losses import mu_law_l2
 from workers.runtime.sources import Batch
 
@@ -21,7 +22,7 @@ def prt_loss(model: PrtNetwork, batch: Batch, mu: float = 10.0, transport_weight
     group lit by its own lighting through its own wavelets."""
     spatial, rest = model.pixel_features(batch)
     wavelets, coefficients = batch["wavelets"], batch["coefficients"]
-    bounds = np.cumsum([0, *_shares(len(spatial), len(wavelets))])
+    bounds = np.cumsum([0, *lighting_shares(len(spatial), len(wavelets))])
     transports = [
         model.transport(spatial[a:b], rest[a:b], w)
         for a, b, w in zip(bounds[:-1], bounds[1:], wavelets, strict=True)
@@ -36,10 +37,3 @@ def prt_loss(model: PrtNetwork, batch: Batch, mu: float = 10.0, transport_weight
             min=1e-12
         )
     return loss
-
-
-def _shares(pixels: int, groups: int) -> list[int]:
-    """Pixels per lighting group: equal, the first takes the remainder (as `source.PrtSource.batch`)."""
-    shares = [pixels // groups] * groups
-    shares[0] += pixels - sum(shares)
-    return shares
