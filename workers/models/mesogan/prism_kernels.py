@@ -24,17 +24,17 @@ TINY = 1e-300
 NEWTON_TOLERANCE = 1e-13
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cross(ax, ay, az, bx, by, bz):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _dot(u, w):
     return u[0] * w[0] + u[1] * w[1] + u[2] * w[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _safe(x):
     return x if abs(x) > TINY else TINY
 
@@ -97,7 +97,7 @@ def inverse(base, offsets, prism, p, iterations):
     return bary, height
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _triangle(ox, oy, oz, dx, dy, dz, tri):
     """Moller-Trumbore distance to triangle `tri` (3, 3), or inf."""
     e1x, e1y, e1z = tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2]
@@ -115,7 +115,7 @@ def _triangle(ox, oy, oz, dx, dy, dz, tri):
     return (e2x * qx + e2y * qy + e2z * qz) / det
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _patch_along(q00, q10, q01, q11, ox, oy, oz, u):
     """The bilinear patch minus the origin, projected on u: a + b s + c t + e s t."""
     a = (q00[0] - ox) * u[0] + (q00[1] - oy) * u[1] + (q00[2] - oz) * u[2]
@@ -179,7 +179,7 @@ def _crossings(out, o, d, base, top, j):
             out[2 + 2 * edge + r] = dist
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _box_met(o, inv, t_min, t_max, lo, hi):
     near, far = -np.inf, np.inf
     for x in range(3):
