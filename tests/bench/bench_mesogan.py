@@ -12,7 +12,6 @@ trained that many quick steps and scored on the same held-out views.
 
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 from pathlib import Path
@@ -27,7 +26,7 @@ from workers.models.mesogan.covering import build_shell, covering, neural_materi
 from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.run import TRIANGLE_BYTES, covered_pixels
-from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
+from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig, cone_radius
 from workers.models.mesogan.train import phases
 from workers.nn.metrics import flip
 from workers.render.integrator import PathTracer
@@ -70,7 +69,7 @@ def run() -> list[BenchSection]:
     converged = settings.model_copy(update={"spp": REFERENCE_SPP, "seed": SEED + 2})
     reference = render(strand_tracer, converged).image
     material = neural_material(model, config, cover, config.structure, config.appearance, SEED)
-    cone = 2 * math.tan(math.radians(spec.camera.fov) / 2) / SIZE / math.sqrt(3)
+    cone = cone_radius(spec.camera.fov, SIZE)
     shell_tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
     mask = covered_pixels(shell, spec.camera, SIZE)
 
