@@ -203,7 +203,7 @@ def test_a_far_view_of_the_shell_matches_the_training_renderer_at_trained_footpr
     """A view 8 times farther than the training cameras, at 8^2 pixels: each pixel's cone is some 30 times
     wider than any the decoder was trained at (a furred mesh seen from across a room). The shell must not
     query the decoder at footprints training never rendered (its integrated height encoding and mip level
-    would be out of distribution: on the default preset's fur ball that doubled the shell's brightness);
+    would be out of distribution: on the default preset's fur ball the shell rendered 1.5 times too bright);
     averaged over its pixels' jittered rays, it must equal the training renderer's view at 128^2, whose
     footprints are within the trained range (but narrower than the shell's clamped ones: 1-3% apart).
     Without the clamp, 7-10% apart in green and blue."""

@@ -18,8 +18,8 @@ A sample's cone footprint is clamped to the widest the training views contain
 (`sampling.widest_footprint`): wider ones (a mesh seen from farther than the training cameras, in slab
 heights) would read the decoder out of its training distribution, with a height encoding damped and mip
 levels it never saw. The default preset's fur ball is seen at 3 to 4 times the widest trained footprint,
-where the shell rendered twice as bright as the strands and its FLIP rose with spp (0.527 / 0.519 / 0.554
-at 1 / 4 / 16 spp); clamped, 0.465 / 0.320 / 0.285 (500 steps, seed 5). Beyond it the pixel is filtered by
+where the shell rendered 1.5 times as bright as the strands and its FLIP rose with spp (0.527 / 0.519 / 0.554
+at 1 / 4 / 16 spp); clamped, 0.467 / 0.322 / 0.288 (500 steps, seed 5). Beyond it the pixel is filtered by
 the path tracer's jittered samples instead of the mip stack.
 
 A scattering event is identified by its shell coordinates and its sample's footprint packed into the
