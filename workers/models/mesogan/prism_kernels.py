@@ -191,6 +191,15 @@ def _box_met(o, inv, t_min, t_max, lo, hi):
 
 
 @njit(cache=True)
+def _in_box(x, y, z, lo, hi, margin):
+    return (
+        lo[0] - margin <= x <= hi[0] + margin
+        and lo[1] - margin <= y <= hi[1] + margin
+        and lo[2] - margin <= z <= hi[2] + margin
+    )
+
+
+@njit(cache=True)
 def _intervals(
     origins, directions, t_min, t_max, shell, group, iterations, tolerance, out_ray, out_prism, out_t
 ):
@@ -201,7 +210,7 @@ def _intervals(
     for x in range(3):
         all_lo[x], all_hi[x] = group_lo[:, x].min(), group_hi[:, x].max()
     cross = np.empty(8)
-    bounds = np.empty(10)
+    bounds = np.empty(10)  # t0, up to 8 crossings, t1
     for r in range(len(origins)):
         o, d = origins[r], directions[r]
         inv = np.empty(3)
@@ -218,21 +227,29 @@ def _intervals(
                 if not _box_met(o, inv, t0, t1, lo[j], hi[j]):
                     continue
                 _crossings(cross, o, d, base, top, j)
+                # [t0, the crossings within (t0, t1) in order (insertion sort: usually two), t1]
                 bounds[0] = t0
+                k = 0
                 for m in range(8):
-                    bounds[1 + m] = cross[m] if cross[m] > t0 and cross[m] < t1 else np.inf
-                bounds[9] = np.inf
-                bounds.sort()
-                for m in range(10):
-                    bounds[m] = min(bounds[m], t1)
-                for m in range(9):
+                    c = cross[m]
+                    if c > t0 and c < t1:
+                        i = k
+                        while i >= 1 and bounds[i] > c:
+                            bounds[i + 1] = bounds[i]
+                            i -= 1
+                        bounds[i + 1] = c
+                        k += 1
+                bounds[k + 1] = t1
+                margin = 10 * tolerance * max(hi[j, 0] - lo[j, 0], hi[j, 1] - lo[j, 1], hi[j, 2] - lo[j, 2])
+                for m in range(k + 1):
                     enter, leave = bounds[m], bounds[m + 1]
                     if not (leave > enter and leave < np.inf):
                         continue
                     mid = 0.5 * (enter + leave)
-                    b0, b1, b2, h = _inverse_point(
-                        base, offsets, j, o[0] + mid * d[0], o[1] + mid * d[1], o[2] + mid * d[2], iterations
-                    )
+                    px, py, pz = o[0] + mid * d[0], o[1] + mid * d[1], o[2] + mid * d[2]
+                    if not _in_box(px, py, pz, lo[j], hi[j], margin):
+                        continue  # the prism lies in its corners' box (its side patches in their hulls)
+                    b0, b1, b2, h = _inverse_point(base, offsets, j, px, py, pz, iterations)
                     if min(b0, b1, b2) < -tolerance or h < -tolerance or h > 1 + tolerance:
                         continue
                     if count < capacity:
