@@ -10,8 +10,9 @@ mathematics per point in registers:
   then the barycentrics in the offset triangle at t.
 - `crossings`: Moller-Trumbore against the bottom and top triangles; each side patch, projected onto two
   planes containing the ray (Duff et al. 2017's frame), is a quadratic in the edge parameter.
-- `candidates`: slab tests against the boxes of groups of prisms, then the boxes of the prisms of the
-  groups met; two passes (count, fill) so the output is exact-size.
+- `intervals`: slab tests against the boxes of groups of prisms, then the boxes of the prisms of the
+  groups met, then the crossings; the output grows by doubling (one pass, even for rays that cross many
+  prisms).
 """
 
 from __future__ import annotations
@@ -200,11 +201,14 @@ def _in_box(x, y, z, lo, hi, margin):
 
 
 @njit(cache=True)
-def _intervals(
-    origins, directions, t_min, t_max, shell, group, iterations, tolerance, out_ray, out_prism, out_t
-):
+def _intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance):
     base, top, offsets, group_lo, group_hi, order, lo, hi = shell
-    capacity = len(out_ray)
+    capacity = 4 * len(origins) + 64
+    out_ray, out_prism, out_t = (
+        np.empty(capacity, np.int64),
+        np.empty(capacity, np.int64),
+        np.empty((capacity, 2)),
+    )
     count = 0
     all_lo, all_hi = np.empty(3), np.empty(3)
     for x in range(3):
@@ -252,13 +256,18 @@ def _intervals(
                     b0, b1, b2, h = _inverse_point(base, offsets, j, px, py, pz, iterations)
                     if min(b0, b1, b2) < -tolerance or h < -tolerance or h > 1 + tolerance:
                         continue
-                    if count < capacity:
-                        out_ray[count] = r
-                        out_prism[count] = j
-                        out_t[count, 0] = enter
-                        out_t[count, 1] = leave
+                    if count == capacity:  # room for twice as many rows
+                        capacity *= 2
+                        grown_ray, grown_prism = np.empty(capacity, np.int64), np.empty(capacity, np.int64)
+                        grown_t = np.empty((capacity, 2))
+                        grown_ray[:count], grown_prism[:count], grown_t[:count] = out_ray, out_prism, out_t
+                        out_ray, out_prism, out_t = grown_ray, grown_prism, grown_t
+                    out_ray[count] = r
+                    out_prism[count] = j
+                    out_t[count, 0] = enter
+                    out_t[count, 1] = leave
                     count += 1
-    return count
+    return out_ray[:count], out_prism[:count], out_t[:count, 0].copy(), out_t[:count, 1].copy()
 
 
 def intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance):
@@ -266,11 +275,4 @@ def intervals(origins, directions, t_min, t_max, shell, group, iterations, toler
     ray order: the segments between consecutive boundary crossings whose midpoints map inside, for the
     prisms whose boxes (and their group's box) the ray meets. `shell` is (base, top, offsets, group_lo,
     group_hi, order, lo, hi) (`shell.Shell`)."""
-    args = (origins, directions, t_min, t_max, shell, group, iterations, tolerance)
-    capacity = 4 * len(origins) + 64
-    while True:  # one pass, or a second one with room for all when the first overflows
-        ray, prism, t = np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 2))
-        count = _intervals(*args, ray, prism, t)
-        if count <= capacity:
-            return ray[:count], prism[:count], t[:count, 0], t[:count, 1]
-        capacity = count
+    return _intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance)
