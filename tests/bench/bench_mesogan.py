@@ -125,8 +125,9 @@ def run() -> list[BenchSection]:
                 **generation_scores(ablation(name, overrides, steps), held_out),
             )
     conditioning = BenchSection(
-        "mesogan conditioning on 16 held-out views: coverage at the lowest / highest density label, height "
-        "where rays stop at the shortest / longest length label, generated and of real strands (_real)"
+        "mesogan conditioning on 16 held-out views: coverage at the lowest / highest density and curliness "
+        "labels, height where rays stop at the shortest / longest length label, generated and of real "
+        "strands (_real)"
     )
     conditioning.add(model="trained", **structure_response(model, source, 16))
     return [curve, memory, quality, conditioning]
