@@ -101,8 +101,8 @@ def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
     structure = Structure(**{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in STRUCTURE_RANGES.items()})
     appearance = Appearance(hue=float(rng.uniform()), saturation=float(rng.uniform(0.2, 1.0)))
     light = hemisphere(math.radians(rng.uniform(15, 80)), rng.uniform(0, 2 * math.pi))
-    scale = rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
-    distance = config.camera_distances[rng.integers(len(config.camera_distances))] * scale
+    distance = config.camera_distances[rng.integers(len(config.camera_distances))]
+    distance *= rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
     eye = distance * hemisphere(math.radians(rng.uniform(*CAMERA_ELEVATIONS)), rng.uniform(0, 2 * math.pi))
     size = config.image_size
     camera = Camera(
