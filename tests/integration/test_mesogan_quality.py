@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from workers.models.mesogan.config import PRESETS, MesoganConfig
-from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
+from workers.models.mesogan.evaluate import PROBES, generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
 from workers.models.mesogan.train import fake_views, phases
@@ -56,7 +56,10 @@ def test_a_trained_model_moves_geometry_with_its_structure_labels(trained):
     model, _, source = trained
     with torch_threads(1):
         r = structure_response(model, source, 8)
-    for statistic, low, high in (("coverage", "sparse", "dense"), ("height", "short", "long")):
+    # Curliness (`PROBES`) is measured but not asserted: the quick preset's 60 steps do not learn it (seed
+    # 3: generated coverage spread 0.016 against 0.116 real; the default preset at 500 steps, seed 5: 0.07
+    # against 0.12).
+    for statistic, low, high in (PROBES["density"], PROBES["length"]):
         spread = r[f"{statistic}_{high}"] - r[f"{statistic}_{low}"]
         real_spread = r[f"{statistic}_{high}_real"] - r[f"{statistic}_{low}_real"]
         assert real_spread > 0.05, (statistic, r)  # the training data do vary with the label

@@ -71,7 +71,9 @@ def neural_material(
     appearance: Appearance,
     seed: int,
 ) -> NeuralMaterial:
-    """The plane of the instance `seed` with these parameters over the covering's UV square."""
+    """The plane of the instance `seed` with these parameters over the covering's UV square, with the mip
+    levels training rendered with: the shell reads no footprint wider than training's
+    (`sampling.widest_footprint`), so deeper levels would never be read."""
     window = Window((0, 0), (cover.resolution, cover.resolution), cover.plane_units / cover.resolution)
     device = next(model.parameters()).device
     generator = torch.Generator().manual_seed(seed)
@@ -79,9 +81,8 @@ def neural_material(
     s = torch.tensor(normalized_structure(structure), dtype=torch.float32, device=device)[None]
     with torch.no_grad():
         planes = generate_planes(model, config, s, latent, draw_noise(model, config, 1, seed), window)
-    levels = max(config.mip_levels, int(math.log2(cover.resolution)) + 1)
     a = torch.tensor(appearance.color(), dtype=torch.float32, device=device)
-    return NeuralMaterial(model, config, mip_stack(planes, levels), window, a)
+    return NeuralMaterial(model, config, mip_stack(planes, config.mip_levels), window, a)
 
 
 def with_strands(

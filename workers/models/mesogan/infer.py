@@ -11,7 +11,6 @@ surfaces, for the given structure, appearance, seed and camera, path-traced with
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import ClassVar
@@ -23,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from workers.models.mesogan import artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import build_shell, covering, neural_material
-from workers.models.mesogan.sampling import normalized_structure
+from workers.models.mesogan.sampling import cone_radius, normalized_structure
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import HEIGHT_TO_RADIANS, mip_stack, sample_mipmapped
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
@@ -143,7 +142,7 @@ class MesoganModel:
             self.model, config, cover, params.structure, params.appearance, params.seed
         )
         camera = params.camera.over(spec.camera)
-        cone = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
+        cone = cone_radius(camera.fov, camera.height)
         tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
         image = render_view(tracer, params, camera).image
         return Answer({"image": image}, {"plane_resolution": cover.resolution})

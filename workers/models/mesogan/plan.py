@@ -11,6 +11,7 @@ import numpy as np
 
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering
+from workers.models.mesogan.sampling import cone_radius, widest_footprint
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.reference import SceneRef
 
@@ -25,10 +26,17 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
     camera = compiled.spec.camera
     covered = compiled.positions[cover.triangles].reshape(-1, 3)
     closest = float(np.linalg.norm(covered - np.asarray(camera.position), axis=1).min())
-    cone = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
-    footprint = closest * cone / config.shell_height  # slab heights per pixel at the closest point
-    finest = max(0.0, math.log2(max(footprint, 1e-12) / config.texel))
-    levels = int(math.log2(cover.resolution)) + 1
+    footprint = closest * cone_radius(camera.fov, camera.height) / config.shell_height  # slab heights
+    widest = widest_footprint(config)
+    finest = max(0.0, math.log2(max(min(footprint, widest), 1e-12) / config.texel))
+    levels = config.mip_levels
+    wider = (
+        f"; its footprint ({footprint:.2f} slab heights) is wider than the widest trained ({widest:.2f}): "
+        "the decoder is read at that, and the path tracer's samples filter the rest (train with farther "
+        "cameras to filter with the mip stack)"
+        if footprint > widest
+        else ""
+    )
     pixels = config.image_size**2
     seconds = config.pool * SECONDS_PER_IMAGE * pixels / 256 * config.training_spp / 8
     seconds += config.train.steps * config.batch_size * SECONDS_PER_STEP_PER_VIEW * pixels / 256
@@ -44,7 +52,7 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
             reason=(
                 f"the UV square spans {cover.plane_units:.1f} slab heights at {config.texel:g} per texel; "
                 "the "
-                f"closest view ({closest:.2f} away) reads level {finest:.1f} and coarser"
+                f"closest view ({closest:.2f} away) reads level {finest:.1f} and coarser{wider}"
             ),
         ),
         PlanItem(

@@ -10,8 +10,9 @@ mathematics per point in registers:
   then the barycentrics in the offset triangle at t.
 - `crossings`: Moller-Trumbore against the bottom and top triangles; each side patch, projected onto two
   planes containing the ray (Duff et al. 2017's frame), is a quadratic in the edge parameter.
-- `candidates`: slab tests against the boxes of groups of prisms, then the boxes of the prisms of the
-  groups met; two passes (count, fill) so the output is exact-size.
+- `intervals`: slab tests against the boxes of groups of prisms, then the boxes of the prisms of the
+  groups met, then the crossings; the output grows by doubling (one pass, even for rays that cross many
+  prisms).
 """
 
 from __future__ import annotations
@@ -24,17 +25,17 @@ TINY = 1e-300
 NEWTON_TOLERANCE = 1e-13
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cross(ax, ay, az, bx, by, bz):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _dot(u, w):
     return u[0] * w[0] + u[1] * w[1] + u[2] * w[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _safe(x):
     return x if abs(x) > TINY else TINY
 
@@ -97,7 +98,7 @@ def inverse(base, offsets, prism, p, iterations):
     return bary, height
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _triangle(ox, oy, oz, dx, dy, dz, tri):
     """Moller-Trumbore distance to triangle `tri` (3, 3), or inf."""
     e1x, e1y, e1z = tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2]
@@ -115,7 +116,7 @@ def _triangle(ox, oy, oz, dx, dy, dz, tri):
     return (e2x * qx + e2y * qy + e2z * qz) / det
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _patch_along(q00, q10, q01, q11, ox, oy, oz, u):
     """The bilinear patch minus the origin, projected on u: a + b s + c t + e s t."""
     a = (q00[0] - ox) * u[0] + (q00[1] - oy) * u[1] + (q00[2] - oz) * u[2]
@@ -179,7 +180,7 @@ def _crossings(out, o, d, base, top, j):
             out[2 + 2 * edge + r] = dist
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _box_met(o, inv, t_min, t_max, lo, hi):
     near, far = -np.inf, np.inf
     for x in range(3):
@@ -191,17 +192,29 @@ def _box_met(o, inv, t_min, t_max, lo, hi):
 
 
 @njit(cache=True)
-def _intervals(
-    origins, directions, t_min, t_max, shell, group, iterations, tolerance, out_ray, out_prism, out_t
-):
+def _in_box(x, y, z, lo, hi, margin):
+    return (
+        lo[0] - margin <= x <= hi[0] + margin
+        and lo[1] - margin <= y <= hi[1] + margin
+        and lo[2] - margin <= z <= hi[2] + margin
+    )
+
+
+@njit(cache=True)
+def _intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance):
     base, top, offsets, group_lo, group_hi, order, lo, hi = shell
-    capacity = len(out_ray)
+    capacity = 4 * len(origins) + 64
+    out_ray, out_prism, out_t = (
+        np.empty(capacity, np.int64),
+        np.empty(capacity, np.int64),
+        np.empty((capacity, 2)),
+    )
     count = 0
     all_lo, all_hi = np.empty(3), np.empty(3)
     for x in range(3):
         all_lo[x], all_hi[x] = group_lo[:, x].min(), group_hi[:, x].max()
     cross = np.empty(8)
-    bounds = np.empty(10)
+    bounds = np.empty(10)  # t0, up to 8 crossings, t1
     for r in range(len(origins)):
         o, d = origins[r], directions[r]
         inv = np.empty(3)
@@ -218,30 +231,43 @@ def _intervals(
                 if not _box_met(o, inv, t0, t1, lo[j], hi[j]):
                     continue
                 _crossings(cross, o, d, base, top, j)
+                # [t0, the crossings within (t0, t1) in order (insertion sort: usually two), t1]
                 bounds[0] = t0
+                k = 0
                 for m in range(8):
-                    bounds[1 + m] = cross[m] if cross[m] > t0 and cross[m] < t1 else np.inf
-                bounds[9] = np.inf
-                bounds.sort()
-                for m in range(10):
-                    bounds[m] = min(bounds[m], t1)
-                for m in range(9):
+                    c = cross[m]
+                    if c > t0 and c < t1:
+                        i = k
+                        while i >= 1 and bounds[i] > c:
+                            bounds[i + 1] = bounds[i]
+                            i -= 1
+                        bounds[i + 1] = c
+                        k += 1
+                bounds[k + 1] = t1
+                margin = 10 * tolerance * max(hi[j, 0] - lo[j, 0], hi[j, 1] - lo[j, 1], hi[j, 2] - lo[j, 2])
+                for m in range(k + 1):
                     enter, leave = bounds[m], bounds[m + 1]
                     if not (leave > enter and leave < np.inf):
                         continue
                     mid = 0.5 * (enter + leave)
-                    b0, b1, b2, h = _inverse_point(
-                        base, offsets, j, o[0] + mid * d[0], o[1] + mid * d[1], o[2] + mid * d[2], iterations
-                    )
+                    px, py, pz = o[0] + mid * d[0], o[1] + mid * d[1], o[2] + mid * d[2]
+                    if not _in_box(px, py, pz, lo[j], hi[j], margin):
+                        continue  # the prism lies in its corners' box (its side patches in their hulls)
+                    b0, b1, b2, h = _inverse_point(base, offsets, j, px, py, pz, iterations)
                     if min(b0, b1, b2) < -tolerance or h < -tolerance or h > 1 + tolerance:
                         continue
-                    if count < capacity:
-                        out_ray[count] = r
-                        out_prism[count] = j
-                        out_t[count, 0] = enter
-                        out_t[count, 1] = leave
+                    if count == capacity:  # room for twice as many rows
+                        capacity *= 2
+                        grown_ray, grown_prism = np.empty(capacity, np.int64), np.empty(capacity, np.int64)
+                        grown_t = np.empty((capacity, 2))
+                        grown_ray[:count], grown_prism[:count], grown_t[:count] = out_ray, out_prism, out_t
+                        out_ray, out_prism, out_t = grown_ray, grown_prism, grown_t
+                    out_ray[count] = r
+                    out_prism[count] = j
+                    out_t[count, 0] = enter
+                    out_t[count, 1] = leave
                     count += 1
-    return count
+    return out_ray[:count], out_prism[:count], out_t[:count, 0].copy(), out_t[:count, 1].copy()
 
 
 def intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance):
@@ -249,11 +275,4 @@ def intervals(origins, directions, t_min, t_max, shell, group, iterations, toler
     ray order: the segments between consecutive boundary crossings whose midpoints map inside, for the
     prisms whose boxes (and their group's box) the ray meets. `shell` is (base, top, offsets, group_lo,
     group_hi, order, lo, hi) (`shell.Shell`)."""
-    args = (origins, directions, t_min, t_max, shell, group, iterations, tolerance)
-    capacity = 4 * len(origins) + 64
-    while True:  # one pass, or a second one with room for all when the first overflows
-        ray, prism, t = np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 2))
-        count = _intervals(*args, ray, prism, t)
-        if count <= capacity:
-            return ray[:count], prism[:count], t[:count, 0], t[:count, 1]
-        capacity = count
+    return _intervals(origins, directions, t_min, t_max, shell, group, iterations, tolerance)

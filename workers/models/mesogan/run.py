@@ -5,7 +5,6 @@ the neural shell against the same surfaces covered by real strands and path-trac
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -17,7 +16,7 @@ from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
 from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
 from workers.models.mesogan.networks import MesoGAN
-from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
+from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig, cone_radius
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.train import phases
 from workers.nn.metrics import flip
@@ -74,7 +73,7 @@ class MesoganMethod:
         material = neural_material(model, config, cover, config.structure, config.appearance, ctx.seed)
         generate_seconds = time.perf_counter() - started
         camera = scene.spec.camera
-        cone = 2 * math.tan(math.radians(camera.fov) / 2) / config.preview_size / math.sqrt(3)
+        cone = cone_radius(camera.fov, config.preview_size)
         aggregate = ShellAggregate(shell, material, config.samples_per_ray, cone)
         ctx.log(f"rendering {config.preview_size}^2 with the neural shell at {config.evaluation_spp} spp")
         result = render(PathTracer(scene, aggregate=aggregate), settings)

@@ -45,6 +45,8 @@ SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 # within 1e-5 of it; strand hits this low are a vanishing fraction of a view.
 ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
+CAMERA_ELEVATIONS = (35.0, 85.0)  # degrees above the slab, uniform
+DISTANCE_JITTER = 0.1  # each camera distance is scaled by a uniform factor in 1 -+ this
 
 
 def to_scene(local: np.ndarray) -> np.ndarray:
@@ -99,8 +101,9 @@ def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
     structure = Structure(**{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in STRUCTURE_RANGES.items()})
     appearance = Appearance(hue=float(rng.uniform()), saturation=float(rng.uniform(0.2, 1.0)))
     light = hemisphere(math.radians(rng.uniform(15, 80)), rng.uniform(0, 2 * math.pi))
-    distance = config.camera_distances[rng.integers(len(config.camera_distances))] * rng.uniform(0.9, 1.1)
-    eye = distance * hemisphere(math.radians(rng.uniform(35, 85)), rng.uniform(0, 2 * math.pi))
+    distance = config.camera_distances[rng.integers(len(config.camera_distances))]
+    distance *= rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
+    eye = distance * hemisphere(math.radians(rng.uniform(*CAMERA_ELEVATIONS)), rng.uniform(0, 2 * math.pi))
     size = config.image_size
     camera = Camera(
         position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=size, height=size
@@ -148,8 +151,24 @@ def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
     pinhole = PinholeCamera(camera)
     py, px = np.mgrid[0 : camera.height, 0 : camera.width] + 0.5
     origins, directions = pinhole.rays(px.ravel(), py.ravel())
-    radius = 2 * math.tan(math.radians(camera.fov) / 2) / camera.height / math.sqrt(3)
-    return to_local(origins), to_local(directions), radius
+    return to_local(origins), to_local(directions), cone_radius(camera.fov, camera.height)
+
+
+def cone_radius(fov: float, pixels: int) -> float:
+    """A pixel's cone radius per unit distance (mip-NeRF: the pixel's width / sqrt(3))."""
+    return 2 * math.tan(math.radians(fov) / 2) / pixels / math.sqrt(3)
+
+
+def widest_footprint(config: MesoganConfig) -> float:
+    """The widest cone radius (slab heights) in the training views: where the lowest ray of the farthest,
+    lowest camera (through an image corner) meets the base. The decoder has never seen a wider footprint:
+    its integrated height encoding and mip level there are out of its training distribution (`aggregate`).
+    Rays of wide fields of view that never reach the base count as meeting it at 1 degree."""
+    distance = max(config.camera_distances) * (1 + DISTANCE_JITTER)
+    elevation = math.radians(CAMERA_ELEVATIONS[0])
+    corner = math.atan(math.sqrt(2) * math.tan(math.radians(config.fov) / 2))
+    reach = distance * math.sin(elevation) / math.sin(max(elevation - corner, math.radians(1.0)))
+    return cone_radius(config.fov, config.image_size) * reach
 
 
 @dataclass

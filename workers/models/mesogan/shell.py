@@ -150,7 +150,8 @@ class Shell:
 
     def _group_prisms(self) -> None:
         """Prisms in groups of GROUP consecutive along a Morton curve of their centres, with the groups'
-        boxes: a two-level hierarchy that `candidates` tests rays against before single prisms."""
+        boxes: a two-level hierarchy that `prism_kernels.intervals` tests rays against before single
+        prisms."""
         centre = 0.5 * (self.lo + self.hi)
         span = np.maximum(centre.max(0) - centre.min(0), 1e-300)
         cells = np.clip(((centre - centre.min(0)) / span * 1023).astype(np.int64), 0, 1023)
