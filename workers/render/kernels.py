@@ -22,7 +22,6 @@ import math
 
 from llvmlite import ir
 from numba import types
-from numba.core import cgutils
 from numba.extending import intrinsic
 
 from workers.render.jit import njit
@@ -206,8 +205,8 @@ def prefetch(typingctx, array, flat_index):
         data = context.make_array(array)(context, builder, args[0]).data
         index = context.cast(builder, args[1], signature.args[1], types.intp)
         byte_ptr, i32 = ir.PointerType(ir.IntType(8)), ir.IntType(32)
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [byte_ptr, i32, i32, i32]), "llvm.prefetch.p0"
+        fn = builder.module.declare_intrinsic(  # named for llvmlite's pointer type (p0i8 or p0)
+            "llvm.prefetch", [byte_ptr], ir.FunctionType(ir.VoidType(), [byte_ptr, i32, i32, i32])
         )
         builder.call(fn, [builder.bitcast(builder.gep(data, [index]), byte_ptr), i32(0), i32(3), i32(1)])
         return context.get_dummy_value()
