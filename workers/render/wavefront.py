@@ -71,15 +71,32 @@ def triangle_records(ng, coordinate_scale, smooth, material_ids, emission, two_s
     return records
 
 
+AHEAD = 16  # rows between a prefetch of a hit's triangle and its reads (`surface_points`)
+
+
+@k.scalar
+def _prefetch_triangle(tri, triangles, tri_ns, tri_uv, need_uv):
+    """Start loading what `surface_points` reads of triangle `tri`: its record, shading normals and UVs."""
+    k.prefetch(triangles, tri * 8)
+    k.prefetch(tri_ns, tri * 9)
+    k.prefetch(tri_ns, tri * 9 + 8)
+    if need_uv:
+        k.prefetch(tri_uv, tri * 6)
+        k.prefetch(tri_uv, tri * 6 + 5)
+
+
 @kernel
 def surface_points(o, d, t, prim, bu, bv, triangles, tri_ns, tri_uv, need_uv):
     """Per hit: position o + t d, geometric normal, shading normal (interpolated on smooth triangles),
     UV (when `need_uv`, else 0), the coordinate magnitude for ray offsets and the material id; `triangles`
-    are the records of `triangle_records`."""
+    are the records of `triangle_records`. The triangles of row i + `AHEAD` are prefetched at row i
+    (`kernels.prefetch`): in a large scene each hit's reads miss the cache."""
     n = len(o)
     position, ng, ns = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
     uv, scale, material = np.zeros((n, 2)), np.empty(n), np.empty(n, np.int64)
     for i in range(n):
+        if i + AHEAD < n:
+            _prefetch_triangle(prim[i + AHEAD], triangles, tri_ns, tri_uv, need_uv)
         tri = prim[i]
         record = triangles[tri]
         magnitude = record[SCALE]
