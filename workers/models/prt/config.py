@@ -80,6 +80,9 @@ class PrtConfig(TrainedKindConfig):
     lightings_per_step: int = Field(
         4, ge=1, description="lightings per step (paper 1), each with its own wavelets and share of pixels"
     )
+    lighting_pool: int = Field(
+        0, ge=0, le=1 << 16, description="training lightings built once and drawn from (0: fresh every draw)"
+    )
     grid: HashGridConfig = HashGridConfig(
         levels=8, features_per_level=2, log2_table_size=14, base_resolution=8, per_level_scale=1.5
     )
