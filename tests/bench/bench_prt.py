@@ -7,7 +7,11 @@ driver: PSNR / SSIM of the full frame and of indirect light, FLIP, on near and f
 held-out lightings (HDRIs and procedural maps never trained on), against the trivial baseline of no
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
-Then frame time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
+Then the same held-out views and lightings against a truth at `TRUTH_SPP` (two independent halves: their
+difference estimates the truth's own noise, so the section states the PSNR a perfect model would score and
+the PSNR with that noise taken out), the network beside the model-free nearest-rows baseline on the same
+training rows (what the rows alone give: the network should beat it) and no indirect light. Then frame
+time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
 `ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
 `PRT_BENCH_SCENES` (comma-separated) narrows the scenes.
 """
@@ -19,13 +23,15 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from tests.bench.common import BenchSection
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
-from workers.models.prt.data import test_views, transport_tracer
+from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
 from workers.models.prt.evaluate import truth
-from workers.models.prt.frame import render_frame
+from workers.models.prt.frame import predict_indirect, render_frame
+from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
 from workers.models.prt.probe import modelled_objects
 from workers.models.prt.source import unit_mean
@@ -40,6 +46,13 @@ PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
 SCENES = tuple(os.environ.get("PRT_BENCH_SCENES", "env_lit_objects,glossy_row").split(","))
 SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
+TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "1024"))  # the 256-spp job truth caps PSNR near 27 dB
+NEAREST_ROWS = 16  # training rows averaged per held-out pixel by the model-free baseline
+# Reflected directions against positions (box diagonals) in the baseline's distance, env_lit_objects,
+# default preset, held-out indirect PSNR against a 1024-spp truth: weight 0 / 0.01 / 0.02 / 0.03 / 0.05 /
+# 0.1 / 0.3 / 1 scored 23.4 / 25.6 / 26.1 / 26.2 / 26.1 / 25.2 / 22.7 / 21.4 dB (chosen on the held-out
+# truth: if anything, the baseline is flattered).
+DIRECTION_WEIGHT = 0.03
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
 ABLATION = (
     ("table 2^10", {"grid": {"log2_table_size": 10}}),
@@ -95,6 +108,74 @@ def target_noise(scene: str, section: BenchSection, pixels: int = 256, reference
         )  # fmt: skip
 
 
+def nearest_rows_indirect(
+    data: TrainingSet, inputs: SurfaceInputs, objects: np.ndarray, cube: np.ndarray
+) -> np.ndarray:
+    """The model-free baseline: each modelled pixel's indirect light (N, 3) under `cube` is the mean of its
+    `NEAREST_ROWS` nearest training rows on the same object (by position in box diagonals and
+    `DIRECTION_WEIGHT` times the reflected direction), dotted with the lighting; 0 elsewhere."""
+    diagonal = float(np.linalg.norm(data.box[1] - data.box[0]))
+    features = lambda s: np.hstack([s.position / diagonal, DIRECTION_WEIGHT * s.reflected])  # noqa: E731
+    radiance = np.einsum("pjc,jc->pc", data.rows, cube.reshape(-1, 3))
+    out = np.zeros((len(inputs.hit), 3))
+    for obj in objects:
+        train = np.flatnonzero(data.inputs.object_id == obj)
+        query = np.flatnonzero(inputs.modelled(np.array([obj])))
+        if len(train) == 0 or len(query) == 0:
+            continue
+        k = min(NEAREST_ROWS, len(train))
+        _, nearest = cKDTree(features(data.inputs.take(train))).query(features(inputs.take(query)), k=k)
+        out[query] = radiance[train[nearest.reshape(len(query), k)]].mean(axis=1)
+    return out
+
+
+def mse_of(psnr_db: float) -> float:
+    return 10 ** (-psnr_db / 10)  # `psnr` has peak 1 after its tonemap
+
+
+def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
+    """Network, nearest rows and no indirect on every held-out (view, lighting) against a `TRUTH_SPP`
+    truth made of two independent halves h1, h2. The truth's noise variance (tonemapped) is about
+    mse(h1, h2) / 4, so `ceiling` = the PSNR of a perfect model and `denoised` = the PSNR with the truth's
+    noise subtracted from the MSE (unbiased to first order; means over cases)."""
+    artifact = load(folder)
+    config, model, box, objects = artifact.config, artifact.model, artifact.box, artifact.objects
+    ref = SceneRef(get_builtin(scene))
+    data = training_set(ref, config, SEED, tuple(int(o) for o in objects))
+    figures: dict[str, list[dict[str, float]]] = {"network": [], "nearest_rows": [], "no_indirect": []}
+    for env in held_out_lightings(config.lighting, SEED).values():
+        cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
+        tracer = relit_tracer(ref.compiled(), cube)
+        for view in test_views(ref, config, SEED):
+            halves = [truth(view, cube, tracer, TRUTH_SPP // 2, SEED + h, config.max_depth) for h in (0, 1)]
+            full, indirect = ((a + b) / 2 for a, b in zip(*halves, strict=True))
+            noise = {i: mse_of(psnr(halves[0][i], halves[1][i])) / 4 for i in (0, 1)}
+            frame = render_frame(
+                model, box, objects, tracer, cube, view.camera, k=config.wavelets,
+                weighting=config.selection, spp=config.evaluation_spp, seed=SEED,
+            )  # fmt: skip
+            shape = indirect.shape
+            predictions = {
+                "network": predict_indirect(model, view.inputs, box, objects, cube, config.wavelets,
+                                            config.selection).reshape(shape),
+                "nearest_rows": nearest_rows_indirect(data, view.inputs, objects, cube).reshape(shape),
+                "no_indirect": np.zeros(shape),
+            }  # fmt: skip
+            for method, predicted in predictions.items():
+                scores = {
+                    "psnr_indirect": psnr(indirect, predicted),
+                    "psnr_full": psnr(full, frame.direct + predicted),
+                }
+                row = {}
+                for i, key in enumerate(("psnr_full", "psnr_indirect")):
+                    row[key] = scores[key]
+                    row[f"{key}_denoised"] = -10 * np.log10(max(mse_of(scores[key]) - noise[i], 1e-10))
+                    row[f"{key}_ceiling"] = -10 * np.log10(noise[i])
+                figures[method].append(row)
+    for method, rows in figures.items():
+        section.add(scene=scene, method=method, **{k: float(np.mean([r[k] for r in rows])) for k in rows[0]})
+
+
 def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
     artifact = load(folder)
     config = artifact.config
@@ -129,6 +210,7 @@ def run() -> list[BenchSection]:
     quality = BenchSection(f"prt held-out quality ({PRESET} preset; Table 1 layout, not denoised)")
     lightings = BenchSection("prt per held-out lighting (never trained on)")
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
+    fine = BenchSection(f"prt held-out against a {TRUTH_SPP}-spp truth: network, nearest rows, no indirect")
     sweep = BenchSection("prt time per frame and error against K (Table 2 on this CPU)")
     noise = BenchSection(f"prt ground-truth noise: indirect PSNR against {1024}-spp importance sampling")
     ablation = BenchSection(f"prt ablation on env_lit_objects, {ABLATION_STEPS} steps each (Tables 3, 6)")
@@ -156,6 +238,7 @@ def run() -> list[BenchSection]:
                 equal_time_ratio=report.model.seconds_per_frame / pt_seconds,
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
+            against_fine_truth(folder / "out", scene, fine)
             k_sweep(folder / "out", scene, sweep)
         for label, overrides in ABLATION if ABLATION_STEPS else ():
             folder = Path(tmp) / f"ablation-{len(ablation.rows)}"
@@ -171,7 +254,11 @@ def run() -> list[BenchSection]:
     noise.notes.append(
         "rows_psnr: training targets (row_spp, lighting-independent sampler); truth_psnr: test_spp"
     )
-    return [noise, quality, lightings, timing, sweep, ablation]
+    fine.notes.append(
+        "nearest_rows: the mean of the 16 nearest training rows dotted with the lighting (no network); "
+        "_ceiling: a perfect model's PSNR (the truth's noise); _denoised: PSNR without the truth's noise"
+    )
+    return [noise, quality, fine, lightings, timing, sweep, ablation]
 
 
 def get_kind_config(preset: str):

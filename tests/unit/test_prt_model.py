@@ -19,7 +19,12 @@ from workers.models.prt.lighting import (
     texels_of,
 )
 from workers.models.prt.network import PrtNetwork, roughness_feature
-from workers.models.prt.selection import run_time_selection, training_selection, wavelets_of
+from workers.models.prt.selection import (
+    ranked_wavelets,
+    run_time_selection,
+    training_selection,
+    wavelets_of,
+)
 from workers.nn.cubemap import cubemap_solid_angles
 from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
@@ -89,7 +94,7 @@ def test_selection_is_invariant_to_scaling_the_map():
 
 def test_training_selection_takes_the_largest_and_distinct_others():
     cube = np.random.default_rng(1).random((6, 4, 4, 3)) ** 4
-    chosen = training_selection(cube, 10, 20, np.random.default_rng(2))
+    chosen = training_selection(ranked_wavelets(cube), 10, 20, np.random.default_rng(2))
     largest = torch.topk(wavelets_of(cube).reshape(-1, 3).norm(dim=-1), 10).indices
     assert set(largest.tolist()) <= set(chosen.indices.tolist())
     assert len(set(chosen.indices.tolist())) == 30
@@ -211,3 +216,17 @@ def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wa
             batch["target"],
         )
         assert torch.allclose(prt_loss(model, batch), expected, rtol=1e-6)
+
+
+def test_a_pooled_batch_lights_each_group_by_one_lighting_of_a_pool_built_once():
+    from workers.models.prt.source import PrtSource, PrtSourceConfig, lighting_pool
+    from workers.scene.builtin import get_builtin
+    from workers.scene.reference import SceneRef
+
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {"lighting_pool": 3, "lightings_per_step": 4})
+    source = PrtSource(PrtSourceConfig(SceneRef(get_builtin("env_lit_objects")), config), seed=0)
+    assert lighting_pool(config, 0) is source.pool  # built once per process
+    pooled = [wavelets_of(lighting.cube.reshape(6, 4, 4, 3)).reshape(-1, 3) for lighting in source.pool]
+    batch = source.batch(5)
+    for wavelets, coefficients in zip(batch["wavelets"], batch["coefficients"], strict=True):
+        assert any(torch.allclose(c[wavelets].float(), coefficients) for c in pooled)

@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
@@ -20,14 +22,29 @@ def run_time_selection(cube: np.ndarray, k: int, weighting: str = "area") -> Spa
     return select_top_k(wavelets_of(cube), k, weighting)
 
 
-def training_selection(cube: np.ndarray, top: int, uniform: int, rng: np.random.Generator) -> SparseWavelets:
-    """The `top` largest coefficients by magnitude and `uniform` others drawn without replacement."""
+@dataclass(frozen=True)
+class RankedWavelets:
+    """A lighting's Haar coefficients [6 R^2, 3] and their indices by descending magnitude: what training
+    selection reads, computed once per lighting (a pooled lighting is selected from many times)."""
+
+    coefficients: torch.Tensor
+    order: np.ndarray
+    size: int
+
+
+def ranked_wavelets(cube: np.ndarray) -> RankedWavelets:
     coefficients = wavelets_of(cube)
-    size = coefficients.shape[1]
     flat = coefficients.reshape(-1, 3)
     order = torch.argsort(flat.norm(dim=-1), descending=True, stable=True).numpy()
-    largest = order[:top]
-    rest = order[top:]
+    return RankedWavelets(flat, order, coefficients.shape[1])
+
+
+def training_selection(
+    ranked: RankedWavelets, top: int, uniform: int, rng: np.random.Generator
+) -> SparseWavelets:
+    """The `top` largest coefficients by magnitude and `uniform` others drawn without replacement."""
+    largest = ranked.order[:top]
+    rest = ranked.order[top:]
     drawn = rng.choice(rest, min(uniform, len(rest)), replace=False) if len(rest) else rest
     indices = torch.from_numpy(np.sort(np.concatenate([largest, drawn])))
-    return SparseWavelets(indices, flat[indices], size)
+    return SparseWavelets(indices, ranked.coefficients[indices], ranked.size)

@@ -3,7 +3,9 @@ distribution (the paper one, here `lightings_per_step`: one lighting's gradient 
 towards a single sun or sky, and which lightings came first decided the result), takes each one's Haar
 transform and picks its wavelets (largest + uniform), then samples an equal share of the pixels for each
 from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L.
-Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss).
+Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss). With
+`lighting_pool` > 0 the lightings are drawn from a pool built once per job (cube, Haar transform and
+ranking precomputed), so many lightings per step cost little; the wavelets and pixels stay fresh per draw.
 Batch i is a pure function of (seed, i)."""
 
 from __future__ import annotations
@@ -14,15 +16,17 @@ import numpy as np
 import torch
 
 from workers.models.prt.config import PrtConfig
-from workers.models.prt.data import PIXEL_MAPS, TrainingSet, training_set
+from workers.models.prt.data import PIXEL_MAPS, TrainingSet, cached, training_set
 from workers.models.prt.lighting import lighting_cube, training_lighting
 from workers.models.prt.probe import modelled_objects
-from workers.models.prt.selection import training_selection
+from workers.models.prt.selection import RankedWavelets, ranked_wavelets, training_selection
 from workers.nn.haar import cubemap_wavelets
 from workers.render.sampling import luminance
 from workers.runtime.sources import Batch, batch_rng
 from workers.runtime.threads import torch_threads
 from workers.scene.reference import SceneRef
+
+POOL_STREAM = 2**41  # the pool's random stream; batch indices never reach it
 
 
 @dataclass(frozen=True)
@@ -35,6 +39,32 @@ def unit_mean(cube: np.ndarray) -> np.ndarray:
     """The cube map scaled to mean luminance 1 (a black map stays black)."""
     mean = float(luminance(cube.reshape(-1, 3)).mean())
     return cube / mean if mean > 0 else cube
+
+
+@dataclass(frozen=True)
+class TrainingLighting:
+    cube: np.ndarray  # [6 R^2, 3] float64, unit mean
+    wavelets: RankedWavelets
+
+
+def draw_lighting(config: PrtConfig, rng: np.random.Generator) -> TrainingLighting:
+    """A fresh lighting of the training distribution, as its cube map and ranked wavelets."""
+    env = training_lighting(config.lighting, rng)
+    with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
+        cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
+        return TrainingLighting(cube.reshape(-1, 3), ranked_wavelets(cube))
+
+
+def lighting_pool(config: PrtConfig, seed: int) -> list[TrainingLighting]:
+    """`config.lighting_pool` training lightings, a function of (lighting config, cube size, seed), built
+    once per process."""
+    key = ("pool", config.lighting.model_dump_json(), config.cube_size, config.lighting_pool, seed)
+
+    def build() -> list[TrainingLighting]:
+        rng = np.random.default_rng([seed, POOL_STREAM])
+        return [draw_lighting(config, rng) for _ in range(config.lighting_pool)]
+
+    return cached(key, build)
 
 
 def wavelet_transport(rows: np.ndarray, wavelets: torch.Tensor, size: int) -> torch.Tensor:
@@ -65,6 +95,13 @@ class PrtSource:
         self.seed = seed
         self.objects = modelled_objects(config.scene, config.prt)
         self.data = training_set(config.scene, config.prt, seed, self.objects)
+        self.pool = lighting_pool(config.prt, seed) if config.prt.lighting_pool else []
+
+    def lighting(self, rng: np.random.Generator) -> TrainingLighting:
+        """A training lighting: from the pool when there is one, else a fresh one."""
+        if self.pool:
+            return self.pool[int(rng.integers(len(self.pool)))]
+        return draw_lighting(self.config.prt, rng)
 
     def batch(self, index: int) -> Batch:
         """`lightings_per_step` lightings, each with its own wavelets and an equal share of the pixels:
@@ -73,13 +110,13 @@ class PrtSource:
         rng = batch_rng(self.seed, index)
         wavelets, values, pixels, targets = [], [], [], []
         for share in lighting_shares(c.pixels_per_step, c.lightings_per_step):
-            env = training_lighting(c.lighting, rng)
-            with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
-                cube = unit_mean(lighting_cube(env, c.cube_size, c.lighting.map_width))
-                chosen = training_selection(cube, c.train_top_wavelets, c.train_uniform_wavelets, rng)
+            lighting = self.lighting(rng)
+            chosen = training_selection(
+                lighting.wavelets, c.train_top_wavelets, c.train_uniform_wavelets, rng
+            )
             picked = sample_pixels(self.data, share, rng)
             rows = self.data.rows[picked].astype(np.float64)
-            targets.append(np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)))
+            targets.append(np.einsum("pjc,jc->pc", rows, lighting.cube))
             wavelets.append(chosen.indices.long())
             values.append(chosen.values.float())
             pixels.append(picked)
