@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from workers.nn.configs import MLPConfig
+from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
@@ -26,6 +26,11 @@ class ExploreConfig(TrainedKindConfig):
     # The network (Sec. 5.3.2, App. A.5): position alone into the first layer, then `depth` layers of
     # `width` that re-read the G-buffers and v. The thesis shows 128 wide is acceptable (Fig. A.6).
     mlp: MLPConfig = MLPConfig(width=128, depth=4, activation="leaky_relu")
+    # A hash grid of the normalised position beside it (`network`): None for the thesis's network
+    position_grid: HashGridConfig | None = None
+    grid_lr_scale: float = Field(1.0, gt=0, description="the grid table's learning rate over the layers'")
+    # The saved and measured network is an exponential average of the trained weights (`Explorer`)
+    average_decay: float = Field(0.98, ge=0, lt=1, description="per-step decay of the weights' average")
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
