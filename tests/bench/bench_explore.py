@@ -15,21 +15,28 @@ Each run is measured twice: its weights as they are, and the explorer's exponent
 rate the weights themselves oscillate: one seed's DSSIM was 0.10 and 0.16 ten steps apart, so one
 snapshot's active / uniform ratio said little; the average cuts that noise and lowered DSSIM by up
 to a half (0.044 to 0.025 after 120 CPU s; never more than 1% higher; explore4 notes).
-`EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds.
+`EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds; `EXPLORE_BENCH_OVERRIDES`
+(JSON) changes the config of every run.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
 machine wall time mostly measures the other jobs. So the four runs (two scenes, two methods) can share
 the machine, `EXPLORE_BENCH_WORKERS` processes at a time. `EXPLORE_BENCH_SECONDS` sets the budget per run.
 
-The frame row times the active network's frame (Embree G-buffers and the network) against path tracing
-of the same configuration at 1 to 256 spp in the same run, and reports the spp path tracing needs to reach
-the network's DSSIM and the ratio of the two times.
+The frame row times the active network's frame (Embree G-buffers and the network, `ANTIALIASING`^2
+pixel centres per pixel as in every measured frame, `evaluate`) against path tracing of the same
+configuration at 1 to 256 spp in the same run, and reports the spp path tracing needs to reach the
+network's DSSIM and the ratio of the two times.
+
+Until explore5 the network's frames read one pixel centre per pixel, which alone costs DSSIM 0.063
+against the area-averaged references: every run sat at that floor (0.068-0.071 after 60 CPU s), so error
+was flat across configurations and active against uniform measured noise.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import multiprocessing
 import os
 import time
@@ -41,7 +48,12 @@ import torch
 
 from tests.bench.common import BenchSection
 from workers.models.explore import KIND
-from workers.models.explore.evaluate import configuration_errors, network_image, reference_images
+from workers.models.explore.evaluate import (
+    ANTIALIASING,
+    configuration_errors,
+    network_image,
+    reference_images,
+)
 from workers.models.explore.explorer import Explorer
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchSource, PatchSourceConfig
@@ -81,6 +93,17 @@ OVERRIDES = {
     "reuse_beta": 2.2,
     "train": {"steps": 10_000_000, "schedule": {"kind": "constant", "lr": 1e-3}, "progress_every": 5},
 }
+
+
+def _merged(base: dict, changes: dict) -> dict:
+    return {
+        **base,
+        **{k: _merged(base[k], v) if isinstance(base.get(k), dict) else v for k, v in changes.items()},
+    }
+
+
+# EXPLORE_BENCH_OVERRIDES: a JSON object merged into OVERRIDES (e.g. '{"train_rejected": false}')
+OVERRIDES = _merged(OVERRIDES, json.loads(os.environ.get("EXPLORE_BENCH_OVERRIDES", "{}")))
 
 
 def hard_configurations(scene: str, count: int, seed: int) -> np.ndarray:
@@ -195,7 +218,9 @@ def run() -> list[BenchSection]:
 def _frame_row(scene, model, tracer, v, reference, box, config) -> dict:
     timings = []
     for _ in range(5):
-        image, seconds = network_image(model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE)
+        image, seconds = network_image(
+            model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, ANTIALIASING
+        )
         timings.append(seconds)
     network_seconds, network_dssim = float(np.median(timings)), dssim(reference, image)
     row = {"scene": scene, "network_ms": network_seconds * 1e3, "network_dssim": network_dssim}

@@ -6,7 +6,8 @@ Each iteration either generates or reuses. Generating (always during the bootstr
 step|| evaluated with the current weights (a forward and backward pass per patch, as in the authors'
 code), and the batch holds the accepted
 proposal, or the rejected proposal and the current state [code]: every rendered patch is trained on at
-least once and long-lived states are retrained. Reusing: `chains` stored patches drawn in proportion to
+least once and long-lived states are retrained (`train_rejected`; without it a rejected proposal is only
+stored, and every batch holds one patch per chain). Reusing: `chains` stored patches drawn in proportion to
 their last loss.
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
@@ -233,6 +234,8 @@ class Explorer:
                 self.store.pin(ids[k])
             else:
                 current = chain.patch_id
+                if not c.train_rejected:
+                    members.pop()  # stored for reuse, not trained on now
                 members.append((current, self.store.patches[current], self.store.large[current]))
         self.generations += 1
         self.counts["generated"] += 1
