@@ -4,11 +4,10 @@ Each iteration either generates or reuses. Generating (always during the bootstr
 1 - p_s): every chain proposes a state, the proposals are rendered by the job's sampler actors
 (`Renders`), each proposal is judged against its chain's current state by the target f = loss x ||Adam
 step|| evaluated with the current weights (a forward and backward pass per patch, as in the authors'
-code), and the batch holds the accepted
-proposal, or the rejected proposal and the current state [code]: every rendered patch is trained on at
-least once and long-lived states are retrained (`train_rejected`; without it a rejected proposal is only
-stored, and every batch holds one patch per chain). Reusing: `chains` stored patches drawn in proportion to
-their last loss.
+code), and the batch holds the accepted proposal, or the rejected proposal and the current state [code]:
+every rendered patch is trained on at least once and long-lived states are retrained (`train_rejected`;
+without it a rejected proposal is only stored, and every batch holds one patch per chain). Reusing:
+`chains` stored patches drawn in proportion to their last loss.
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
