@@ -10,27 +10,33 @@ the sphere near a mirror finish, the box by the mirror; the others seeded unifor
 `REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third table and plotted to
 out/bench-explore-<scene>-<seed>.png.
 
-Each run is measured twice: its weights as they are, and an exponential average of them (decay 0.9 every
-`progress_every` steps, about the last 50 steps). At the bench's constant rate the weights themselves
-oscillate: one seed's DSSIM was 0.10 and 0.16 ten steps apart, so one snapshot's active / uniform ratio
-said little; the average cuts that noise and lowered DSSIM by up to a half (0.044 to 0.025 after 120
-CPU s; never more than 1% higher; explore4 notes). `EXPLORE_BENCH_SEEDS` (comma-separated) repeats
-every run with other seeds.
+Each run is measured twice: its weights as they are, and the explorer's exponential average of them
+(`average_decay`, about the last 50 steps; the average is what a job saves). At the bench's constant
+rate the weights themselves oscillate: one seed's DSSIM was 0.10 and 0.16 ten steps apart, so one
+snapshot's active / uniform ratio said little; the average cuts that noise and lowered DSSIM by up
+to a half (0.044 to 0.025 after 120 CPU s; never more than 1% higher; explore4 notes).
+`EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds; `EXPLORE_BENCH_OVERRIDES`
+(JSON) changes the config of every run.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
 machine wall time mostly measures the other jobs. So the four runs (two scenes, two methods) can share
 the machine, `EXPLORE_BENCH_WORKERS` processes at a time. `EXPLORE_BENCH_SECONDS` sets the budget per run.
 
-The frame row times the active network's frame (Embree G-buffers and the network) against path tracing
-of the same configuration at 1 to 256 spp in the same run, and reports the spp path tracing needs to reach
-the network's DSSIM and the ratio of the two times.
+The frame row times the active network's frame (Embree G-buffers and the network, `ANTIALIASING`^2
+pixel centres per pixel as in every measured frame, `evaluate`) against path tracing of the same
+configuration at 1 to 256 spp in the same run, and reports the spp path tracing needs to reach the
+network's DSSIM and the ratio of the two times.
+
+Until explore5 the network's frames read one pixel centre per pixel, which alone costs DSSIM 0.063
+against the area-averaged references: every run sat at that floor (0.068-0.071 after 60 CPU s), so error
+was flat across configurations and active against uniform measured noise.
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
+import json
 import multiprocessing
 import os
 import time
@@ -42,7 +48,12 @@ import torch
 
 from tests.bench.common import BenchSection
 from workers.models.explore import KIND
-from workers.models.explore.evaluate import configuration_errors, network_image, reference_images
+from workers.models.explore.evaluate import (
+    ANTIALIASING,
+    configuration_errors,
+    network_image,
+    reference_images,
+)
 from workers.models.explore.explorer import Explorer
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchSource, PatchSourceConfig
@@ -50,7 +61,7 @@ from workers.nn.metrics import dssim
 from workers.render.render import RenderSettings, render
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
-from workers.runtime.training import Phase, Progress, train_phases
+from workers.runtime.training import Progress, train_phases
 from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 from workers.scene.variables import dimension_names
@@ -66,7 +77,6 @@ REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
 CONFIGURATIONS = 8
 SEED = 11  # of the configurations and the references
 SEEDS = tuple(int(x) for x in os.environ.get("EXPLORE_BENCH_SEEDS", str(SEED)).split(","))  # of the runs
-AVERAGE_DECAY = 0.9  # per progress event, every `progress_every` (5) steps
 PATH_TRACING_SPP = (1, 4, 16, 64, 256)
 # The hard end of each scene's hardest variable (normalised): a sphere near a mirror finish (roughness
 # 0.02-0.09: sharp reflections of the room and the light), a box by the mirror (its reflection beside it)
@@ -83,6 +93,17 @@ OVERRIDES = {
     "reuse_beta": 2.2,
     "train": {"steps": 10_000_000, "schedule": {"kind": "constant", "lr": 1e-3}, "progress_every": 5},
 }
+
+
+def _merged(base: dict, changes: dict) -> dict:
+    return {
+        **base,
+        **{k: _merged(base[k], v) if isinstance(base.get(k), dict) else v for k, v in changes.items()},
+    }
+
+
+# EXPLORE_BENCH_OVERRIDES: a JSON object merged into OVERRIDES (e.g. '{"train_rejected": false}')
+OVERRIDES = _merged(OVERRIDES, json.loads(os.environ.get("EXPLORE_BENCH_OVERRIDES", "{}")))
 
 
 def hard_configurations(scene: str, count: int, seed: int) -> np.ndarray:
@@ -111,16 +132,15 @@ def train_for(
     source = spec.build()
     tracers = [source.tracer.at(v) for v in vectors]
     torch.manual_seed(seed)
-    model = PixelGenerator(source.dimensions, config.mlp)
-    averaged = copy.deepcopy(model)
+    model = PixelGenerator.of(config, source.dimensions)
     explorer = Explorer(config, source.dimensions, model, seed)
-    phase = Phase("main", explorer.loss, on_optimizer=explorer.attach)
+    phase = explorer.phase()
     curve: list[dict] = []
     clock = {"trained": 0.0, "since": time.process_time(), "next_eval": EVAL_EVERY}
 
     def measure(steps: int) -> None:
         errors = configuration_errors(model, tracers, vectors, references, source.box).means()
-        mean = configuration_errors(averaged, tracers, vectors, references, source.box).means()
+        mean = configuration_errors(explorer.average, tracers, vectors, references, source.box).means()
         curve.append(
             {
                 "seconds": clock["trained"],
@@ -131,9 +151,6 @@ def train_for(
         )
 
     def on_progress(event: Progress) -> None:
-        with torch.no_grad():
-            for mean, weight in zip(averaged.parameters(), model.parameters(), strict=True):
-                mean.lerp_(weight, 1 - AVERAGE_DECAY)
         clock["trained"] += time.process_time() - clock["since"]
         if clock["trained"] >= clock["next_eval"] or clock["trained"] >= SECONDS:
             measure(event.step)
@@ -147,7 +164,7 @@ def train_for(
         clock["since"] = time.process_time()
         with contextlib.suppress(_BudgetSpent):
             train_phases(model, [phase], batches, config.train, on_progress=on_progress)
-    return curve, model.state_dict(), explorer.statistics()
+    return curve, explorer.average.state_dict(), explorer.statistics()
 
 
 def run() -> list[BenchSection]:
@@ -187,7 +204,7 @@ def run() -> list[BenchSection]:
             f"{scene}: active/uniform after {SECONDS:.0f} CPU s each, mean over seeds {list(SEEDS)}: "
             + ", ".join(f"{key} {np.mean(values):.3f}" for key, values in ratios.items())
         )
-        model = PixelGenerator(sources[scene].dimensions, config.mlp)
+        model = PixelGenerator.of(config, sources[scene].dimensions)
         model.load_state_dict(results[scene, "active", SEEDS[0]][1])
         frames.add(
             **_frame_row(
@@ -201,7 +218,9 @@ def run() -> list[BenchSection]:
 def _frame_row(scene, model, tracer, v, reference, box, config) -> dict:
     timings = []
     for _ in range(5):
-        image, seconds = network_image(model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE)
+        image, seconds = network_image(
+            model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, ANTIALIASING
+        )
         timings.append(seconds)
     network_seconds, network_dssim = float(np.median(timings)), dssim(reference, image)
     row = {"scene": scene, "network_ms": network_seconds * 1e3, "network_dssim": network_dssim}

@@ -3,19 +3,22 @@ emission rule, deterministic exploration for a seed, and finite training on fire
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+
 import numpy as np
+import pytest
 import torch
 
 from workers.models.explore.config import PRESETS, ExploreConfig
 from workers.models.explore.explorer import Explorer, patch_losses
 from workers.models.explore.features import BUFFER_CHANNELS
 from workers.models.explore.network import PixelGenerator
-from workers.models.explore.oracle import adam_step_norm
 from workers.models.explore.source import PatchSource, PatchSourceConfig
-from workers.nn.configs import MLPConfig
+from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
-from workers.runtime.training import Phase, TrainConfig, train_phases
+from workers.runtime.training import TrainConfig, train_phases
 from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 from workers.scene.spec import SceneSpec
@@ -24,15 +27,19 @@ K = 3
 QUICK = ExploreConfig.model_validate(PRESETS["quick"])
 
 
-def network() -> PixelGenerator:
+def network(grid: HashGridConfig | None = None) -> PixelGenerator:
     torch.manual_seed(0)
-    return PixelGenerator(K, MLPConfig(width=16, depth=2, activation="leaky_relu"))
+    return PixelGenerator(K, MLPConfig(width=16, depth=2, activation="leaky_relu"), grid)
 
 
-def test_the_first_layer_reads_position_only():
-    model = network()
+SMALL_GRID = HashGridConfig(levels=4, base_resolution=4, per_level_scale=2.0, log2_table_size=8)
+
+
+@pytest.mark.parametrize("grid", [None, SMALL_GRID])
+def test_the_first_layer_reads_position_only(grid):
+    model = network(grid)
     features = torch.rand(5, BUFFER_CHANNELS + K, requires_grad=True)
-    model.first(features[:, :3]).sum().backward()
+    model.first(model.encode_position(features[:, :3])).sum().backward()
     first_only = features.grad.clone()
     assert first_only[:, 3:].abs().max() == 0 and first_only[:, :3].abs().max() > 0
     features.grad = None
@@ -80,18 +87,20 @@ def explore_run(
     config = QUICK.model_copy(update=overrides)
     spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(scene), config), seed)
     torch.manual_seed(seed)
-    model = PixelGenerator(spec.build().dimensions, config.mlp)
+    model = PixelGenerator.of(config, spec.build().dimensions)
     explorer = Explorer(config, model.dimensions, model, seed)
-    losses = []
+    losses, snapshots = [], []
 
     def loss(m, batch):
+        snapshots.append([p.detach().clone() for p in m.parameters()])
         value = explorer.loss(m, batch)
         losses.append(float(value.detach()))
         return value
 
     with InProcessRenders(spec) as renders, explorer.open(renders) as batches:
-        phase = Phase("main", loss, on_optimizer=explorer.attach)
+        phase = dataclasses.replace(explorer.phase(), loss=loss)
         train_phases(model, [phase], batches, TrainConfig(steps=steps, schedule={"lr": 3e-3}, eps=1e-8))
+    explorer.snapshots = snapshots
     return explorer, losses, model
 
 
@@ -109,6 +118,21 @@ def test_exploration_is_deterministic_for_a_seed_and_trains_on_every_rendered_pa
     assert all(w != 1.0 for w in a.store.weights.values())
 
 
+def test_the_average_is_the_moving_average_of_the_weights_each_step_trained_from():
+    explorer, _, model = explore_run(
+        get_builtin("mirror_variable"), 2, 6, bootstrap=2, spp=1, average_decay=0.5
+    )
+    expected = [p.clone() for p in explorer.snapshots[0]]
+    for n, snapshot in enumerate(explorer.snapshots):
+        decay = min(0.5, (1 + n) / (10 + n))
+        expected = [decay * e + (1 - decay) * w for e, w in zip(expected, snapshot, strict=True)]
+    for mean, value in zip(explorer.average.parameters(), expected, strict=True):
+        torch.testing.assert_close(mean, value)
+    assert not all(
+        torch.equal(a, b) for a, b in zip(explorer.average.parameters(), model.parameters(), strict=True)
+    )
+
+
 def test_training_stays_finite_on_a_near_mirror_and_fireflies():
     scene = get_builtin("mirror_variable")
     mirror = scene.materials["mirror"].model_copy(update={"roughness": 1e-4})
@@ -118,9 +142,9 @@ def test_training_stays_finite_on_a_near_mirror_and_fireflies():
     assert all(torch.isfinite(p).all() for p in model.parameters())
 
 
-def test_the_vectorised_targets_equal_one_patch_at_a_time():
-    model = network()
-    adam = torch.optim.Adam(model.parameters(), lr=1e-3)
+def test_the_targets_are_each_patchs_loss_times_its_adam_step_through_the_grid():
+    model = network(SMALL_GRID)
+    adam = torch.optim.Adam(model.parameter_groups(10.0), lr=1e-3)
     patches = [
         {"features": torch.rand(8, 8, BUFFER_CHANNELS + K), "emission": torch.zeros(8, 8, 3),
          "target": torch.rand(8, 8, 3) * 2}
@@ -141,9 +165,16 @@ def test_the_vectorised_targets_equal_one_patch_at_a_time():
     )
     explorer.attach(adam)
     expected = []
-    for patch in patches:
-        loss = patch_losses(model, {k: v[None] for k, v in patch.items()}, 2.0)[0]
-        gradients = torch.autograd.grad(loss, list(model.parameters()))
-        expected.append(float(loss.detach()) * adam_step_norm(adam, gradients))
+    for patch in patches:  # a real step of a copy of the model and of its Adam
+        stepped = copy.deepcopy(model)
+        stepped_adam = torch.optim.Adam(stepped.parameter_groups(10.0), lr=1e-3)
+        stepped_adam.load_state_dict(copy.deepcopy(adam.state_dict()))  # it would share the moments
+        loss = patch_losses(stepped, {k: v[None] for k, v in patch.items()}, 2.0)[0]
+        loss.backward()
+        assert stepped.grid.table.grad.abs().max() > 0  # the grid's table is in the step
+        stepped_adam.step()
+        moved = [(a - b).double() for a, b in zip(stepped.parameters(), model.parameters(), strict=True)]
+        length = torch.sqrt(sum(d.square().sum() for d in moved)).detach()
+        expected.append(float(loss.detach()) * float(length))
     np.testing.assert_allclose(explorer.targets(patches), expected, rtol=1e-4)
     assert all(p.grad is None for p in model.parameters())

@@ -63,7 +63,7 @@ def load(folder: Path | str, device: str = "cpu") -> ExploreArtifact:
     scene = load_scene(folder).spec
     if scene is None:
         raise ValueError("the artifact keeps no scene")
-    model = PixelGenerator(len(manifest["dimensions"]), config.mlp)
+    model = PixelGenerator.of(config, len(manifest["dimensions"]))
     weights = safetensors.torch.load_file(str(folder / WEIGHTS))
     model.load_state_dict({k: v.float() for k, v in weights.items()})
     return ExploreArtifact(

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from workers.nn.configs import MLPConfig
+from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
@@ -26,6 +26,16 @@ class ExploreConfig(TrainedKindConfig):
     # The network (Sec. 5.3.2, App. A.5): position alone into the first layer, then `depth` layers of
     # `width` that re-read the G-buffers and v. The thesis shows 128 wide is acceptable (Fig. A.6).
     mlp: MLPConfig = MLPConfig(width=128, depth=4, activation="leaky_relu")
+    # A hash grid of the normalised position into the first layer (`network`; None: the thesis's network).
+    # bench_explore's uniform run on cornell_variable (seed 3, antialiased frames): DSSIM of the averaged
+    # weights 0.0508 / 0.0399 after 30 / 60 CPU s with it, 0.0632 / 0.0479 without (MAPE 0.179 / 0.207
+    # at 60 s); table rate x10 instead of x30 was no better than none (pixel-centre frames, explore5)
+    position_grid: HashGridConfig | None = HashGridConfig(
+        levels=8, base_resolution=8, per_level_scale=1.5, log2_table_size=14
+    )
+    grid_lr_scale: float = Field(30.0, gt=0, description="the grid table's learning rate over the layers'")
+    # The saved and measured network is an exponential average of the trained weights (`Explorer`)
+    average_decay: float = Field(0.98, ge=0, lt=1, description="per-step decay of the weights' average")
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
@@ -42,6 +52,12 @@ class ExploreConfig(TrainedKindConfig):
     resolution_every: int = Field(200, ge=1, description="iterations between resolution steps")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
     max_depth: int = Field(5, ge=1, le=64, description="path segments of a training patch")
+    # [code]: a rejected proposal is trained on beside the chain's current state, so batches hold
+    # `chains` to 2 `chains` patches; without it they hold the chains' states after the decision only.
+    # Dropping them did not pay in bench_explore (60 CPU s, seeds 3-4): active still got ~2300 steps to
+    # uniform's ~3500 (the targets' passes are the overhead, not the batch), active/uniform DSSIM 1.10
+    # and 1.62 against 1.07 and 1.53 with them (explore5)
+    train_rejected: bool = True
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
@@ -100,6 +116,7 @@ PRESETS: dict[str, dict] = {
         # (seeds 5 / 6) at 1000 steps with cosine decay; a constant rate gave 0.46-0.75 over seeds and
         # settings, 100 steps 0.68. About a minute on the loaded 2-core CPU.
         "mlp": {"width": 32, "depth": 2},
+        "position_grid": None,  # measured without
         "patch": 8,
         "chains": 4,
         "resolution_start": 16,
@@ -125,6 +142,7 @@ PRESETS: dict[str, dict] = {
     "default": {},
     "paper": {
         "mlp": {"width": 512, "depth": 8},
+        "position_grid": None,
         "patch": 32,
         "chains": 16,
         "resolution_start": 128,

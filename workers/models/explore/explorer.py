@@ -3,11 +3,11 @@
 Each iteration either generates or reuses. Generating (always during the bootstrap, else with probability
 1 - p_s): every chain proposes a state, the proposals are rendered by the job's sampler actors
 (`Renders`), each proposal is judged against its chain's current state by the target f = loss x ||Adam
-step|| evaluated with the current weights (the authors' code runs a forward and backward pass per
-patch; here every patch's gradient comes from one vectorised pass), and the batch holds the accepted
-proposal, or the rejected proposal and the current state [code]: every rendered patch is trained on at
-least once and long-lived states are retrained. Reusing: `chains` stored patches drawn in proportion to
-their last loss.
+step|| evaluated with the current weights (a forward and backward pass per patch, as in the authors'
+code), and the batch holds the accepted proposal, or the rejected proposal and the current state [code]:
+every rendered patch is trained on at least once and long-lived states are retrained (`train_rejected`;
+without it a rejected proposal is only stored, and every batch holds one patch per chain). Reusing:
+`chains` stored patches drawn in proportion to their last loss.
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
@@ -19,19 +19,24 @@ two loss averages and the counters go into `stream-exploration.json`, and a resu
 stored patches again from their requests, so it continues exactly as the uninterrupted one (there is no
 random state to carry: each iteration's generator is seeded by (seed, iteration)). Seeking to an
 iteration with no such state restarts the chains, the store and the bootstrap there.
+
+The explorer also keeps an exponential moving average of the weights the loss is evaluated with
+(`average`, checkpointed beside the exploration): at a constant or slowly decaying rate the weights
+oscillate from step to step, and the average is what the job saves and measures.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import safetensors.torch
 import torch
 from torch import Tensor
-from torch.func import functional_call, grad, vmap
 
 from workers.models.explore.config import UNIFORM, ExploreConfig
 from workers.models.explore.exploration import greedy, large_step, propose
@@ -43,9 +48,12 @@ from workers.nn.ssim import ssim_map
 from workers.runtime.samplers import Renders
 from workers.runtime.sources import Batch
 from workers.runtime.threads import torch_threads
+from workers.runtime.training import Phase
 
 PATCH_KEYS = ("features", "emission", "target")
 STATE_FILE = "stream-exploration.json"  # the exploration's part of a training checkpoint
+AVERAGE_FILE = "stream-average.safetensors"  # the averaged weights
+AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10 + n))
 
 
 def patch_losses(
@@ -77,9 +85,16 @@ class Explorer:
         self.adam: torch.optim.Adam | None = None
         self.renders: Renders | None = None
         self._threads: contextlib.ExitStack | None = None
+        self.average = copy.deepcopy(model).requires_grad_(False)
         self._restart(0)
 
     # ------------------------------------------------------------------ wiring
+
+    def phase(self) -> Phase:
+        """The training phase of this explorer's model: its loss, its parameter groups (the grid's table at
+        its own rate) and the Adam the targets read."""
+        groups = self.model.parameter_groups(self.config.grid_lr_scale)
+        return Phase("main", self.loss, groups, on_optimizer=self.attach)
 
     def attach(self, adam: torch.optim.Optimizer) -> None:
         """The trainer's Adam, whose moments the target's step norm reads (`Phase.on_optimizer`)."""
@@ -118,6 +133,8 @@ class Explorer:
         self.loss_new, self.loss_existing = MovingAverage(c.reuse_ema), MovingAverage(c.reuse_ema)
         self.generations = 0
         self.counts = {"proposals": 0, "accepted": 0, "large_steps": 0, "generated": 0, "reused": 0}
+        self.average.load_state_dict(self.model.state_dict())
+        self.averaged = 0
 
     def seek(self, index: int) -> None:
         if index != self.position:
@@ -128,13 +145,15 @@ class Explorer:
         state = {
             "position": self.position,
             "generations": self.generations,
+            "averaged": self.averaged,
             "counts": self.counts,
             "loss_new": self.loss_new.value,
             "loss_existing": self.loss_existing.value,
             "chains": [[None if c.state is None else c.state.tolist(), c.patch_id] for c in self.chains],
             "store": self.store.state(asdict),
         }
-        return {STATE_FILE: json.dumps(state).encode()}
+        average = safetensors.torch.save(self.average.state_dict())
+        return {STATE_FILE: json.dumps(state).encode(), AVERAGE_FILE: average}
 
     def restore(self, files: dict[str, bytes]) -> None:
         """Return to a checkpoint's exploration state, rendering its stored patches again; a checkpoint
@@ -146,6 +165,8 @@ class Explorer:
         state = json.loads(files[STATE_FILE])
         self._restart(state["position"])
         self.generations, self.counts = state["generations"], state["counts"]
+        self.averaged = state["averaged"]
+        self.average.load_state_dict(safetensors.torch.load(files[AVERAGE_FILE]))
         self.loss_new.value, self.loss_existing.value = state["loss_new"], state["loss_existing"]
         for chain, (chain_state, patch_id) in zip(self.chains, state["chains"], strict=True):
             chain.state = None if chain_state is None else np.array(chain_state, dtype=np.float64)
@@ -212,6 +233,8 @@ class Explorer:
                 self.store.pin(ids[k])
             else:
                 current = chain.patch_id
+                if not c.train_rejected:
+                    members.pop()  # stored for reuse, not trained on now
                 members.append((current, self.store.patches[current], self.store.large[current]))
         self.generations += 1
         self.counts["generated"] += 1
@@ -226,33 +249,28 @@ class Explorer:
 
     def targets(self, patches: list[Batch]) -> np.ndarray:
         """f(u) = loss(u) x ||Adam step for u's gradient|| of each patch with the current weights (Sec. 5.4),
-        every patch's gradient in one vectorised pass (`torch.func`); the loss alone before the trainer's
-        Adam is attached."""
+        one forward and backward pass per patch as in the authors' code (the hash grid's CPU kernels are
+        not vmap-able); the loss alone before the trainer's Adam is attached."""
         device = next(self.model.parameters()).device
-        stacked = [torch.stack([p[k] for p in patches]).to(device) for k in PATCH_KEYS]
-        weights = {name: p.detach() for name, p in self.model.named_parameters()}
         c = self.config
-
-        def loss_of(w: dict[str, Tensor], features: Tensor, emission: Tensor, target: Tensor):
-            def network(x: Tensor, e: Tensor) -> Tensor:
-                return functional_call(self.model, w, (x, e))
-
-            one = {"features": features[None], "emission": emission[None], "target": target[None]}
-            value = patch_losses(network, one, c.loss_l1_weight, c.loss_ssim_weight)[0]
-            return value, value
-
-        gradients, losses = vmap(grad(loss_of, has_aux=True), in_dims=(None, 0, 0, 0))(weights, *stacked)
-        losses = losses.detach().double().cpu().numpy()
-        if self.adam is None:
-            return losses
-        names = {id(p): name for name, p in self.model.named_parameters()}
-        order = [names[id(p)] for group in self.adam.param_groups for p in group["params"]]
-        norms = [adam_step_norm(self.adam, [gradients[n][i] for n in order]) for i in range(len(patches))]
-        return losses * np.array(norms)
+        parameters = [p for group in self.adam.param_groups for p in group["params"]] if self.adam else []
+        values = []
+        for patch in patches:
+            one = {k: patch[k][None].to(device) for k in PATCH_KEYS}
+            with torch.set_grad_enabled(self.adam is not None):
+                loss = patch_losses(self.model, one, c.loss_l1_weight, c.loss_ssim_weight)[0]
+            value = float(loss.detach())
+            if self.adam is not None:
+                gradients = torch.autograd.grad(loss, parameters, allow_unused=True)
+                value *= adam_step_norm(self.adam, gradients)
+            values.append(value)
+        return np.array(values, dtype=np.float64)
 
     def loss(self, model: PixelGenerator, batch: Batch) -> Tensor:
         """The training loss (the phase's); it writes each patch's loss back as its reuse weight and feeds
-        the large-step patches' mean to the average of fresh or of reused patches."""
+        the large-step patches' mean to the average of fresh or of reused patches. The weights it is
+        called with (those of the previous steps) join the weights' moving average."""
+        self._accumulate(model)
         per_patch = patch_losses(model, batch, self.config.loss_l1_weight, self.config.loss_ssim_weight)
         values = per_patch.detach().float().cpu().numpy()
         for patch_id, value in zip(batch["patch_id"].tolist(), values, strict=True):
@@ -262,6 +280,13 @@ class Explorer:
             average = self.loss_existing if bool(batch["reused"][0]) else self.loss_new
             average.update(float(values[large].mean()))
         return per_patch.mean()
+
+    @torch.no_grad()
+    def _accumulate(self, model: PixelGenerator) -> None:
+        decay = min(self.config.average_decay, (1 + self.averaged) / (AVERAGE_WARMUP + self.averaged))
+        for mean, weight in zip(self.average.parameters(), model.parameters(), strict=True):
+            mean.lerp_(weight.detach(), 1 - decay)
+        self.averaged += 1
 
     def statistics(self) -> dict[str, float]:
         proposals = max(self.counts["proposals"], 1)

@@ -98,8 +98,14 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
             f"p_LS {config.large_step_probability}, beta {config.reuse_beta}, bootstrap {config.bootstrap}",
         )
     )
+    grid = config.position_grid
+    encoding = "" if grid is None else f"; position: {grid.describe()}"
     items.append(
-        PlanItem(name="network", choice=config.mlp.describe(), reason="position preconditioning, skips")
+        PlanItem(
+            name="network",
+            choice=config.mlp.describe() + encoding,
+            reason="position preconditioning, skips; the grid stores what v does not change",
+        )
     )
     patches = config.chains * config.patch**2
     render_seconds = patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT

@@ -26,7 +26,6 @@ from workers.runtime.contract import JobContext
 from workers.runtime.pipeline import Finished, Trainable, Trained
 from workers.runtime.report import TimedImage
 from workers.runtime.sources import SourceSpec
-from workers.runtime.training import Phase
 from workers.runtime.view import PathTracedView
 
 
@@ -42,9 +41,9 @@ class ExploreMethod:
         spec = SourceSpec(PatchSource, PatchSourceConfig(ctx.scene, config), ctx.seed)
         self.source = spec.build()
         torch.manual_seed(ctx.seed)
-        model = PixelGenerator(self.source.dimensions, config.mlp)
+        model = PixelGenerator.of(config, self.source.dimensions)
         self.explorer = Explorer(config, self.source.dimensions, model, ctx.seed)
-        phases = [Phase("main", self.explorer.loss, on_optimizer=self.explorer.attach)]
+        phases = [self.explorer.phase()]
         return [
             Trainable(
                 model,
@@ -58,7 +57,7 @@ class ExploreMethod:
 
     def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
         config: ExploreConfig = ctx.config
-        source, model = self.source, trained[0].model
+        source, model = self.source, self.explorer.average  # the trained weights' average (`Explorer`)
         files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec, source.box)
         ctx.raise_if_cancelled()
         vectors = configurations(source.dimensions, config.evaluation_configurations, ctx.seed)
