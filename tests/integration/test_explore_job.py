@@ -116,6 +116,21 @@ def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
         RENDER, params(values={"light": [0.0, 0.5]}, normalised=True, camera={"width": 20, "height": 12}), {}
     )
     np.testing.assert_allclose(normalised.arrays["image"], image, atol=1e-6)
+    # antialiased frames (the default, as the report measures) average the pixel centres of a finer frame
+    fine = loaded.answer(
+        RENDER,
+        params(values={"light": [-0.5, 0.0, 0.0]}, camera={"width": 40, "height": 24}, antialiasing=1),
+        {},
+    )
+    two = loaded.answer(
+        RENDER,
+        params(values={"light": [-0.5, 0.0, 0.0]}, camera={"width": 20, "height": 12}, antialiasing=2),
+        {},
+    )
+    blocks = fine.arrays["image"].reshape(12, 2, 20, 2, 3).mean(axis=(1, 3))
+    np.testing.assert_allclose(two.arrays["image"], blocks, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match=r"^params\.antialiasing: "):
+        loaded.answer(RENDER, params(camera={"width": 4096, "height": 4096}, antialiasing=2), {})
     with pytest.raises(ValueError, match=r"^params\.values\.light: "):
         loaded.answer(RENDER, params(values={"light": [3.0, 0.0, 0.0]}), {})
     with pytest.raises(ValueError, match=r"^params\.values\.nope: "):
@@ -126,7 +141,9 @@ def test_a_query_of_the_frames_gbuffers_answers_the_frames_pixels(short_job):
     inference = get_inference("explore")
     loaded = inference.load(short_job, "cpu")
     render_params = inference.operations[RENDER].params
-    frame = loaded.answer(RENDER, render_params(values={"light": [0.2, 0.8]}, normalised=True), {})
+    frame = loaded.answer(
+        RENDER, render_params(values={"light": [0.2, 0.8]}, normalised=True, antialiasing=1), {}
+    )
     v = np.asarray(frame.meta["v"])
     state = loaded.scene.at(v)
     camera = state.compiled.spec.camera

@@ -3,8 +3,9 @@
 `render`: `params.values` sets the named variables, in their own units (a colour as RGB, an offset as
 xyz, an angle in degrees, a switch by object name) or, with `normalised`, as their entries of v; the
 variables not named sit at the middle of their ranges. Embree gives the G-buffers of the view, the network
-the radiance per pixel. A camera that is itself a variable is set through its values; otherwise
-`params.camera` overrides the scene camera's fields.
+the radiance per pixel, averaged over `antialiasing`^2 pixel centres per pixel as the frames the report
+measures are (`evaluate.ANTIALIASING`). A camera that is itself a variable is set through its values;
+otherwise `params.camera` overrides the scene camera's fields.
 
 `query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
 albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, which the network sees as
@@ -22,12 +23,12 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.explore.artifact import load
-from workers.models.explore.evaluate import network_image
+from workers.models.explore.evaluate import ANTIALIASING, network_image
 from workers.models.explore.features import pixel_features
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.render.gbuffer import GBuffers
 from workers.render.variable_tracer import VariableTracer
-from workers.runtime.view_render import RENDER_WORKING_BYTES, CameraParams, scene_bytes
+from workers.runtime.view_render import MAX_SAMPLES, RENDER_WORKING_BYTES, CameraParams, scene_bytes
 from workers.scene.variable_scene import CompiledVariableScene
 from workers.scene.variables import vector_from_values
 
@@ -44,6 +45,12 @@ class ExploreRender(BaseModel):
         default_factory=dict, description="variable name -> value (own units, or v entries with `normalised`)"
     )
     normalised: bool = Field(False, description="values are entries of v in [0, 1]")
+    antialiasing: int = Field(
+        ANTIALIASING,
+        ge=1,
+        le=8,
+        description="network samples per pixel side (the report's frames: 4; 1 costs 16x less, aliases)",
+    )
 
 
 class PixelQuery(BaseModel):
@@ -76,10 +83,16 @@ class ExploreModel:
             )
         state = self.scene.at(v)
         camera = params.camera.over(state.compiled.spec.camera)
+        samples = camera.width * camera.height * params.antialiasing**2
+        if samples > MAX_SAMPLES:
+            raise ValueError(
+                f"params.antialiasing: {camera.width}x{camera.height} at {params.antialiasing}^2 samples a "
+                f"pixel is {samples} network samples, more than {MAX_SAMPLES}; lower it or the size"
+            )
         with torch.inference_mode():
             image, seconds = network_image(
                 self.artifact.model, self.tracer.state_tracer(state), camera, self.artifact.box, v,
-                camera.width, camera.height,
+                camera.width, camera.height, params.antialiasing,
             )  # fmt: skip
         return Answer(
             {"image": image}, {"v": v.tolist(), "dimensions": self.artifact.dimensions, "seconds": seconds}

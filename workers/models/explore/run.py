@@ -13,6 +13,7 @@ import torch
 from workers.models.explore import artifact
 from workers.models.explore.config import ExploreConfig
 from workers.models.explore.evaluate import (
+    ANTIALIASING,
     configuration_errors,
     configurations,
     network_image,
@@ -77,8 +78,9 @@ class ExploreMethod:
         others = reference_images(tracers[1:], size, config.reference_spp, config.max_depth, ctx.seed + 2)
         references = [view.reference(), *others]
         errors = configuration_errors(model, tracers, vectors, references, source.box)
-        image, seconds = network_image(
-            model, tracers[0], states[0].compiled.spec.camera, source.box, vectors[0], size, size
+        camera = states[0].compiled.spec.camera
+        image, seconds = network_image(  # timed as the errors are measured: antialiased
+            model, tracers[0], camera, source.box, vectors[0], size, size, ANTIALIASING
         )
         statistics = self.explorer.statistics()
         means = errors.means()
