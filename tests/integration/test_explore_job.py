@@ -14,7 +14,7 @@ import pytest
 
 from tests.support.jobs import assert_resumes_to_the_uninterrupted_weights, run_kind_job
 from tests.support.quality import report_failures
-from workers.models.explore import artifact
+from workers.models.explore import artifact, evaluate
 from workers.models.explore.evaluate import configurations, reference_images
 from workers.models.explore.source import PatchSource, PatchSourceConfig
 from workers.models.registry import QUERY, RENDER, get_inference, get_kind
@@ -98,7 +98,7 @@ def test_the_network_beats_a_black_renderer_at_every_configuration(tmp_path):
     assert figures["exploration.final_resolution"] > CONFIG.resolution_start
 
 
-def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
+def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job, monkeypatch):
     out = short_job
     inference = get_inference("explore")
     loaded = inference.load(out, "cpu")
@@ -129,6 +129,13 @@ def test_the_artifact_renders_named_values_and_refuses_bad_ones(short_job):
     )
     blocks = fine.arrays["image"].reshape(12, 2, 20, 2, 3).mean(axis=(1, 3))
     np.testing.assert_allclose(two.arrays["image"], blocks, rtol=1e-5, atol=1e-6)
+    monkeypatch.setattr(evaluate, "PIXELS_PER_CHUNK", 64)  # traced and run in bands of 3 rows
+    banded = loaded.answer(
+        RENDER,
+        params(values={"light": [-0.5, 0.0, 0.0]}, camera={"width": 20, "height": 12}, antialiasing=2),
+        {},
+    )
+    np.testing.assert_allclose(banded.arrays["image"], two.arrays["image"], rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match=r"^params\.antialiasing: "):
         loaded.answer(RENDER, params(camera={"width": 4096, "height": 4096}, antialiasing=2), {})
     with pytest.raises(ValueError, match=r"^params\.values\.light: "):

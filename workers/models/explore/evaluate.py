@@ -46,22 +46,23 @@ def network_image(
     width: int, height: int, antialiasing: int = 1,
 ) -> tuple[np.ndarray, float]:  # fmt: skip
     """(H, W, 3) linear radiance of the view at v, and the seconds it took (G-buffers and network); each
-    pixel the mean of `antialiasing`^2 pixel centres of a finer frame."""
+    pixel the mean of `antialiasing`^2 pixel centres of a finer frame, traced and run in bands of rows of
+    about `PIXELS_PER_CHUNK` samples, so memory does not grow with the frame."""
     started = time.perf_counter()
     s = antialiasing
-    buffers = primary_gbuffers(tracer, PinholeCamera(camera, width * s, height * s))
-    features = torch.from_numpy(pixel_features(buffers, box, v)).reshape(-1, 13 + len(v))
-    emission = torch.from_numpy(buffers.emission).reshape(-1, 3)
+    fine = PinholeCamera(camera, width * s, height * s)
     device = next(model.parameters()).device
+    image = np.empty((height, width, 3), np.float32)
+    rows = max(1, PIXELS_PER_CHUNK // (width * s * s))  # output rows a band
     with torch_threads(1):  # small layers: a second thread busy-waits (`workers.runtime.threads`)
-        chunks = [
-            model.radiance(
-                features[i : i + PIXELS_PER_CHUNK].to(device), emission[i : i + PIXELS_PER_CHUNK].to(device)
-            )
-            for i in range(0, len(features), PIXELS_PER_CHUNK)
-        ]
-    fine = torch.cat(chunks).float().cpu().numpy().reshape(height, s, width, s, 3)
-    return fine.mean(axis=(1, 3)), time.perf_counter() - started
+        for y0 in range(0, height, rows):
+            y1 = min(height, y0 + rows)
+            buffers = primary_gbuffers(tracer, fine, (0, y0 * s, width * s, y1 * s))
+            features = torch.from_numpy(pixel_features(buffers, box, v)).reshape(-1, 13 + len(v))
+            emission = torch.from_numpy(buffers.emission).reshape(-1, 3)
+            radiance = model.radiance(features.to(device), emission.to(device)).float().cpu().numpy()
+            image[y0:y1] = radiance.reshape(y1 - y0, s, width, s, 3).mean(axis=(1, 3))
+    return image, time.perf_counter() - started
 
 
 @dataclass
