@@ -61,7 +61,7 @@ def pyramid_swd(real: Tensor, fake: Tensor, seed: int = 0) -> float:
 def held_out_views(source: SlabSource, count: int):
     """`count` path-traced instances no training batch draws (a seed of their own), as one batch."""
     held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
-    return stack_views([held_out.instance(j) for j in range(count)])
+    return stack_views([held_out.instance(j) for j in range(count)], source.config.mesogan.image_size)
 
 
 def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
@@ -104,7 +104,6 @@ def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[s
     held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
     instances = [held_out.draw(j) for j in range(count)]
     middle = {k: (lo + hi) / 2 for k, (lo, hi) in STRUCTURE_RANGES.items()}
-    blank = np.zeros((c.image_size, c.image_size, 3))
     figures: dict[str, float] = {}
     for parameter, (statistic, low, high) in PROBES.items():
         lo, hi = STRUCTURE_RANGES[parameter]
@@ -114,8 +113,9 @@ def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[s
             views = []
             for instance in instances:
                 probe = dataclasses.replace(instance, structure=structure)
+                blank = np.zeros((probe.camera.height, probe.camera.width, 3))
                 views.append(View(probe, blank, first_hit_heights(tracer, probe.camera)))
-            batch = stack_views(views)
+            batch = stack_views(views, c.image_size)
             with torch.no_grad():
                 torch.manual_seed(0)
                 fake = fake_views(model, batch)
