@@ -39,8 +39,8 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
     levels = config.mip_levels
     wider = (
         f"; its footprint ({footprint:.2f} slab heights) is wider than the widest trained ({widest:.2f}): "
-        "the decoder is read at that, and the path tracer's samples filter the rest (train with farther "
-        "cameras to filter with the mip stack)"
+        "the decoder is read at that, and the path tracer's samples filter the rest (farther "
+        "`coarse_distances` would filter it with the mip stack)"
         if footprint > widest
         else ""
     )
