@@ -118,6 +118,9 @@ def run() -> list[BenchSection]:
     source = SlabSource(SlabSourceConfig(mesogan=config), SEED)
     held_out = held_out_views(source, 16)
     quality.add(model="trained", **generation_scores(model, held_out))
+    if config.coarse_distances:  # the far views, whose pixels read the coarse mip levels (Sec. 6.2.7)
+        far = held_out_views(source, 16, coarse=True)
+        quality.add(model="trained, coarse views only", **generation_scores(model, far))
     if steps := int(os.environ.get("MESOGAN_BENCH_ABLATION_STEPS", "0")):
         for name, overrides in ABLATIONS.items():
             quality.add(

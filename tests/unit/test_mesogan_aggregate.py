@@ -154,7 +154,7 @@ def flat_slab(distance: float, size: int, floor: float):
         position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=size, height=size
     )
     instance = Instance(Structure(), Appearance(hue=0.3), hemisphere(math.radians(40), 2.0), camera, 0)
-    batch = stack_views([View(instance, np.zeros((size, size, 3)), np.zeros(size * size))])
+    batch = stack_views([View(instance, np.zeros((size, size, 3)), np.zeros(size * size))], size)
     side = round(floor / config.texel)
     window = Window((-side // 2, -side // 2), (side, side), config.texel)
     with torch.no_grad():

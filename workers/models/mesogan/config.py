@@ -36,6 +36,12 @@ class MesoganConfig(TrainedKindConfig):
     training_spp: int = Field(16, ge=1, le=4096)
     pool: int = Field(64, ge=2, description="distinct rendered instances batches draw from (cached)")
     camera_distances: list[float] = Field([2.5, 5.0], min_length=1, description="multi-scale, slab heights")
+    # Multi-scale training that reaches the coarse mip levels (Sec. 6.2.7): at image_size pixels a footprint
+    # one texel wide needs a camera about 25 slab heights away, whose view leaves the slab. Coarse views
+    # keep the camera near and make the pixels wider instead: `image_size / coarse_block` pixels, shown to
+    # the discriminator as blocks (`sampling.stack_views`).
+    coarse_distances: list[float] = Field([], description="slab heights of the coarse views' cameras")
+    coarse_block: int = Field(4, ge=1, description="image pixels per side of a coarse view's pixel")
     fov: float = Field(30.0, gt=1, lt=120)
     light_irradiance: float = Field(3.0, gt=0)
     ambient: float = Field(0.3, ge=0)
@@ -99,6 +105,8 @@ class MesoganConfig(TrainedKindConfig):
     def _sizes(self) -> MesoganConfig:
         if self.image_size & (self.image_size - 1):
             raise ValueError(f"image_size: must be a power of two, got {self.image_size}")
+        if self.image_size % self.coarse_block:
+            raise ValueError(f"coarse_block: {self.coarse_block} must divide image_size {self.image_size}")
         if self.plane_resolution >> (self.mip_levels - 1) < 1:
             raise ValueError(f"mip_levels: {self.mip_levels} levels need plane_resolution >= 2^(levels-1)")
         return self
@@ -135,7 +143,17 @@ PRESETS: dict[str, dict] = {
     # 0.07 / 0.41), stop height at length 0.4 / 1.0 0.03 / 0.16 (real 0.03 / 0.15), held-out SWD 0.401
     # (black 0.676); without the structure term coverage 1.00 / 1.00 and SWD 0.442. `material: grass` or
     # `carpet` trains the other families with the same sizes.
-    "default": {"image_size": 32, "plane_resolution": 48, "pool": 96, "train": {"steps": 1000}},
+    # A third of the views are coarse (8^2 pixels from 12 slab heights, elevations 60-85 degrees): base
+    # footprints 0.37-0.51 slab heights, mip levels 0.6-1.0 (fine views: 0.01-0.05, level 0 only). The fur
+    # ball's closest footprint at the bench's 32^2 is 0.43; pixel-centre rays reach 5.2 slab heights from
+    # the centre (the slab spans 5, the generated window 6).
+    "default": {
+        "image_size": 32,
+        "plane_resolution": 48,
+        "pool": 96,
+        "coarse_distances": [12.0],
+        "train": {"steps": 1000},
+    },
     "paper": {
         "image_size": 128,
         "training_spp": 256,

@@ -8,6 +8,7 @@ height where their rays stop the strand length label, beside the same figures of
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import torch
@@ -58,10 +59,14 @@ def pyramid_swd(real: Tensor, fake: Tensor, seed: int = 0) -> float:
     return sum(sliced_wasserstein(patches(r), patches(f), generator) for r, f in pairs)
 
 
-def held_out_views(source: SlabSource, count: int):
-    """`count` path-traced instances no training batch draws (a seed of their own), as one batch."""
+def held_out_views(source: SlabSource, count: int, coarse: bool | None = None):
+    """`count` path-traced instances no training batch draws (a seed of their own), as one batch; with
+    `coarse`, only the coarse (or only the fine) views among them (`sampling`): the far views whose
+    pixels read the coarse mip levels, where the thesis's no-mipmapping ablation aliases."""
     held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
-    return stack_views([held_out.instance(j) for j in range(count)])
+    size = source.config.mesogan.image_size
+    ids = (j for j in itertools.count() if coarse is None or (held_out.draw(j).camera.width < size) == coarse)
+    return stack_views([held_out.instance(j) for j in itertools.islice(ids, count)], size)
 
 
 def generation_scores(model: MesoGAN, batch) -> dict[str, float]:
@@ -104,7 +109,6 @@ def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[s
     held_out = SlabSource(source.config, source.seed + HELD_OUT_SEED_OFFSET)
     instances = [held_out.draw(j) for j in range(count)]
     middle = {k: (lo + hi) / 2 for k, (lo, hi) in STRUCTURE_RANGES.items()}
-    blank = np.zeros((c.image_size, c.image_size, 3))
     figures: dict[str, float] = {}
     for parameter, (statistic, low, high) in PROBES.items():
         lo, hi = STRUCTURE_RANGES[parameter]
@@ -114,8 +118,9 @@ def structure_response(model: MesoGAN, source: SlabSource, count: int) -> dict[s
             views = []
             for instance in instances:
                 probe = dataclasses.replace(instance, structure=structure)
+                blank = np.zeros((probe.camera.height, probe.camera.width, 3))
                 views.append(View(probe, blank, first_hit_heights(tracer, probe.camera)))
-            batch = stack_views(views)
+            batch = stack_views(views, c.image_size)
             with torch.no_grad():
                 torch.manual_seed(0)
                 fake = fake_views(model, batch)

@@ -19,21 +19,28 @@ SECONDS_PER_IMAGE = 0.5  # path tracing one training view (quick sizes, one idle
 SECONDS_PER_STEP_PER_VIEW = 0.02  # generator + discriminator phases per batch element at 16^2, 6 samples
 
 
+def closest_view(compiled, triangles: np.ndarray, shell_height: float) -> tuple[float, float]:
+    """The camera's distance to the closest covered vertex and a pixel's cone footprint there (slab
+    heights): the narrowest footprint the shell is read at, and about the one of the whole surface when
+    the mesh is small beside its distance."""
+    camera = compiled.spec.camera
+    covered = compiled.positions[triangles].reshape(-1, 3)
+    closest = float(np.linalg.norm(covered - np.asarray(camera.position), axis=1).min())
+    return closest, closest * cone_radius(camera.fov, camera.height) / shell_height
+
+
 def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
     compiled = scene.compiled()
     cover = covering(compiled, config.surfaces, config.shell_height, config.texel)
     build_shell(compiled, cover, config.shell_height)  # a degenerate or folding shell is refused here
-    camera = compiled.spec.camera
-    covered = compiled.positions[cover.triangles].reshape(-1, 3)
-    closest = float(np.linalg.norm(covered - np.asarray(camera.position), axis=1).min())
-    footprint = closest * cone_radius(camera.fov, camera.height) / config.shell_height  # slab heights
+    closest, footprint = closest_view(compiled, cover.triangles, config.shell_height)
     widest = widest_footprint(config)
     finest = max(0.0, math.log2(max(min(footprint, widest), 1e-12) / config.texel))
     levels = config.mip_levels
     wider = (
         f"; its footprint ({footprint:.2f} slab heights) is wider than the widest trained ({widest:.2f}): "
-        "the decoder is read at that, and the path tracer's samples filter the rest (train with farther "
-        "cameras to filter with the mip stack)"
+        "the decoder is read at that, and the path tracer's samples filter the rest (farther "
+        "`coarse_distances` would filter it with the mip stack)"
         if footprint > widest
         else ""
     )

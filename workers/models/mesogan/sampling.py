@@ -3,12 +3,14 @@
 Instance j of a source is a pure function of (seed, j): structure parameters drawn from
 `STRUCTURE_RANGES`, a colour, a directional light from a random upper-hemisphere direction plus a constant
 ambient sky, and a camera on the hemisphere at one of the configured distances (multi-scale) looking at
-the slab's centre tile with its neighbours around it. The image is HDR, tonemapped x / (x + 1) for the
-discriminator. Each view also carries the height at which every pixel-centre ray first meets the geometry
-(0 on the skin): the coverage and height of the pile as the camera sees it, which the generator's
-structure terms match (`train`) and the conditioning figures compare against (`evaluate`). A batch draws
-`batch_size` instances of a pool of `pool` (each rendered once per process and cached), so batches are a
-pure function of (seed, index) and a job can bound its rendering cost.
+the slab's centre tile with its neighbours around it. Coarse views (`coarse_distances`) have
+`coarse_block` times wider pixels, so their cone footprints reach the plane's coarse mip levels (Sec.
+6.2.7); their cameras stay high enough that the view stays on the slab. The image is HDR, tonemapped x /
+(x + 1) for the discriminator. Each view also carries the height at which every pixel-centre ray first
+meets the geometry (0 on the skin): the coverage and height of the pile as the camera sees it, which the
+generator's structure terms match (`train`) and the conditioning figures compare against (`evaluate`). A
+batch draws `batch_size` instances of a pool of `pool` (each rendered once per process and cached), so
+batches are a pure function of (seed, index) and a job can bound its rendering cost.
 
 Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
 """
@@ -46,6 +48,7 @@ SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
 CAMERA_ELEVATIONS = (35.0, 85.0)  # degrees above the slab, uniform
+COARSE_ELEVATIONS = (60.0, 85.0)  # coarse views are farther: higher, to keep the slab in view
 DISTANCE_JITTER = 0.1  # each camera distance is scaled by a uniform factor in 1 -+ this
 
 
@@ -101,10 +104,13 @@ def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
     structure = Structure(**{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in STRUCTURE_RANGES.items()})
     appearance = Appearance(hue=float(rng.uniform()), saturation=float(rng.uniform(0.2, 1.0)))
     light = hemisphere(math.radians(rng.uniform(15, 80)), rng.uniform(0, 2 * math.pi))
-    distance = config.camera_distances[rng.integers(len(config.camera_distances))]
-    distance *= rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
-    eye = distance * hemisphere(math.radians(rng.uniform(*CAMERA_ELEVATIONS)), rng.uniform(0, 2 * math.pi))
-    size = config.image_size
+    distances = [*config.camera_distances, *config.coarse_distances]
+    index = rng.integers(len(distances))
+    coarse = index >= len(config.camera_distances)
+    distance = distances[index] * rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
+    elevation = rng.uniform(*(COARSE_ELEVATIONS if coarse else CAMERA_ELEVATIONS))
+    eye = distance * hemisphere(math.radians(elevation), rng.uniform(0, 2 * math.pi))
+    size = config.image_size // (config.coarse_block if coarse else 1)
     camera = Camera(
         position=tuple(to_scene(eye)), target=(0.0, 0.0, 0.0), fov=config.fov, width=size, height=size
     )
@@ -161,14 +167,24 @@ def cone_radius(fov: float, pixels: int) -> float:
 
 def widest_footprint(config: MesoganConfig) -> float:
     """The widest cone radius (slab heights) in the training views: where the lowest ray of the farthest,
-    lowest camera (through an image corner) meets the base. The decoder has never seen a wider footprint:
-    its integrated height encoding and mip level there are out of its training distribution (`aggregate`).
+    lowest camera (through an image corner) meets the base, over the fine and the coarse views. The
+    decoder has never seen a wider footprint: its integrated height encoding and mip level there are out
+    of its training distribution (`aggregate`)."""
+    widest = _widest_in(config.fov, config.camera_distances, CAMERA_ELEVATIONS[0], config.image_size)
+    if config.coarse_distances:
+        pixels = config.image_size // config.coarse_block
+        widest = max(widest, _widest_in(config.fov, config.coarse_distances, COARSE_ELEVATIONS[0], pixels))
+    return widest
+
+
+def _widest_in(fov: float, distances: list[float], lowest: float, pixels: int) -> float:
+    """The widest footprint of views of `pixels`^2 from `distances` at elevations from `lowest` degrees.
     Rays of wide fields of view that never reach the base count as meeting it at 1 degree."""
-    distance = max(config.camera_distances) * (1 + DISTANCE_JITTER)
-    elevation = math.radians(CAMERA_ELEVATIONS[0])
-    corner = math.atan(math.sqrt(2) * math.tan(math.radians(config.fov) / 2))
+    distance = max(distances) * (1 + DISTANCE_JITTER)
+    elevation = math.radians(lowest)
+    corner = math.atan(math.sqrt(2) * math.tan(math.radians(fov) / 2))
     reach = distance * math.sin(elevation) / math.sin(max(elevation - corner, math.radians(1.0)))
-    return cone_radius(config.fov, config.image_size) * reach
+    return cone_radius(fov, pixels) * reach
 
 
 @dataclass
@@ -222,22 +238,34 @@ class SlabSource:
     def batch(self, index: int) -> Batch:
         c = self.config.mesogan
         ids = batch_rng(self.seed, index).integers(c.pool, size=c.batch_size)
-        return stack_views([self.instance(int(j)) for j in ids])
+        return stack_views([self.instance(int(j)) for j in ids], c.image_size)
 
 
-def stack_views(views: list[View]) -> Batch:
-    """Tensors of labelled views: tonemapped images (B, 3, H, W), first-hit heights (B, HW), rays
-    (B, HW, 3), labels (B, ...)."""
+def blocks(values: np.ndarray, side: int, block: int) -> np.ndarray:
+    """Per-pixel rows (side^2, ...) in image order, each pixel repeated as a block x block square."""
+    grid = values.reshape(side, side, *values.shape[1:])
+    return np.repeat(np.repeat(grid, block, 0), block, 1).reshape(-1, *values.shape[1:])
+
+
+def stack_views(views: list[View], size: int) -> Batch:
+    """Tensors of labelled views shown at `size`^2: tonemapped images (B, 3, H, W), first-hit heights
+    (B, HW), rays (B, HW, 3), labels (B, ...). A coarse view's pixels are blocks of `block` (B,) pixels
+    (its pixel-centre ray and cone repeated), which `slab.render_slab` renders as their mean."""
     rows: dict[str, list[np.ndarray]] = {}
     for view in views:
         instance = view.instance
+        side = instance.camera.width
+        block = size // side
         origins, directions, radius = camera_rays(instance.camera)
         row = {
-            "image": np.transpose(view.image, (2, 0, 1)),
-            "hit_height": view.hit_height,
-            "origins": origins,
-            "directions": directions,
+            "image": np.transpose(blocks(view.image.reshape(side * side, 3), side, block), (1, 0)).reshape(
+                3, size, size
+            ),
+            "hit_height": blocks(view.hit_height, side, block),
+            "origins": blocks(origins, side, block),
+            "directions": blocks(directions, side, block),
             "pixel_radius": np.array(radius),
+            "block": np.array(block),
             "camera": origins[0],
             **instance.labels(),
         }

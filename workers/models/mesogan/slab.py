@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from workers.models.mesogan.config import MesoganConfig
@@ -175,7 +176,21 @@ def render_slab(
     pixels = (weights[..., None] * radiance).sum(-2)  # (B, N, 3)
     size = math.isqrt(pixels.shape[1])
     image = pixels.permute(0, 2, 1).reshape(pixels.shape[0], 3, size, size)
+    if "block" in batch:
+        image = block_means(image, batch["block"])
     return SlabRender(image, opacity, hit_height)
+
+
+def block_means(image: Tensor, block: Tensor) -> Tensor:
+    """Each view's image (B, 3, H, W) as the means of its `block` (B,) pixel squares: a coarse view's
+    pixel is one pixel-centre ray repeated, and the mean of its repeats' jittered estimates is its value
+    (what the path-traced coarse view shows, `sampling.stack_views`)."""
+    for k in block.unique().tolist():
+        if k > 1:
+            views = (block == k).nonzero()[:, 0]
+            means = F.interpolate(F.avg_pool2d(image[views], int(k)), scale_factor=int(k), mode="nearest")
+            image = image.index_put((views,), means)
+    return image
 
 
 def uniform_hemisphere(shape, device, random: bool) -> Tensor:
