@@ -72,8 +72,27 @@ def median_cpu_seconds(fn, repeats: int = 5) -> float:
     return float(np.median(times))
 
 
+class RecordedQueries:
+    """An intersector that passes every query on and keeps a copy: the Embree work of a render, to be
+    timed again without the path tracer around it."""
+
+    def __init__(self, inner: RayScene) -> None:
+        self.inner, self.queries = inner, []
+
+    def intersect(self, origins, directions, t_max=None):
+        self.queries.append((self.inner.intersect, origins.copy(), directions.copy(), t_max))
+        return self.inner.intersect(origins, directions, t_max)
+
+    def occluded(self, origins, directions, t_max):
+        self.queries.append((self.inner.occluded, origins.copy(), directions.copy(), t_max))
+        return self.inner.occluded(origins, directions, t_max)
+
+
 def one_thread_cpu(name: str, scene) -> dict:
-    """Raw Embree and our tracer in this thread, as rays per CPU second (128x128, 16 spp)."""
+    """Raw Embree and our tracer in this thread, as rays per CPU second (128x128, 16 spp); and the share of
+    the render's CPU time its own Embree queries (closest hit and shadow, replayed alone) take, which
+    does not depend on how hard the incoherent reference rays are for this scene (on env_lit_objects
+    most of them miss the small objects and are cheap)."""
     origins, directions = incoherent_rays(scene.bounds, 1 << 16)
     rays = RayScene(scene.positions)
     embree = len(origins) / median_cpu_seconds(lambda: rays.intersect(origins, directions))
@@ -90,8 +109,22 @@ def one_thread_cpu(name: str, scene) -> dict:
 
     seconds = median_cpu_seconds(render_items, repeats=3)
     ours = traced[-1] / seconds
+    recorder = RecordedQueries(tracer.rays)
+    tracer.rays = tracer.primary = recorder
+    render_items()
+    queries = recorder.queries
+
+    def replay():
+        for query, o, d, t_max in queries:
+            query(o, d) if t_max is None else query(o, d, t_max)
+
+    own = median_cpu_seconds(replay, repeats=3)
     return dict(
-        scene=name, embree_mrays_per_cpu_s=embree / 1e6, ours_mrays_per_cpu_s=ours / 1e6, ratio=ours / embree
+        scene=name,
+        embree_mrays_per_cpu_s=embree / 1e6,
+        ours_mrays_per_cpu_s=ours / 1e6,
+        ratio=ours / embree,
+        own_queries_share=own / seconds,
     )
 
 
@@ -152,6 +185,9 @@ def run() -> list[BenchSection]:
     for name, scene in compiled.items():
         cpu.add(**one_thread_cpu(name, scene))
     cpu.notes.append("thread CPU time: load from other processes on the machine does not enter it")
+    cpu.notes.append(
+        "own_queries_share: the render's own Embree queries replayed alone, over the render's CPU time"
+    )
 
     jit = BenchSection("First-run cost: compiling the kernels (fresh process, empty Numba cache)")
     for name in SCENES:
