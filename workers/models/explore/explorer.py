@@ -3,11 +3,11 @@
 Each iteration either generates or reuses. Generating (always during the bootstrap, else with probability
 1 - p_s): every chain proposes a state, the proposals are rendered by the job's sampler actors
 (`Renders`), each proposal is judged against its chain's current state by the target f = loss x ||Adam
-step|| evaluated with the current weights (a forward and backward pass per patch, as in the authors'
-code), and the batch holds the accepted proposal, or the rejected proposal and the current state [code]:
-every rendered patch is trained on at least once and long-lived states are retrained (`train_rejected`;
-without it a rejected proposal is only stored, and every batch holds one patch per chain). Reusing:
-`chains` stored patches drawn in proportion to their last loss.
+step|| evaluated with the current weights (per-patch gradients of the layers, `targets`), and the batch
+holds the accepted proposal, or the rejected proposal and the current state [code]: every rendered patch
+is trained on at least once and long-lived states are retrained (`train_rejected`; without it a rejected
+proposal is only stored, and every batch holds one patch per chain). Reusing: `chains` stored patches
+drawn in proportion to their last loss.
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
@@ -253,13 +253,14 @@ class Explorer:
         """f(u) = loss(u) x ||Adam step of the layers for u's gradient|| of each patch with the current
         weights (Sec. 5.4); the loss alone before the trainer's Adam is attached.
 
-        The step is that of the layers' weights (`PixelGenerator.layers`), the thesis's whole network; the
-        hash grid's table, our addition, is held fixed (its features are inputs here): its autograd
-        Function (Numba kernels) cannot be vmapped, and its dense step norm over ~2.6e5 entries, of which
-        a patch touches a few thousand, was a third of the target's cost. With the grid's features fixed,
-        the per-patch gradients of all patches come from one `vmap`ped backward pass, not one pass per
-        patch as in the authors' code: a generation's targets took 60 ms of CPU, ~25% of an active run's
-        training (explore5), and now take ~N ms (explore6)."""
+        The step is that of the layers' weights (`PixelGenerator.layers`: the thesis's network); the hash
+        grid's table, our addition, is held fixed and its features are inputs here. Its autograd Function
+        (Numba kernels) cannot be vmapped, and its dense step norm over ~2.6e5 entries, of which a patch
+        touches a few thousand, was a third of the target's cost. With the grid's features fixed, the
+        per-patch gradients of all patches come from one `vmap`ped backward pass instead of one pass per
+        patch (the authors' code): 16 patches of 16^2 took 46 ms of CPU, now 14 ms (bench's 64 x 3
+        network with the grid; 68 -> 37 ms at the default 128 x 4; explore6). One pass per patch had
+        made the targets ~25% of an active run's training CPU, and active got 0.65x uniform's steps."""
         device = next(self.model.parameters()).device
         c = self.config
         batch = {k: torch.stack([patch[k] for patch in patches]).to(device) for k in PATCH_KEYS}
