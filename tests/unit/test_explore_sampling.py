@@ -20,7 +20,7 @@ from workers.models.explore.exploration import (
     propose,
     small_step,
 )
-from workers.models.explore.oracle import adam_step_norm
+from workers.models.explore.oracle import adam_step_norms
 from workers.models.explore.reuse import PatchStore, reuse_probability
 
 S1, S2 = 1 / 25, 1 / 20
@@ -123,7 +123,7 @@ def test_greedy_chains_move_once_the_target_decays_where_they_sit():
 
 
 @pytest.mark.parametrize("steps_before", [0, 3])
-def test_the_adam_step_norm_is_a_real_steps_length_and_changes_nothing(steps_before):
+def test_the_adam_step_norms_are_real_steps_lengths_and_change_nothing(steps_before):
     torch.manual_seed(0)
     model = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.LeakyReLU(0.01), torch.nn.Linear(8, 2))
     adam = torch.optim.Adam(model.parameters(), lr=1e-2, betas=(0.9, 0.999), eps=1e-8, weight_decay=1e-3)
@@ -135,19 +135,22 @@ def test_the_adam_step_norm_is_a_real_steps_length_and_changes_nothing(steps_bef
     adam.zero_grad(set_to_none=True)
     before_state = copy.deepcopy(adam.state_dict())
     before_params = [p.detach().clone() for p in model.parameters()]
-    sample = torch.randn(3, 4)
-    loss = (model(sample) - 1).abs().mean()
-    gradients = torch.autograd.grad(loss, list(model.parameters()))
-    predicted = adam_step_norm(adam, gradients)
+    samples = torch.randn(2, 3, 4)
+    per_sample = [
+        torch.autograd.grad((model(sample) - 1).abs().mean(), list(model.parameters())) for sample in samples
+    ]
+    stacked = {p: torch.stack(g) for p, *g in zip(model.parameters(), *per_sample, strict=True)}
+    predicted = adam_step_norms(adam, stacked)
 
-    twin = copy.deepcopy(model)
-    twin_adam = torch.optim.Adam(twin.parameters(), lr=1e-2, betas=(0.9, 0.999), eps=1e-8, weight_decay=1e-3)
-    twin_adam.load_state_dict(copy.deepcopy(before_state))
-    (twin(sample) - 1).abs().mean().backward()
-    twin_adam.step()
-    moved = [(a.detach() - b) for a, b in zip(twin.parameters(), before_params, strict=True)]
-    real = torch.sqrt(sum((d**2).sum() for d in moved))
-    assert predicted == pytest.approx(float(real), rel=1e-5)
+    for sample, norm in zip(samples, predicted, strict=True):
+        twin = copy.deepcopy(model)
+        twin_adam = torch.optim.Adam(twin.parameters(), lr=1e-2, eps=1e-8, weight_decay=1e-3)
+        twin_adam.load_state_dict(copy.deepcopy(before_state))
+        (twin(sample) - 1).abs().mean().backward()
+        twin_adam.step()
+        moved = [(a.detach() - b) for a, b in zip(twin.parameters(), before_params, strict=True)]
+        real = torch.sqrt(sum((d**2).sum() for d in moved))
+        assert float(norm) == pytest.approx(float(real), rel=1e-5)
     assert all(torch.equal(p, q) for p, q in zip(model.parameters(), before_params, strict=True))
     assert all(p.grad is None for p in model.parameters())
     after = adam.state_dict()

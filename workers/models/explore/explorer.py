@@ -3,11 +3,11 @@
 Each iteration either generates or reuses. Generating (always during the bootstrap, else with probability
 1 - p_s): every chain proposes a state, the proposals are rendered by the job's sampler actors
 (`Renders`), each proposal is judged against its chain's current state by the target f = loss x ||Adam
-step|| evaluated with the current weights (a forward and backward pass per patch, as in the authors'
-code), and the batch holds the accepted proposal, or the rejected proposal and the current state [code]:
-every rendered patch is trained on at least once and long-lived states are retrained (`train_rejected`;
-without it a rejected proposal is only stored, and every batch holds one patch per chain). Reusing:
-`chains` stored patches drawn in proportion to their last loss.
+step|| evaluated with the current weights (per-patch gradients of the layers, `targets`), and the batch
+holds the accepted proposal, or the rejected proposal and the current state [code]: every rendered patch
+is trained on at least once and long-lived states are retrained (`train_rejected`; without it a rejected
+proposal is only stored, and every batch holds one patch per chain). Reusing: `chains` stored patches
+drawn in proportion to their last loss.
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
@@ -37,11 +37,13 @@ import numpy as np
 import safetensors.torch
 import torch
 from torch import Tensor
+from torch.func import functional_call, grad, vmap
 
 from workers.models.explore.config import UNIFORM, ExploreConfig
 from workers.models.explore.exploration import greedy, large_step, propose
+from workers.models.explore.features import POSITION
 from workers.models.explore.network import PixelGenerator
-from workers.models.explore.oracle import adam_step_norm
+from workers.models.explore.oracle import adam_step_norms
 from workers.models.explore.reuse import MovingAverage, PatchStore, reuse_probability
 from workers.models.explore.source import PatchRequest, render_seed, request_for
 from workers.nn.ssim import ssim_map
@@ -248,23 +250,40 @@ class Explorer:
     # ------------------------------------------------------------------ the target and the loss
 
     def targets(self, patches: list[Batch]) -> np.ndarray:
-        """f(u) = loss(u) x ||Adam step for u's gradient|| of each patch with the current weights (Sec. 5.4),
-        one forward and backward pass per patch as in the authors' code (the hash grid's CPU kernels are
-        not vmap-able); the loss alone before the trainer's Adam is attached."""
+        """f(u) = loss(u) x ||Adam step of the layers for u's gradient|| of each patch with the current
+        weights (Sec. 5.4); the loss alone before the trainer's Adam is attached.
+
+        The step is that of the layers' weights (`PixelGenerator.layers`: the thesis's network); the hash
+        grid's table, our addition, is held fixed and its features are inputs here. Its autograd Function
+        (Numba kernels) cannot be vmapped, and its dense step norm over ~2.6e5 entries, of which a patch
+        touches a few thousand, was a third of the target's cost. With the grid's features fixed, the
+        per-patch gradients of all patches come from one `vmap`ped backward pass instead of one pass per
+        patch (the authors' code): 16 patches of 16^2 took 46 ms of CPU, now 14 ms (bench's 64 x 3
+        network with the grid; 68 -> 37 ms at the default 128 x 4; explore6). One pass per patch had
+        made the targets ~25% of an active run's training CPU, and active got 0.65x uniform's steps."""
         device = next(self.model.parameters()).device
         c = self.config
-        parameters = [p for group in self.adam.param_groups for p in group["params"]] if self.adam else []
-        values = []
-        for patch in patches:
-            one = {k: patch[k][None].to(device) for k in PATCH_KEYS}
-            with torch.set_grad_enabled(self.adam is not None):
-                loss = patch_losses(self.model, one, c.loss_l1_weight, c.loss_ssim_weight)[0]
-            value = float(loss.detach())
-            if self.adam is not None:
-                gradients = torch.autograd.grad(loss, parameters, allow_unused=True)
-                value *= adam_step_norm(self.adam, gradients)
-            values.append(value)
-        return np.array(values, dtype=np.float64)
+        batch = {k: torch.stack([patch[k] for patch in patches]).to(device) for k in PATCH_KEYS}
+        if self.adam is None:
+            with torch.no_grad():
+                losses = patch_losses(self.model, batch, c.loss_l1_weight, c.loss_ssim_weight)
+            return losses.double().cpu().numpy()
+        with torch.no_grad():
+            encoded = self.model.encode_position(batch["features"][..., POSITION])
+        layers = self.model.layers()
+
+        def loss_of(weights: dict[str, Tensor], encoded: Tensor, one: Batch) -> tuple[Tensor, Tensor]:
+            def network(features: Tensor, emission: Tensor) -> Tensor:
+                return functional_call(self.model, weights, (features, emission), {"encoded": encoded[None]})
+
+            single = {k: one[k][None] for k in PATCH_KEYS}
+            loss = patch_losses(network, single, c.loss_l1_weight, c.loss_ssim_weight)[0]
+            return loss, loss.detach()
+
+        weights = {name: p.detach() for name, p in layers.items()}
+        gradients, losses = vmap(grad(loss_of, has_aux=True), in_dims=(None, 0, 0))(weights, encoded, batch)
+        norms = adam_step_norms(self.adam, {layers[name]: g for name, g in gradients.items()})
+        return (losses.double() * norms).cpu().numpy()
 
     def loss(self, model: PixelGenerator, batch: Batch) -> Tensor:
         """The training loss (the phase's); it writes each patch's loss back as its reuse weight and feeds

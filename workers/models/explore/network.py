@@ -49,18 +49,25 @@ class PixelGenerator(nn.Module):
             return position
         return torch.cat([position, self.grid(position)], dim=-1)
 
-    def forward(self, features: Tensor, emission: Tensor) -> Tensor:
-        """log1p radiance [..., 3] of pixels with `features` [..., 13 + K] and first-hit `emission`."""
-        h = self.activation(self.first(self.encode_position(features[..., POSITION])))
+    def forward(self, features: Tensor, emission: Tensor, encoded: Tensor | None = None) -> Tensor:
+        """log1p radiance [..., 3] of pixels with `features` [..., 13 + K] and first-hit `emission`;
+        `encoded`: the first layer's input if already computed (`encode_position`), e.g. held constant."""
+        if encoded is None:
+            encoded = self.encode_position(features[..., POSITION])
+        h = self.activation(self.first(encoded))
         for layer in self.hidden:
             h = self.activation(layer(torch.cat([h, features], dim=-1)))
         emitted = torch.log1p(emission)
         passthrough = (emitted > BRIGHT_EMITTER).any(dim=-1, keepdim=True)
         return torch.where(passthrough, emitted, self.output(h) + emitted)
 
+    def layers(self) -> dict[str, nn.Parameter]:
+        """The layers' parameters by name: everything but the grid's table."""
+        return {name: p for name, p in self.named_parameters() if not name.startswith("grid.")}
+
     def parameter_groups(self, grid_lr_scale: float) -> list[dict]:
         """Adam groups: the layers at the scheduled rate, the grid's table at `grid_lr_scale` times it."""
-        layers = [p for name, p in self.named_parameters() if not name.startswith("grid.")]
+        layers = list(self.layers().values())
         if self.grid is None:
             return [{"params": layers}]
         return [{"params": layers}, {"params": list(self.grid.parameters()), "lr_scale": grid_lr_scale}]
