@@ -59,7 +59,11 @@ class ExploreConfig(TrainedKindConfig):
     # `chains` to 2 `chains` patches; without it they hold the chains' states after the decision only.
     # Dropping them did not pay in bench_explore (60 CPU s, seeds 3-4): active still got ~2300 steps to
     # uniform's ~3500 (the targets' passes are the overhead, not the batch), active/uniform DSSIM 1.10
-    # and 1.62 against 1.07 and 1.53 with them (explore5)
+    # and 1.62 against 1.07 and 1.53 with them (explore5). Re-measured with the batched targets
+    # (cornell_variable, 60 CPU s, same run): 1.02x and 1.00x the steps (3210 vs 3150, 3405 vs 3405) at
+    # 6% and 16% higher DSSIM of the averaged weights (0.0342 vs 0.0323, 0.0356 vs 0.0307; seeds 3, 4):
+    # only ~11% of steps are fresh generations (the rest reuse `chains` stored patches), so the doubled
+    # batches cost little and the rejected proposals are worth training on (explore7)
     train_rejected: bool = True
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
