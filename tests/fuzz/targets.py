@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import os
 import re
 import sys
 import tempfile
@@ -24,7 +25,8 @@ with atheris.instrument_imports(include=["services", "workers"]):
     from workers.scene.errors import SceneError
     from workers.scene.io import load_scene
 
-WORK = Path(tempfile.mkdtemp(prefix="nbake-fuzz-"))
+# NBAKE_FUZZ_DIR: a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
+WORK = Path(tempfile.mkdtemp(prefix="nbake-fuzz-", dir=os.environ.get("NBAKE_FUZZ_DIR")))
 LIMITS = UploadLimits(max_total_bytes=1 << 20, max_files=20, max_file_bytes=1 << 20)
 
 

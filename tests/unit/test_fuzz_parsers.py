@@ -19,9 +19,13 @@ RSS_LIMIT_MB = 5120
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_parsers_survive_bounded_fuzzing():
+def test_parsers_survive_bounded_fuzzing(tmp_path):
     pytest.importorskip("atheris")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        "NBAKE_FUZZ_DIR": str(tmp_path),
+    }
     runs = {
         name: subprocess.Popen(
             [
