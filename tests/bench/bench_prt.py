@@ -30,7 +30,7 @@ from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
 from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
 from workers.models.prt.evaluate import truth
-from workers.models.prt.frame import predict_indirect, render_frame
+from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
 from workers.models.prt.probe import modelled_objects
@@ -156,8 +156,7 @@ def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
             )  # fmt: skip
             shape = indirect.shape
             predictions = {
-                "network": predict_indirect(model, view.inputs, box, objects, cube, config.wavelets,
-                                            config.selection).reshape(shape),
+                "network": frame.indirect.reshape(shape),
                 "nearest_rows": nearest_rows_indirect(data, view.inputs, objects, cube).reshape(shape),
                 "no_indirect": np.zeros(shape),
             }  # fmt: skip
