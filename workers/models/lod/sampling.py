@@ -25,7 +25,9 @@ from workers.models.lod.segments import (
     add_unblocked_throughput,
     boundary_pair_rows,
     box_exit_rows,
+    rays_leaving_voxels,
     roulette_survivors,
+    take_voxel_paths,
     voxel_shadow_rays,
 )
 from workers.render import wavefront
@@ -121,7 +123,8 @@ def throughput_estimates(
     rng: np.random.Generator,
     max_bounces: int,
 ) -> np.ndarray:
-    """(N, 3) one-sample estimates of phi_V(w_o, w_i) for segments that met the asset at `hits`."""
+    """(N, 3) one-sample estimates of phi_V(w_o, w_i) for segments that met the asset at `hits` (the
+    `asset_tracer`'s Embree hits: no predicted surfaces to carry along the bounces)."""
     n = len(wi)
     value = np.zeros((n, 3))
     live = np.arange(n)
@@ -140,13 +143,17 @@ def throughput_estimates(
             add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
         sampled, weight, _, _, eta = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
-        o, d = wavefront.rays_leaving(_f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale)
-        hits = tracer.rays.intersect(o, d, t_max=box_exit(lo, hi, o, d))  # hits past the box end the path
-        keep = roulette_survivors(
-            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, d, RR_MAX_SURVIVAL
+        o, d, t_exit = rays_leaving_voxels(
+            _f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale, lo, hi
         )
-        live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
-        hits = hits.take(keep)
+        hits = tracer.rays.intersect(o, d, t_max=t_exit)  # hits past the box end the path
+        keep = roulette_survivors(
+            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), t_exit, RR_MAX_SURVIVAL
+        )
+        live, o, d, beta, lo, hi, *hit = take_voxel_paths(
+            keep, live, o, d, beta, lo, hi, hits.prim, hits.t, hits.u, hits.v
+        )
+        hits = Hits(*hit)
     return np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
 
 
