@@ -28,6 +28,8 @@ from workers.models.lod.segments import (
     rays_leaving_voxels,
     roulette_survivors,
     take_voxel_paths,
+    uniform_sphere_rows,
+    voxel_ancestors,
     voxel_shadow_rays,
 )
 from workers.render import wavefront
@@ -35,7 +37,6 @@ from workers.render.bsdf import eval_bsdf, sample_bsdf
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
-from workers.render.sampling import square_to_uniform_sphere
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import CompiledScene
 from workers.scene.reference import SceneRef
@@ -89,7 +90,7 @@ def boundary_pairs(
     the directions instead of drawing them."""
     n = len(cells)
     if wo is None:
-        wo = square_to_uniform_sphere(rng.random((n, 2)))
+        wo = uniform_sphere_rows(rng.random((n, 2)))
     u_face, u_point = rng.random(n), rng.random((n, 3))
     box = np.asarray(grid.lo, np.float64), float(grid.extent), np.asarray(grid.resolutions, np.float64)
     voxels = np.asarray(level, np.int64), np.asarray(cells, np.int64), float(grow)
@@ -101,9 +102,9 @@ def boundary_pairs(
 
 def sample_voxels(grid: LodGrid, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """(level, cell) of n voxels: an occupied LoD-0 voxel and a LoD uniformly, then its ancestor."""
-    fine = grid.cells(0, grid.keys[0][rng.integers(len(grid.keys[0]), size=n)])
+    fine = grid.keys[0][rng.integers(len(grid.keys[0]), size=n)]
     level = rng.integers(grid.levels, size=n)
-    return level, fine >> grid.shifts[level, None]
+    return level, voxel_ancestors(fine, grid.resolutions[0], grid.shifts, level)
 
 
 def first_asset_hits(tracer: PathTracer, pairs: BoundaryPairs) -> tuple[np.ndarray, Hits]:
@@ -182,7 +183,7 @@ class LodSource:
         pairs = boundary_pairs(self.grid, level, cells, rng, lod.domain_extrusion)
         occluded, hits = first_asset_hits(self.tracer, pairs)
         rows = np.flatnonzero(occluded)
-        wi = square_to_uniform_sphere(rng.random((len(rows), 2)))
+        wi = uniform_sphere_rows(rng.random((len(rows), 2)))
         value = throughput_estimates(
             self.tracer, pairs.take(rows), hits.take(rows), wi, rng, lod.max_voxel_bounces
         )

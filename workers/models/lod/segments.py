@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from workers.render.jit import njit
+from workers.render.kernels import uniform_sphere
 from workers.render.wavefront import leave_one, offset_one
 
 kernel = njit(cache=True, nogil=True, fastmath=False)
@@ -35,6 +36,27 @@ def _max3(a, b, c):
     if math.isnan(a) or math.isnan(b) or math.isnan(c):
         return math.nan
     return max(a, b, c)
+
+
+@kernel
+def uniform_sphere_rows(u):
+    """(N, 3) uniform directions from (N, 2) uniforms: `sampling.square_to_uniform_sphere` in one pass."""
+    out = np.empty((len(u), 3))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1], out[i, 2] = uniform_sphere(u[i, 0], u[i, 1])
+    return out
+
+
+@kernel
+def voxel_ancestors(fine_keys, resolution, shifts, level):
+    """(N, 3) cells at LoD level[i] of the LoD-0 voxels with row-major keys (x r + y) r + z."""
+    out = np.empty((len(fine_keys), 3), np.int64)
+    for i in range(len(fine_keys)):
+        key, shift = fine_keys[i], shifts[level[i]]
+        out[i, 0] = (key // (resolution * resolution)) >> shift
+        out[i, 1] = ((key // resolution) % resolution) >> shift
+        out[i, 2] = (key % resolution) >> shift
+    return out
 
 
 @kernel
