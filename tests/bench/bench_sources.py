@@ -5,17 +5,27 @@ loop: `LodSource.batch` (voxel pairs, Embree visibility and voxel-confined appea
 One source object per kind, built and warmed up (grid, voxels, Embree BVH, compiled kernels) before timing;
 the figure is the preset's batch size over the median thread CPU seconds of a batch, over distinct batch
 indices: a batch runs in the calling thread, and CPU time leaves out the load of other processes on a shared
-machine. Run it on two checkouts in one window to compare them (issue 19 reports before and after this way).
+machine.
+
+`BENCH_SOURCES_PEER=<checkout>` also measures another checkout of the repository in the same window (e.g. a
+worktree of `fb3938e^`, the tracer before issue 19's compiled kernels): this file runs as a script in a
+fresh process per tree with that tree first on the path, alternating trees for `PEER_ROUNDS` rounds; the
+rows then carry both trees' medians over the rounds and the speedup. The peer needs the same source API
+(`LodSource`, `ObjectRaySource` and their configs), which has not changed since before issue 19.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from tests.bench.common import BenchSection
 from workers.models.lod import KIND as LOD
 from workers.models.lod.grid import LodGrid
 from workers.models.lod.plan import choose_asset, choose_resolutions, cube_extent
@@ -26,8 +36,10 @@ from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 BATCHES = 7  # timed batches per source (after one warm-up batch)
+PEER_ROUNDS = 3  # alternating processes per tree with BENCH_SOURCES_PEER
 LOD_SCENES = ("menger_sponge", "dense_foliage")
 LSNIF_SCENES = (("high_poly", "displaced_sphere"), ("dense_foliage", "leaves"))
+REPO = Path(__file__).resolve().parents[2]
 
 
 def lod_source(scene_name: str) -> tuple[LodSource, int]:
@@ -61,21 +73,66 @@ def seconds_per_batch(source) -> float:
     return statistics.median(times)
 
 
-def run() -> list[BenchSection]:
-    section = BenchSection(f"Sample sources at the default preset (median CPU time of {BATCHES} batches)")
+def measure() -> list[dict]:
+    """One row per source: kind, scene, batch size and median CPU seconds of a batch."""
+    rows = []
     for name in LOD_SCENES:
         source, size = lod_source(name)
-        seconds = seconds_per_batch(source)
-        section.add(source="lod", scene=name, batch=size, batch_cpu_s=seconds, samples_per_s=size / seconds)
+        rows.append(dict(source="lod", scene=name, batch=size, batch_cpu_s=seconds_per_batch(source)))
     for name, obj in LSNIF_SCENES:
         source, size = lsnif_source(name, obj)
-        seconds = seconds_per_batch(source)
-        section.add(
-            source="lsnif",
-            scene=f"{name}/{obj}",
-            batch=size,
-            batch_cpu_s=seconds,
-            samples_per_s=size / seconds,
+        rows.append(
+            dict(source="lsnif", scene=f"{name}/{obj}", batch=size, batch_cpu_s=seconds_per_batch(source))
         )
+    return rows
+
+
+def measure_in_process(tree: Path) -> list[dict]:
+    """`measure()` in a fresh process that imports the repository at `tree`."""
+    path = os.pathsep.join([str(tree), str(tree / "clients" / "python"), os.environ.get("PYTHONPATH", "")])
+    out = subprocess.run(
+        [sys.executable, __file__],
+        cwd=tree,
+        env={**os.environ, "PYTHONPATH": path},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def run() -> list:
+    from tests.bench.common import BenchSection
+
+    peer = os.environ.get("BENCH_SOURCES_PEER")
+    if peer is None:
+        section = BenchSection(f"Sample sources at the default preset (median CPU time of {BATCHES} batches)")
+        for row in measure():
+            section.add(**row, samples_per_s=row["batch"] / row["batch_cpu_s"])
+    else:
+        section = BenchSection(
+            f"Sample sources against {peer} (median over {PEER_ROUNDS} alternating processes per tree of "
+            f"the median CPU time of {BATCHES} batches)"
+        )
+        rounds = {"ours": [], "peer": []}
+        for _ in range(PEER_ROUNDS):
+            rounds["ours"].append(measure_in_process(REPO))
+            rounds["peer"].append(measure_in_process(Path(peer).resolve()))
+        for i, row in enumerate(rounds["ours"][0]):
+            ours = statistics.median(r[i]["batch_cpu_s"] for r in rounds["ours"])
+            theirs = statistics.median(r[i]["batch_cpu_s"] for r in rounds["peer"])
+            section.add(
+                source=row["source"],
+                scene=row["scene"],
+                batch=row["batch"],
+                samples_per_s=row["batch"] / ours,
+                peer_samples_per_s=row["batch"] / theirs,
+                speedup=theirs / ours,
+            )
+        section.notes.append("target (issue 19): speedup >= 2 against the tracer before the issue")
     section.notes.append("samples: voxel pairs (lod) or training rays (lsnif) per batch")
     return [section]
+
+
+if __name__ == "__main__":  # a tree's figures for BENCH_SOURCES_PEER, as one JSON line
+    print(json.dumps(measure()))

@@ -373,8 +373,7 @@ def test_roulette_undoes_the_radiance_scaling_of_a_refraction():
         beta = np.ones((n, 3))
         keep = roulette_survivors(
             beta, np.full((n, 3), 1 / 1.5**2), np.full(n, eta), u, np.zeros(n, np.int64), np.full(n, 0.5),
-            np.full((n, 3), -1.0), np.ones((n, 3)), np.zeros((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1)),
-            RR_MAX_SURVIVAL,
+            np.ones(n), RR_MAX_SURVIVAL,
         )  # fmt: skip
         assert len(keep) == round(survival * n)
         np.testing.assert_allclose(beta[keep], 1 / 1.5**2 / survival, rtol=1e-12)

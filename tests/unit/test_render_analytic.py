@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from workers.render import render as render_module
+from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
-from workers.render.render import RenderSettings, render
+from workers.render.render import ImageAccumulator, RenderSettings, plan_render, render, render_item
 from workers.scene import spec
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
@@ -186,6 +188,26 @@ def test_same_seed_same_image_whatever_the_thread_count():
     c = render(compiled, RenderSettings(spp=4, width=48, height=40, seed=8, threads=2, tile_size=16)).image
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
+
+
+def test_passes_in_flight_are_summed_in_pass_order(monkeypatch):
+    """Several passes (4 + 4 + 2 spp of 4 tiles): the image and the progress reports are those of the
+    items summed pass by pass in (pass, tile) order, at 1 and 2 threads, although the next pass is queued
+    before a pass is summed (fails with the queued passes summed last-in first-out)."""
+    monkeypatch.setattr(render_module, "MAX_PATHS_PER_ITEM", 4 * 16 * 16)
+    tracer = PathTracer(compile_scene(cornell_box()))
+    settings = RenderSettings(spp=10, width=32, height=32, seed=3, tile_size=16)
+    camera = PinholeCamera(tracer.scene.spec.camera, settings.width, settings.height)
+    plan = plan_render(camera, settings)
+    assert plan.passes == [4, 4, 2]
+    expected = ImageAccumulator(plan, aovs=False)
+    for pass_index, tile in plan.items:
+        expected.add(tile, render_item(tracer, camera, settings, plan, pass_index, tile))
+    for threads in (1, 2):
+        reports = []
+        result = render(tracer, settings.model_copy(update={"threads": threads}), progress=reports.append)
+        assert np.array_equal(result.image, expected.result(settings.spp, 0.0).image)
+        assert [r.samples_done for r in reports] == [4, 8, 10]
 
 
 @pytest.mark.parametrize("roughness", [1e-4, 1.0])

@@ -69,6 +69,15 @@ def cosine_hemisphere(u0, u1):
 
 
 @scalar
+def uniform_sphere(u0, u1):
+    """A uniform direction on the unit sphere (the same operations as `sampling.square_to_uniform_sphere`)."""
+    z = 1.0 - 2.0 * u0
+    r = safe_sqrt(1.0 - z * z)
+    phi = 2.0 * math.pi * u1
+    return r * math.cos(phi), r * math.sin(phi), z
+
+
+@scalar
 def power_heuristic(pdf_a, pdf_b):
     """Veach's power heuristic (beta 2); 0 when both pdfs are 0, finite when they are infinite."""
     a2 = min(pdf_a, 1e150) ** 2

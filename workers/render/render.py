@@ -10,8 +10,9 @@ trace 1.9x the rays of one (forked processes measured no better).
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -165,16 +166,34 @@ def render(
     accum = ImageAccumulator(plan, settings.aovs)
     start = time.perf_counter()
     samples_done = 0
+
+    def add_pass(pass_index: int, results: list[Future]) -> None:
+        nonlocal samples_done
+        for tile, result in zip(plan.tiles, results, strict=True):
+            accum.add(tile, result.result())
+        samples_done += plan.passes[pass_index]
+        if progress is not None:
+            progress(
+                RenderProgress(samples_done, settings.spp, time.perf_counter() - start, accum.rays_traced)
+            )
+
+    # A pass is summed once the next one is queued: a thread done with its last item of a pass starts on
+    # the next pass instead of idling until the pass's slowest item ends (cornell_box 128^2 at 64 spp, 4
+    # passes of 4 tiles on 2 threads, scheduled from measured item CPU times: 1.020x -> 1.006x the ideal
+    # makespan). Sums stay in (pass, tile) order, so the image is unchanged; two passes at most in flight.
     with ThreadPoolExecutor(max_workers=settings.threads) as pool:
-        for pass_index, spp in enumerate(plan.passes):
-            work = partial(render_item, tracer, camera, settings, plan, pass_index)
-            for tile, result in zip(plan.tiles, pool.map(work, plan.tiles), strict=True):
-                accum.add(tile, result)
-            samples_done += spp
-            if progress is not None:
-                progress(
-                    RenderProgress(samples_done, settings.spp, time.perf_counter() - start, accum.rays_traced)
-                )
+        try:
+            queued: deque[tuple[int, list[Future]]] = deque()
+            for pass_index in range(len(plan.passes)):
+                work = partial(render_item, tracer, camera, settings, plan, pass_index)
+                queued.append((pass_index, [pool.submit(work, tile) for tile in plan.tiles]))
+                if len(queued) == 2:
+                    add_pass(*queued.popleft())
+            while queued:
+                add_pass(*queued.popleft())
+        except BaseException:
+            pool.shutdown(cancel_futures=True)  # an item failed: drop the items not started
+            raise
     return accum.result(settings.spp, time.perf_counter() - start)
 
 

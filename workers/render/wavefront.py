@@ -272,7 +272,7 @@ def _roulette(beta, eta2, u):
 
 
 @k.scalar
-def _leave_one(wi, fs, ft, ns, p, nrm, scale, origin, direction):
+def leave_one(wi, fs, ft, ns, p, nrm, scale, origin, direction):
     """The ray leaving surface point `p` along local direction `wi`, written into `origin` and `direction`:
     the direction is wi in the frame (fs, ft, ns), the origin is offset off the surface to the side it
     leaves by."""
@@ -323,7 +323,7 @@ def next_paths(idx, beta, eta2, sampled, frames, position, ng, scale, u_roulette
                 b[c] *= factor
         if not max(b[0], b[1], b[2]) > 0:
             continue
-        _leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], out_o[count], out_d[count])
+        leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], out_o[count], out_d[count])
         for c in range(3):
             out_beta[count, c] = b[c]
         out_eta2[count] = e2
@@ -384,5 +384,5 @@ def rays_leaving(wi, fs, ft, ns, position, ng, scale):
     n = len(wi)
     origins, directions = np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
-        _leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], origins[i], directions[i])
+        leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], origins[i], directions[i])
     return origins, directions

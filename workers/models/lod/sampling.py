@@ -25,7 +25,11 @@ from workers.models.lod.segments import (
     add_unblocked_throughput,
     boundary_pair_rows,
     box_exit_rows,
+    rays_leaving_voxels,
     roulette_survivors,
+    take_voxel_paths,
+    uniform_sphere_rows,
+    voxel_ancestors,
     voxel_shadow_rays,
 )
 from workers.render import wavefront
@@ -33,7 +37,6 @@ from workers.render.bsdf import eval_bsdf, sample_bsdf
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
-from workers.render.sampling import square_to_uniform_sphere
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import CompiledScene
 from workers.scene.reference import SceneRef
@@ -87,7 +90,7 @@ def boundary_pairs(
     the directions instead of drawing them."""
     n = len(cells)
     if wo is None:
-        wo = square_to_uniform_sphere(rng.random((n, 2)))
+        wo = uniform_sphere_rows(rng.random((n, 2)))
     u_face, u_point = rng.random(n), rng.random((n, 3))
     box = np.asarray(grid.lo, np.float64), float(grid.extent), np.asarray(grid.resolutions, np.float64)
     voxels = np.asarray(level, np.int64), np.asarray(cells, np.int64), float(grow)
@@ -99,9 +102,9 @@ def boundary_pairs(
 
 def sample_voxels(grid: LodGrid, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """(level, cell) of n voxels: an occupied LoD-0 voxel and a LoD uniformly, then its ancestor."""
-    fine = grid.cells(0, grid.keys[0][rng.integers(len(grid.keys[0]), size=n)])
+    fine = grid.keys[0][rng.integers(len(grid.keys[0]), size=n)]
     level = rng.integers(grid.levels, size=n)
-    return level, fine >> grid.shifts[level, None]
+    return level, voxel_ancestors(fine, grid.resolutions[0], grid.shifts, level)
 
 
 def first_asset_hits(tracer: PathTracer, pairs: BoundaryPairs) -> tuple[np.ndarray, Hits]:
@@ -121,7 +124,8 @@ def throughput_estimates(
     rng: np.random.Generator,
     max_bounces: int,
 ) -> np.ndarray:
-    """(N, 3) one-sample estimates of phi_V(w_o, w_i) for segments that met the asset at `hits`."""
+    """(N, 3) one-sample estimates of phi_V(w_o, w_i) for segments that met the asset at `hits` (the
+    `asset_tracer`'s Embree hits: no predicted surfaces to carry along the bounces)."""
     n = len(wi)
     value = np.zeros((n, 3))
     live = np.arange(n)
@@ -140,13 +144,17 @@ def throughput_estimates(
             add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
         sampled, weight, _, _, eta = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
-        o, d = wavefront.rays_leaving(_f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale)
-        hits = tracer.rays.intersect(o, d, t_max=box_exit(lo, hi, o, d))  # hits past the box end the path
-        keep = roulette_survivors(
-            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), lo, hi, o, d, RR_MAX_SURVIVAL
+        o, d, t_exit = rays_leaving_voxels(
+            _f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale, lo, hi
         )
-        live, o, d, beta, lo, hi = live[keep], o[keep], d[keep], beta[keep], lo[keep], hi[keep]
-        hits = hits.take(keep)
+        hits = tracer.rays.intersect(o, d, t_max=t_exit)  # hits past the box end the path
+        keep = roulette_survivors(
+            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), t_exit, RR_MAX_SURVIVAL
+        )
+        live, o, d, beta, lo, hi, *hit = take_voxel_paths(
+            keep, live, o, d, beta, lo, hi, hits.prim, hits.t, hits.u, hits.v
+        )
+        hits = Hits(*hit)
     return np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
 
 
@@ -175,7 +183,7 @@ class LodSource:
         pairs = boundary_pairs(self.grid, level, cells, rng, lod.domain_extrusion)
         occluded, hits = first_asset_hits(self.tracer, pairs)
         rows = np.flatnonzero(occluded)
-        wi = square_to_uniform_sphere(rng.random((len(rows), 2)))
+        wi = uniform_sphere_rows(rng.random((len(rows), 2)))
         value = throughput_estimates(
             self.tracer, pairs.take(rows), hits.take(rows), wi, rng, lod.max_voxel_bounces
         )
