@@ -5,12 +5,13 @@ Instance j of a source is a pure function of (seed, j): structure parameters dra
 ambient sky, and a camera on the hemisphere at one of the configured distances (multi-scale) looking at
 the slab's centre tile with its neighbours around it. Coarse views (`coarse_distances`) have
 `coarse_block` times wider pixels, so their cone footprints reach the plane's coarse mip levels (Sec.
-6.2.7); their cameras stay high enough that the view stays on the slab. The image is HDR, tonemapped x /
-(x + 1) for the discriminator. Each view also carries the height at which every pixel-centre ray first
-meets the geometry (0 on the skin): the coverage and height of the pile as the camera sees it, which the
-generator's structure terms match (`train`) and the conditioning figures compare against (`evaluate`). A
-batch draws `batch_size` instances of a pool of `pool` (each rendered once per process and cached), so
-batches are a pure function of (seed, index) and a job can bound its rendering cost.
+6.2.7); a view's pixels must stay on the slab (fewer, wider pixels from a nearer camera let coarse views
+look down obliquely). The image is HDR, tonemapped x / (x + 1) for the discriminator. Each view also
+carries the height at which every pixel-centre ray first meets the geometry (0 on the skin): the coverage
+and height of the pile as the camera sees it, which the generator's structure terms match (`train`) and
+the conditioning figures compare against (`evaluate`). A batch draws `batch_size` instances of a pool of
+`pool` (each rendered once per process and cached), so batches are a pure function of (seed, index) and
+a job can bound its rendering cost.
 
 Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
 """
@@ -48,7 +49,6 @@ SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
 CAMERA_ELEVATIONS = (35.0, 85.0)  # degrees above the slab, uniform
-COARSE_ELEVATIONS = (60.0, 85.0)  # coarse views are farther: higher, to keep the slab in view
 DISTANCE_JITTER = 0.1  # each camera distance is scaled by a uniform factor in 1 -+ this
 
 
@@ -69,6 +69,12 @@ def hemisphere(elevation: float, azimuth: float) -> np.ndarray:
             math.sin(elevation),
         ]
     )
+
+
+def coarse_elevations(config: MesoganConfig) -> tuple[float, float]:
+    """The coarse cameras' elevation range (degrees, uniform): from `coarse_lowest_elevation` up to the
+    fine views' highest."""
+    return config.coarse_lowest_elevation, CAMERA_ELEVATIONS[1]
 
 
 def normalized_structure(s: Structure) -> np.ndarray:
@@ -108,7 +114,7 @@ def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
     index = rng.integers(len(distances))
     coarse = index >= len(config.camera_distances)
     distance = distances[index] * rng.uniform(1 - DISTANCE_JITTER, 1 + DISTANCE_JITTER)
-    elevation = rng.uniform(*(COARSE_ELEVATIONS if coarse else CAMERA_ELEVATIONS))
+    elevation = rng.uniform(*(coarse_elevations(config) if coarse else CAMERA_ELEVATIONS))
     eye = distance * hemisphere(math.radians(elevation), rng.uniform(0, 2 * math.pi))
     size = config.image_size // (config.coarse_block if coarse else 1)
     camera = Camera(
@@ -173,7 +179,8 @@ def widest_footprint(config: MesoganConfig) -> float:
     widest = _widest_in(config.fov, config.camera_distances, CAMERA_ELEVATIONS[0], config.image_size)
     if config.coarse_distances:
         pixels = config.image_size // config.coarse_block
-        widest = max(widest, _widest_in(config.fov, config.coarse_distances, COARSE_ELEVATIONS[0], pixels))
+        lowest = coarse_elevations(config)[0]
+        widest = max(widest, _widest_in(config.fov, config.coarse_distances, lowest, pixels))
     return widest
 
 
