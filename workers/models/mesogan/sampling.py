@@ -49,6 +49,7 @@ SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
 CAMERA_ELEVATIONS = (35.0, 85.0)  # degrees above the slab, uniform
+LIGHT_ELEVATIONS = (2.0, 85.0)  # degrees above the slab, uniform (measured in `draw_instance`)
 DISTANCE_JITTER = 0.1  # each camera distance is scaled by a uniform factor in 1 -+ this
 
 
@@ -109,7 +110,7 @@ class SlabSourceConfig(BaseModel):
 def draw_instance(config: MesoganConfig, rng: np.random.Generator) -> Instance:
     structure = Structure(**{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in STRUCTURE_RANGES.items()})
     appearance = Appearance(hue=float(rng.uniform()), saturation=float(rng.uniform(0.2, 1.0)))
-    light = hemisphere(math.radians(rng.uniform(15, 80)), rng.uniform(0, 2 * math.pi))
+    light = hemisphere(math.radians(rng.uniform(*LIGHT_ELEVATIONS)), rng.uniform(0, 2 * math.pi))
     distances = [*config.camera_distances, *config.coarse_distances]
     index = rng.integers(len(distances))
     coarse = index >= len(config.camera_distances)
