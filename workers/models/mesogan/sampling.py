@@ -49,7 +49,12 @@ SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 ON_STRANDS = 1e-3
 INSTANCE_STREAM = 1 << 31  # instance streams never collide with batch streams
 CAMERA_ELEVATIONS = (35.0, 85.0)  # degrees above the slab, uniform
-LIGHT_ELEVATIONS = (2.0, 85.0)  # degrees above the slab, uniform (measured in `draw_instance`)
+# The sun's elevation, degrees above the slab, uniform. A mesh sees the sun at every local elevation, and
+# the sky's term integrates rho over the whole hemisphere. From 15 degrees (main), elevations below were
+# supervised only through that integral: sky-only slab views under the fur ball's labels (default preset,
+# 500 steps, seed 6, 12 instances, cameras at 45 / 75 degrees) rendered 1.49 / 1.59 times the real ones,
+# 1.18 / 1.28 from 2 degrees.
+LIGHT_ELEVATIONS = (2.0, 85.0)
 DISTANCE_JITTER = 0.1  # each camera distance is scaled by a uniform factor in 1 -+ this
 
 
