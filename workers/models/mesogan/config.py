@@ -153,11 +153,8 @@ PRESETS: dict[str, dict] = {
     # at 60-85 degrees (pixel corners out to 6.4, 0.2% of their area past the slab): the ball's oblique
     # samples at wide footprints were read where training never looked. 500 steps, fur ball 32^2 covered
     # FLIP at 16 spp against 256-spp strands, seeds 6 / 7: 0.458 / 0.514 -> 0.422 / 0.319, covered mean
-    # over the strands' 1.45 / 1.48 -> 1.35 / 0.97; training CPU 216 / 196 -> 211 / 199 s. With the sun
-    # from 2 degrees (`sampling.LIGHT_ELEVATIONS`) 0.264 / 0.462 (1.09 / 0.81), 199 / 190 s: the seeds'
-    # brightness still scatters by some 20% at 500 steps. bench_mesogan at seed 6: the strands reach the
-    # shell's best covered FLIP (0.252, 8 spp, 0.11 CPU s a frame) in 0.13x its CPU time; model and plane
-    # 165 kB against 94 MB of strand triangles (570x).
+    # over the strands' 1.45 / 1.48 -> 1.35 / 0.97; training CPU 216 / 196 -> 211 / 199 s. Seed 5: 0.281
+    # -> 0.282 (0.90). The seeds' brightness still scatters by some 20-30% at 500 steps.
     "default": {
         "image_size": 32,
         "plane_resolution": 48,
