@@ -20,10 +20,8 @@ heights) would read the decoder out of its training distribution, with a height 
 levels it never saw. Beyond it the pixel is filtered by the path tracer's jittered samples instead of the
 mip stack. Trained on fine views only, the default preset's fur ball was seen at 3 to 4 times the widest
 trained footprint and the clamp bound 68% of its samples (unclamped, FLIP rose with spp: 0.527 / 0.519 /
-0.554 at 1 / 4 / 16 spp; clamped 0.467 / 0.322 / 0.288; 500 steps, seed 5). With the default preset's
-coarse views (footprints to 0.70) it binds on none of them (0.430 / 0.307 / 0.281 at seed 5; but over
-seeds 5-7 the mean at 16 spp is 0.418 against 0.373 clamped on main: the coarse views are steep, 60-85
-degrees, and the mesh's oblique samples are read at footprints training saw only from above).
+0.554 at 1 / 4 / 16 spp; clamped 0.467 / 0.322 / 0.288; 500 steps, seed 5). The default preset's coarse
+views (footprints to about 1.0 slab heights, elevations 40-85 degrees) leave the ball's samples unclamped.
 
 A scattering event is identified by its shell coordinates and its sample's footprint packed into the
 protocol's int64 triple: (prism << 20 | height in 2^-20 steps, float32 bits of b1 and b2, float32 bits of
