@@ -213,7 +213,10 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
 
 
 def run() -> list[BenchSection]:
-    quality = BenchSection(f"prt held-out quality ({PRESET} preset; Table 1 layout, not denoised)")
+    quality = BenchSection(
+        f"prt held-out quality ({PRESET} preset; Table 1 layout; direct light as `denoise_direct`, "
+        "indirect not denoised)"
+    )
     lightings = BenchSection("prt per held-out lighting (never trained on)")
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
     fine = BenchSection(f"prt held-out against a {TRUTH_SPP}-spp truth: network, nearest rows, no indirect")

@@ -150,7 +150,10 @@ class PrtConfig(TrainedKindConfig):
     # path tracing's 64 spp at 26.1 dB, 0.20 s, extrapolated at its 1.8 dB per doubling).
     # FLIP does not reward the filter: 0.122 (128 raw) -> 0.147 (64 denoised), so the FLIP equal-time
     # ratio went 2.07 -> 2.28 (32 raw 1.68, 32 denoised 1.96): FLIP at 48^2 forgives pixel noise and
-    # penalises the slight blur. Quick keeps the raw direct light; the paper denoises (Sec. 6).
+    # penalises the slight blur. bench_prt (report's far view, wall clock on the loaded machine, same run):
+    # equal-time ratio env_lit_objects 3.7 by FLIP / 1.7 by PSNR, glossy_row 10.6 / 4.0 (prt6's 128 raw, a
+    # run apart: 7.2 / 18.8 by FLIP); against the 1024-spp truth, full frame 26.25 -> 26.45 dB and 21.88 ->
+    # 21.91 (same networks). Quick keeps the raw direct light; the paper denoises (Sec. 6).
     evaluation_spp: int = Field(
         64, ge=1, le=65536, description="spp of the model's direct light (before denoising)"
     )
