@@ -105,8 +105,8 @@ class PrtConfig(TrainedKindConfig):
     )
     # prt7, env_lit_objects, held-out indirect against the 1024-spp truth (all / far views): SH degree 2
     # instead of 4, seeds 0 / 1: 22.76 (21.48) / 22.64 (21.51) -> 22.88 (22.13) / 22.36 (21.08) dB; MLP
-    # width 128, seed 0: 22.52 (21.62). Neither the view encoding nor f's width is what holds the network
-    # under nearest rows (26.13).
+    # width 128, seed 0: 22.52 (21.62); degree 0 (no view dependence), seed 0: 22.26 (21.57). Neither the
+    # view encoding nor f's width is what holds the network under nearest rows (26.13).
     directions: SphericalHarmonicsConfig = SphericalHarmonicsConfig(degree=4)
     mlp: MLPConfig = MLPConfig(width=64, depth=2, activation="relu")
     # Small networks: a quick-preset step took 0.027 s with 1 thread and 0.28 s with 2 (busy-waiting workers
