@@ -11,8 +11,8 @@ Each pass i convolves with the 5 x 5 B3-spline kernel spread 2^i pixels apart, e
   does not show survive.
 The weights are normalised per pixel, so a constant image comes out constant. Pixels outside `mask` (rays
 that left the scene: their radiance is the environment's, already exact) are left alone and never mixed
-into their neighbours. The radiance is filtered divided by the albedo and multiplied back afterwards
-(texture detail is not blurred)."""
+into their neighbours, and so are pixels straddling a silhouette (`interior`). The radiance is filtered
+divided by the albedo and multiplied back afterwards (texture detail is not blurred)."""
 
 from __future__ import annotations
 
@@ -40,6 +40,12 @@ class Guides:
 
 @dataclass(frozen=True)
 class AtrousSettings:
+    """Measured on prt's direct light (env_lit_objects, 16 held-out cases at 48^2, 1024-spp truth, 16-128
+    spp): plane_sigma 0.25-4 and normal_power 16-256 within 0.3 dB; 2 passes as good as 3-5 at half the
+    cost (0.011 s); luminance_sigma 4 beat 1, 2 and 8 below 128 spp; without the luminance term shadows
+    flatten (22 dB at any spp). Keeping silhouette pixels raw cost 0.4 dB PSNR at 32 spp and lowered FLIP
+    (0.119 -> 0.118; 128 spp 0.089 -> 0.086)."""
+
     iterations: int = 2
     normal_power: float = 64.0
     plane_sigma: float = 1.0
