@@ -63,12 +63,17 @@ FIGURES = ("psnr_full", "psnr_indirect", "ssim_full", "ssim_indirect", "flip_ful
            "baseline_psnr_indirect", "baseline_flip_full", "seconds_per_frame")  # fmt: skip
 
 
-def equal_error_seconds(report: Report) -> float:
-    """Path-tracing seconds at the model's FLIP, log-log interpolated along the curve (inf beyond it)."""
+def equal_error_seconds(report: Report, metric: str = "flip") -> float:
+    """Path-tracing seconds at the model's error, interpolated along the curve (inf beyond it): log-log for
+    FLIP, log seconds against PSNR (dB is already a log)."""
     curve = sorted(report.path_tracing, key=lambda p: p.seconds_per_frame)
     seconds = np.log([p.seconds_per_frame for p in curve])
-    errors = np.log([p.error.flip for p in curve])
-    target = np.log(report.model.error.flip)
+    if metric == "flip":
+        errors = np.log([p.error.flip for p in curve])
+        target = np.log(report.model.error.flip)
+    else:  # PSNR, negated so that lower is better
+        errors = -np.array([p.error.psnr for p in curve])
+        target = -report.model.error.psnr
     if target < errors.min():
         return float("inf")
     order = np.argsort(errors)
@@ -153,6 +158,7 @@ def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
             frame = render_frame(
                 model, box, objects, tracer, cube, view.camera, k=config.wavelets,
                 weighting=config.selection, spp=config.evaluation_spp, seed=SEED,
+                denoise=config.denoise_direct,
             )  # fmt: skip
             shape = indirect.shape
             predictions = {
@@ -192,6 +198,7 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
             render_frame(
                 artifact.model, artifact.box, artifact.objects, tracer, cube, view.camera, k=k,
                 weighting=config.selection, spp=config.evaluation_spp, seed=SEED + r,
+                denoise=config.denoise_direct,
             )
             for r in range(3)
         ]  # fmt: skip
@@ -206,7 +213,10 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
 
 
 def run() -> list[BenchSection]:
-    quality = BenchSection(f"prt held-out quality ({PRESET} preset; Table 1 layout, not denoised)")
+    quality = BenchSection(
+        f"prt held-out quality ({PRESET} preset; Table 1 layout; direct light as `denoise_direct`, "
+        "indirect not denoised)"
+    )
     lightings = BenchSection("prt per held-out lighting (never trained on)")
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
     fine = BenchSection(f"prt held-out against a {TRUTH_SPP}-spp truth: network, nearest rows, no indirect")
@@ -235,6 +245,8 @@ def run() -> list[BenchSection]:
                 model_flip=report.model.error.flip, equal_time_pt=report.path_tracing_equal_time.label,
                 equal_time_pt_flip=report.path_tracing_equal_time.error.flip, pt_s_at_model_flip=pt_seconds,
                 equal_time_ratio=report.model.seconds_per_frame / pt_seconds,
+                model_psnr=report.model.error.psnr,
+                equal_time_ratio_psnr=report.model.seconds_per_frame / equal_error_seconds(report, "psnr"),
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
             against_fine_truth(folder / "out", scene, fine)
@@ -248,7 +260,9 @@ def run() -> list[BenchSection]:
             m = Report.read(str(folder / "out")).method_metrics
             size = sum(m[f"parameters.{p}"] for p in "SWUf") * 2
             ablation.add(variant=label, stored_bytes=size, **{k: m[k] for k in FIGURES[:5]})
-    timing.notes.append("equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP")
+    timing.notes.append(
+        "equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP (_psnr: its PSNR)"
+    )
     sweep.notes.append("frame_s: G-buffer + network + direct light; network_s: selection and network only")
     noise.notes.append(
         "rows_psnr: training targets (row_spp, lighting-independent sampler); truth_psnr: test_spp"

@@ -2,7 +2,9 @@
 largest area-weighted magnitude, B = sum_k L_k T_k from the network at every pixel that sees geometry
 (pixels that see the environment get no indirect light: they are masked, not learned), plus direct light
 path-traced at the first hit (next-event estimation and BSDF-sampled escapes: `max_depth` 2), which also
-draws the environment where camera rays escape."""
+draws the environment where camera rays escape. With `denoise`, the direct light is rendered as two
+independent halves of `spp` (their difference estimates its variance) and filtered by the G-buffer-guided
+à-trous filter (`workers.render.denoise`): the paper denoises its direct light too (Sec. 6)."""
 
 from __future__ import annotations
 
@@ -16,11 +18,13 @@ from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.selection import run_time_selection
 from workers.models.prt.views import pixel_rays
+from workers.render.denoise import LUMINANCE, Guides, atrous
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.spec import Camera
 
 DIRECT_DEPTH = 2  # camera segment + one bounce: emitters seen, NEE and BSDF-sampled escapes at the first hit
+SECOND_HALF_SEED = 1 << 20  # seed offset of the direct light's second half (independent of the first)
 
 
 @dataclass
@@ -56,6 +60,48 @@ def predict_indirect(
     return out
 
 
+def guides_of(inputs: SurfaceInputs, camera: Camera) -> Guides:
+    """The denoiser's G-buffer from the frame's own pixel-centre raycast."""
+    h, w = camera.height, camera.width
+    position = inputs.position.reshape(h, w, 3)
+    distance = np.linalg.norm(position - np.asarray(camera.position), axis=-1)
+    pixel_angle = 2 * np.tan(np.radians(camera.fov) / 2) / h
+    return Guides(
+        mask=inputs.hit.reshape(h, w),
+        normal=inputs.normal.reshape(h, w, 3),
+        position=position,
+        footprint=distance * pixel_angle,
+        object_id=inputs.object_id.reshape(h, w),
+        albedo=(inputs.kd + inputs.ks).reshape(h, w, 3),
+    )
+
+
+def direct_light(
+    tracer: PathTracer,
+    camera: Camera,
+    inputs: SurfaceInputs,
+    spp: int,
+    seed: int,
+    threads: int,
+    denoise: bool,
+) -> np.ndarray:
+    """The direct light (H, W, 3) at `spp` paths per pixel, denoised or not."""
+
+    def half(samples: int, seed: int) -> np.ndarray:
+        settings = RenderSettings(
+            spp=samples, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed,
+            threads=threads,
+        )  # fmt: skip
+        return render(tracer, settings, view=camera).image
+
+    if not denoise or spp < 2:
+        return half(spp, seed)
+    first, second = half(spp // 2, seed), half(spp - spp // 2, seed + SECOND_HALF_SEED)
+    mean = (first * (spp // 2) + second * (spp - spp // 2)) / spp
+    variance = ((first - second) @ LUMINANCE) ** 2 / 4  # of the mean of two equal halves
+    return atrous(mean, guides_of(inputs, camera), variance=variance)
+
+
 def render_frame(
     model: PrtNetwork,
     box: np.ndarray,
@@ -69,9 +115,11 @@ def render_frame(
     spp: int,
     seed: int = 0,
     threads: int = 1,
+    denoise: bool = False,
 ) -> Frame:
     """The frame through `camera`: `tracer` lights the scene for the direct light (its environment is the
-    lighting, at whatever resolution) and `cube` is the same lighting as the network's cube map."""
+    lighting, at whatever resolution) and `cube` is the same lighting as the network's cube map. `spp` is the
+    direct light's paths per pixel (before denoising)."""
     start = time.perf_counter()
     origins, directions = pixel_rays(camera)
     inputs = surface_inputs(tracer, origins, directions)
@@ -80,8 +128,5 @@ def render_frame(
         camera.height, camera.width, 3
     )
     network_seconds = time.perf_counter() - network_start
-    settings = RenderSettings(
-        spp=spp, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed, threads=threads
-    )
-    direct = render(tracer, settings, view=camera).image
+    direct = direct_light(tracer, camera, inputs, spp, seed, threads, denoise)
     return Frame(direct + indirect, direct, indirect, time.perf_counter() - start, network_seconds)

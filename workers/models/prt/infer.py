@@ -4,7 +4,8 @@
 (`params.lighting`: a built-in HDRI, a procedural `sky` or `studio` map, or, with `path` set to any name, the
 lat-long map uploaded as the `environment` array; with `rotate` and `scale`) in, the frame out: G-buffer,
 the K (`params.wavelets`) wavelets of the lighting, the network's indirect light and path-traced direct
-light at `params.spp` under the map itself (full resolution, importance-sampled). The service adds the
+light at `params.spp` under the map itself (full resolution, importance-sampled), denoised unless
+`params.denoise` is false. The service adds the
 frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
@@ -67,10 +68,15 @@ class PrtQuery(Relighting):
 
 
 class PrtRender(ViewRender, Relighting):
-    """`spp` is the direct light's samples per pixel; `max_depth` is not used (direct light is two path
-    segments, the network gives the rest); `background` can only be `scene` (relighting needs it)."""
+    """`spp` is the direct light's samples per pixel, before `denoise` filters it; `max_depth` is not used
+    (direct light is two path segments, the network gives the rest); `background` can only be `scene`
+    (relighting needs it)."""
 
     background: Literal["scene"] = SCENE
+    denoise: bool | None = Field(
+        None,
+        description="filter the direct light guided by the G-buffer; default: the artifact's denoise_direct",
+    )
 
 
 class PrtModel:
@@ -126,6 +132,7 @@ class PrtModel:
             frame = render_frame(
                 self.model, self.artifact.box, self.artifact.objects, tracer, cube, camera,
                 k=k, weighting=self.config.selection, spp=params.spp, seed=params.seed, threads=2,
+                denoise=self.config.denoise_direct if params.denoise is None else params.denoise,
             )  # fmt: skip
         meta = {
             "wavelets": k,

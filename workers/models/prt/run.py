@@ -84,9 +84,10 @@ class PrtMethod:
         frame = render_frame(
             model, source.data.box, objects, tracer, cube, camera,
             k=config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
+            denoise=config.denoise_direct,
         )  # fmt: skip
-        timed = TimedImage(
-            f"direct {config.evaluation_spp} spp + K={config.wavelets}", frame.image, frame.seconds
-        )
+        denoised = " denoised" if config.denoise_direct else ""
+        label = f"direct {config.evaluation_spp} spp{denoised} + K={config.wavelets}"
+        timed = TimedImage(label, frame.image, frame.seconds)
         method_metrics["report_view.network_seconds"] = frame.network_seconds
         return Finished(files, view, timed, method_metrics, metrics, preview=[frame.direct, frame.indirect])
