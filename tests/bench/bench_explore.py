@@ -27,8 +27,11 @@ the machine, `EXPLORE_BENCH_WORKERS` processes at a time. `EXPLORE_BENCH_SECONDS
 
 The frame rows time the frame of the first arm's (`active`'s) averaged network (Embree G-buffers and the
 network; served with RGSS's 4 points a pixel, and with `ANTIALIASING`^2 pixel centres a pixel as in every
-measured frame, `evaluate`) against path tracing of the same configuration at 1 to 256 spp in the same
-run, and reports the spp path tracing needs to reach the network's DSSIM and the ratio of the two times.
+measured frame, `evaluate`) against path tracing of the same configurations at 1 to 256 spp in the same
+run, both in CPU time on one thread: the mean DSSIM over the configurations, and the CPU time path tracing
+needs for the network's mean DSSIM, log-log interpolated over spp (until explore8: configuration 0 only,
+wall time, path tracing on 2 threads, and the first of 1/4/16/64/256 spp at or below the network's DSSIM,
+which charged a 4 x 4 frame at 0.0172 for 256 spp because 64 spp scored 0.0178).
 
 Until explore5 the network's frames read one pixel centre per pixel, which alone costs DSSIM 0.063
 against the area-averaged references: every run sat at that floor (0.068-0.071 after 60 CPU s), so error
@@ -38,6 +41,7 @@ was flat across configurations and active against uniform measured noise.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import multiprocessing
 import os
@@ -79,7 +83,7 @@ REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
 CONFIGURATIONS = 8
 SEED = 11  # of the configurations and the references
 SEEDS = tuple(int(x) for x in os.environ.get("EXPLORE_BENCH_SEEDS", str(SEED)).split(","))  # of the runs
-PATH_TRACING_SPP = (1, 4, 16, 64, 256)
+PATH_TRACING_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 # The hard end of each scene's hardest variable (normalised): a sphere near a mirror finish (roughness
 # 0.02-0.09: sharp reflections of the room and the light), a box by the mirror (its reflection beside it)
 HARD = {"cornell_variable": {"sphere_roughness": (0.0, 0.15)}, "mirror_variable": {"box.z": (0.0, 0.35)}}
@@ -225,46 +229,64 @@ def run() -> list[BenchSection]:
             )
         model = PixelGenerator.of(config, sources[scene].dimensions)
         model.load_state_dict(results[scene, RUN[0], SEEDS[0]][1])
-        for antialiasing in (RGSS, ANTIALIASING):  # served frames, measured frames
-            frames.add(
-                **_frame_row(
-                    scene, model, tracers[scene][0], vectors[scene][0], references[scene][0],
-                    sources[scene].box, config, antialiasing,
-                )
-            )  # fmt: skip
+        rows = _frame_rows(
+            scene, model, tracers[scene], vectors[scene], references[scene], sources[scene].box, config
+        )
+        for row in rows:
+            frames.add(**row)
     return [comparison, frames, curves_section]
 
 
-def _frame_row(scene, model, tracer, v, reference, box, config, antialiasing) -> dict:
-    timings = []
-    for _ in range(5):
-        image, seconds = network_image(
-            model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, antialiasing
-        )
-        timings.append(seconds)
-    network_seconds, network_dssim = float(np.median(timings)), dssim(reference, image)
-    row = {
-        "scene": scene, "antialiasing": str(antialiasing), "network_ms": network_seconds * 1e3,
-        "network_dssim": network_dssim,
-    }  # fmt: skip
-    matched = None
+def _frame_rows(scene, model, tracers, vectors, references, box, config) -> list[dict]:
+    """Per frame kind: the network's mean DSSIM over the configurations and its median CPU time a frame,
+    against path tracing's (one thread each): the CPU time path tracing needs for the same mean DSSIM,
+    log-log interpolated between the spp of `PATH_TRACING_SPP`."""
+    traced = []
     for spp in PATH_TRACING_SPP:
         settings = RenderSettings(
-            spp=spp, width=SIZE, height=SIZE, max_depth=config.max_depth, seed=SEED, threads=2
+            spp=spp, width=SIZE, height=SIZE, max_depth=config.max_depth, seed=SEED, threads=1
         )
-        result = render(tracer, settings)
-        error = dssim(reference, result.image)
-        row[f"pt{spp}_ms"], row[f"pt{spp}_dssim"] = result.seconds * 1e3, error
-        if matched is None and error <= network_dssim:
-            matched = (spp, result.seconds)
-    if matched is not None:
-        row["pt_spp_to_match"], row["speedup"] = matched[0], matched[1] / network_seconds
-    else:
-        row["pt_spp_to_match"], row["speedup"] = (
-            f">{PATH_TRACING_SPP[-1]}",
-            row[f"pt{PATH_TRACING_SPP[-1]}_ms"] / (network_seconds * 1e3),
-        )
-    return row
+        errors, times = [], []
+        for tracer, reference in zip(tracers, references, strict=True):
+            started = time.process_time()
+            image = render(tracer, settings).image
+            times.append(time.process_time() - started)
+            errors.append(dssim(reference, image))
+        traced.append((spp, float(np.mean(errors)), float(np.median(times))))
+    rows = []
+    for antialiasing in (RGSS, ANTIALIASING):  # served frames, measured frames
+        errors, times = [], []
+        for tracer, v, reference in zip(tracers, vectors, references, strict=True):
+            for _ in range(3):
+                started = time.process_time()
+                image, _ = network_image(
+                    model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, antialiasing
+                )
+                times.append(time.process_time() - started)
+            errors.append(dssim(reference, image))
+        network_dssim, network_seconds = float(np.mean(errors)), float(np.median(times))
+        row = {
+            "scene": scene, "antialiasing": str(antialiasing), "network_ms": network_seconds * 1e3,
+            "network_dssim": network_dssim,
+            **{f"pt{spp}_ms": seconds * 1e3 for spp, _, seconds in traced},
+            **{f"pt{spp}_dssim": error for spp, error, _ in traced},
+        }  # fmt: skip
+        matched = _interpolated_seconds(traced, network_dssim)
+        row["pt_ms_to_match"] = matched * 1e3 if matched is not None else f">{PATH_TRACING_SPP[-1]} spp"
+        row["speedup"] = (matched or traced[-1][2]) / network_seconds
+        rows.append(row)
+    return rows
+
+
+def _interpolated_seconds(traced: list[tuple[int, float, float]], target: float) -> float | None:
+    """Path tracing's seconds at DSSIM `target`, log-log between the bracketing spp (None: beyond them)."""
+    if target >= traced[0][1]:
+        return traced[0][2]
+    for (_, e0, t0), (_, e1, t1) in itertools.pairwise(traced):
+        if e1 <= target <= e0:
+            w = np.log(e0 / target) / np.log(e0 / e1) if e0 > e1 else 1.0
+            return float(np.exp(np.log(t0) + w * np.log(t1 / t0)))
+    return None
 
 
 def _plot(scene: str, seed: int, curves: dict[str, list[dict]]) -> None:
