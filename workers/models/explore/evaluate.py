@@ -37,7 +37,8 @@ ANTIALIASING = 4  # network samples per pixel side in the measured frames
 # near-horizontal and near-vertical edges get 4 levels as with a 4 x 4 grid. On cornell_variable's 8 hard
 # configurations (32^2, a network of 60 CPU s; CPU time, one thread, explore8): DSSIM 0.0243 at 7.0 ms a
 # frame against 0.0219 at 22.6 ms for 4 x 4 (2 x 2: 0.0296 at 8.0 ms; 3 x 3: 0.0260 at 12.9 ms; pixel
-# centres: 0.0565 at 3.3 ms); path tracing to the same DSSIM costs 13.8x the RGSS frame, 5.0x the 4 x 4
+# centres: 0.0565 at 3.3 ms); path tracing to the same DSSIM costs 13.8x the RGSS frame, 5.0x the 4 x 4.
+# mirror_variable: RGSS 0.0737 at 6.6 ms, 4 x 4 0.0677 at 24.5 ms; path tracing 31.9x and 10.3x
 RGSS = "rgss"
 RGSS_OFFSETS = np.array([[0.125, 0.375], [0.375, 0.875], [0.625, 0.125], [0.875, 0.625]])
 Antialiasing = int | str  # samples per pixel side on a grid, or RGSS
