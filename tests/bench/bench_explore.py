@@ -2,13 +2,14 @@
 path tracing to the same error (issue 16, "Targets").
 
 Per scene (`cornell_variable`, 11 dimensions; `mirror_variable`, a box moving in front of a mirror), the
-same network, store and time budget are trained twice from the same seed: `active` (greedy chains on
-loss x Adam step, progressive resolution) and `uniform` (large steps only, all accepted, fixed R,
-Table 5.3). Both are measured every `EVAL_EVERY` seconds of training (evaluation excluded) at the same 8
-fixed hard configurations (`HARD`: the variable that carries the scene's hardest effect at its hard end,
-the sphere near a mirror finish, the box by the mirror; the others seeded uniform draws) against
-`REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third table and plotted to
-out/bench-explore-<scene>-<seed>.png.
+same network, store and time budget are trained once per arm from the same seed: `active` (greedy chains
+on loss x Adam step, progressive resolution), `uniform` (large steps only, all accepted, fixed R, the
+thesis's baseline of Table 5.3) and `uniform_schedule` (uniform with active's resolution schedule, so the
+chains are measured apart from the schedule). All are measured every `EVAL_EVERY` seconds of training
+(evaluation excluded) at the same 8 fixed hard configurations (`HARD`: the variable that carries the
+scene's hardest effect at its hard end, the sphere near a mirror finish, the box by the mirror; the others
+seeded uniform draws) against `REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third
+table and plotted to out/bench-explore-<scene>-<seed>.png.
 
 Each run is measured twice: its weights as they are, and the explorer's exponential average of them
 (`average_decay`, about the last 50 steps; the average is what a job saves). At the bench's constant
@@ -16,17 +17,21 @@ rate the weights themselves oscillate: one seed's DSSIM was 0.10 and 0.16 ten st
 snapshot's active / uniform ratio said little; the average cuts that noise and lowered DSSIM by up
 to a half (0.044 to 0.025 after 120 CPU s; never more than 1% higher; explore4 notes).
 `EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds; `EXPLORE_BENCH_OVERRIDES`
-(JSON) changes the config of every run.
+(JSON) changes the config of every run; `EXPLORE_BENCH_ARMS` (JSON, name -> config changes) adds arms or
+redefines them, and `EXPLORE_BENCH_RUN` (comma-separated names) runs only those arms.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
-machine wall time mostly measures the other jobs. So the four runs (two scenes, two methods) can share
+machine wall time mostly measures the other jobs. So the runs (scenes x arms x seeds) can share
 the machine, `EXPLORE_BENCH_WORKERS` processes at a time. `EXPLORE_BENCH_SECONDS` sets the budget per run.
 
-The frame row times the active network's frame (Embree G-buffers and the network, `ANTIALIASING`^2
-pixel centres per pixel as in every measured frame, `evaluate`) against path tracing of the same
-configuration at 1 to 256 spp in the same run, and reports the spp path tracing needs to reach the
-network's DSSIM and the ratio of the two times.
+The frame rows time the frame of the first arm's (`active`'s) averaged network (Embree G-buffers and the
+network; served with RGSS's 4 points a pixel, and with `ANTIALIASING`^2 pixel centres a pixel as in every
+measured frame, `evaluate`) against path tracing of the same configurations at 1 to 256 spp in the same
+run, both in CPU time on one thread: the mean DSSIM over the configurations, and the CPU time path tracing
+needs for the network's mean DSSIM, log-log interpolated over spp (until explore8: configuration 0 only,
+wall time, path tracing on 2 threads, and the first of 1/4/16/64/256 spp at or below the network's DSSIM,
+which charged a 4 x 4 frame at 0.0172 for 256 spp because 64 spp scored 0.0178).
 
 Until explore5 the network's frames read one pixel centre per pixel, which alone costs DSSIM 0.063
 against the area-averaged references: every run sat at that floor (0.068-0.071 after 60 CPU s), so error
@@ -36,6 +41,7 @@ was flat across configurations and active against uniform measured noise.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import multiprocessing
 import os
@@ -50,6 +56,7 @@ from tests.bench.common import BenchSection
 from workers.models.explore import KIND
 from workers.models.explore.evaluate import (
     ANTIALIASING,
+    RGSS,
     configuration_errors,
     network_image,
     reference_images,
@@ -67,7 +74,6 @@ from workers.scene.reference import SceneRef
 from workers.scene.variables import dimension_names
 
 SCENES = ("cornell_variable", "mirror_variable")
-MODES = ("active", "uniform")
 # the four training runs go to this many processes at once (each measures its own CPU time)
 WORKERS = int(os.environ.get("EXPLORE_BENCH_WORKERS", "2"))
 SECONDS = float(os.environ.get("EXPLORE_BENCH_SECONDS", "240"))
@@ -77,7 +83,7 @@ REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
 CONFIGURATIONS = 8
 SEED = 11  # of the configurations and the references
 SEEDS = tuple(int(x) for x in os.environ.get("EXPLORE_BENCH_SEEDS", str(SEED)).split(","))  # of the runs
-PATH_TRACING_SPP = (1, 4, 16, 64, 256)
+PATH_TRACING_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 # The hard end of each scene's hardest variable (normalised): a sphere near a mirror finish (roughness
 # 0.02-0.09: sharp reflections of the room and the light), a box by the mirror (its reflection beside it)
 HARD = {"cornell_variable": {"sphere_roughness": (0.0, 0.15)}, "mirror_variable": {"box.z": (0.0, 0.35)}}
@@ -104,6 +110,15 @@ def _merged(base: dict, changes: dict) -> dict:
 
 # EXPLORE_BENCH_OVERRIDES: a JSON object merged into OVERRIDES (e.g. '{"train_rejected": false}')
 OVERRIDES = _merged(OVERRIDES, json.loads(os.environ.get("EXPLORE_BENCH_OVERRIDES", "{}")))
+# Each arm's changes to OVERRIDES; ratios are taken against both uniform baselines
+ARMS: dict[str, dict] = {
+    "active": {"exploration": "active"},
+    "uniform": {"exploration": "uniform"},
+    "uniform_schedule": {"exploration": "uniform", "resolution_schedule": True},
+}
+ARMS.update(json.loads(os.environ.get("EXPLORE_BENCH_ARMS", "{}")))
+RUN = tuple(os.environ.get("EXPLORE_BENCH_RUN", ",".join(ARMS)).split(","))
+BASELINES = ("uniform", "uniform_schedule")
 
 
 def hard_configurations(scene: str, count: int, seed: int) -> np.ndarray:
@@ -121,13 +136,13 @@ class _BudgetSpent(Exception):
 
 
 def train_for(
-    scene: str, mode: str, seed: int, references: list[np.ndarray], vectors: np.ndarray
+    scene: str, arm: str, seed: int, references: list[np.ndarray], vectors: np.ndarray
 ) -> tuple[list[dict], dict[str, torch.Tensor], dict]:
-    """Train `mode` from `seed` for SECONDS of its process's CPU time: the error curve (of the weights and of
+    """Train `arm` from `seed` for SECONDS of its process's CPU time: the error curve (of the weights and of
     their average) measured every EVAL_EVERY seconds, the trained weights and the explorer's figures (runs
     in a process of its own)."""
     torch.set_num_threads(1)
-    config = KIND.resolve_config("default", {**OVERRIDES, "exploration": mode})
+    config = KIND.resolve_config("default", _merged(OVERRIDES, ARMS[arm]))
     spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin(scene)), config), seed)
     source = spec.build()
     tracers = [source.tracer.at(v) for v in vectors]
@@ -178,70 +193,100 @@ def run() -> list[BenchSection]:
     references = {
         s: reference_images(tracers[s], SIZE, REFERENCE_SPP, config.max_depth, SEED + 2) for s in SCENES
     }
-    runs = [(scene, mode, seed) for scene in SCENES for mode in MODES for seed in SEEDS]
+    runs = [(scene, arm, seed) for scene in SCENES for arm in RUN for seed in SEEDS]
     with ProcessPoolExecutor(WORKERS, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {r: pool.submit(train_for, *r, references[r[0]], vectors[r[0]]) for r in runs}
         results = {r: future.result() for r, future in futures.items()}
+    baselines = [b for b in BASELINES if b in RUN]
     for scene in SCENES:
-        ratios: dict[str, list[float]] = {"dssim": [], "avg_dssim": [], "mape": [], "avg_mape": []}
+        ratios: dict[tuple[str, str, str], list[float]] = {}
         for seed in SEEDS:
-            curves = {mode: results[scene, mode, seed][0] for mode in MODES}
-            for mode in MODES:
-                _, _, statistics = results[scene, mode, seed]
-                for point in curves[mode]:
-                    curves_section.add(scene=scene, method=mode, seed=seed, **point)
-                final = curves[mode][-1]
+            curves = {arm: results[scene, arm, seed][0] for arm in RUN}
+            for arm in RUN:
+                _, _, statistics = results[scene, arm, seed]
+                for point in curves[arm]:
+                    curves_section.add(scene=scene, method=arm, seed=seed, **point)
+                final = curves[arm][-1]
                 comparison.add(
-                    scene=scene, method=mode, seed=seed, seconds=round(final["seconds"], 1),
+                    scene=scene, method=arm, seed=seed, seconds=round(final["seconds"], 1),
                     steps=final["steps"], dssim=final["dssim"], avg_dssim=final["avg_dssim"],
                     mape=final["mape"], avg_mape=final["avg_mape"],
                     acceptance=statistics["acceptance_rate"], rendered=statistics["patches_rendered"],
+                    chain_age=statistics["mean_chain_age"],
                 )  # fmt: skip
-            for key, values in ratios.items():
-                values.append(curves["active"][-1][key] / curves["uniform"][-1][key])
+                for baseline in baselines:
+                    if arm in BASELINES[BASELINES.index(baseline) :]:
+                        continue  # a baseline against itself or a later one
+                    for key in ("avg_dssim", "avg_mape"):
+                        ratio = final[key] / curves[baseline][-1][key]
+                        ratios.setdefault((arm, baseline, key), []).append(ratio)
             _plot(scene, seed, curves)
-        comparison.notes.append(
-            f"{scene}: active/uniform after {SECONDS:.0f} CPU s each, mean over seeds {list(SEEDS)}: "
-            + ", ".join(f"{key} {np.mean(values):.3f}" for key, values in ratios.items())
-        )
-        model = PixelGenerator.of(config, sources[scene].dimensions)
-        model.load_state_dict(results[scene, "active", SEEDS[0]][1])
-        frames.add(
-            **_frame_row(
-                scene, model, tracers[scene][0], vectors[scene][0], references[scene][0], sources[scene].box,
-                config,
+        for (arm, baseline, key), values in ratios.items():
+            comparison.notes.append(
+                f"{scene}: {arm}/{baseline} {key} after {SECONDS:.0f} CPU s each, seeds {list(SEEDS)}: "
+                + " ".join(f"{v:.3f}" for v in values)
+                + f" (mean {np.mean(values):.3f})"
             )
-        )  # fmt: skip
+        model = PixelGenerator.of(config, sources[scene].dimensions)
+        model.load_state_dict(results[scene, RUN[0], SEEDS[0]][1])
+        rows = _frame_rows(
+            scene, model, tracers[scene], vectors[scene], references[scene], sources[scene].box, config
+        )
+        for row in rows:
+            frames.add(**row)
     return [comparison, frames, curves_section]
 
 
-def _frame_row(scene, model, tracer, v, reference, box, config) -> dict:
-    timings = []
-    for _ in range(5):
-        image, seconds = network_image(
-            model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, ANTIALIASING
-        )
-        timings.append(seconds)
-    network_seconds, network_dssim = float(np.median(timings)), dssim(reference, image)
-    row = {"scene": scene, "network_ms": network_seconds * 1e3, "network_dssim": network_dssim}
-    matched = None
+def _frame_rows(scene, model, tracers, vectors, references, box, config) -> list[dict]:
+    """Per frame kind: the network's mean DSSIM over the configurations and its median CPU time a frame,
+    against path tracing's (one thread each): the CPU time path tracing needs for the same mean DSSIM,
+    log-log interpolated between the spp of `PATH_TRACING_SPP`."""
+    traced = []
     for spp in PATH_TRACING_SPP:
         settings = RenderSettings(
-            spp=spp, width=SIZE, height=SIZE, max_depth=config.max_depth, seed=SEED, threads=2
+            spp=spp, width=SIZE, height=SIZE, max_depth=config.max_depth, seed=SEED, threads=1
         )
-        result = render(tracer, settings)
-        error = dssim(reference, result.image)
-        row[f"pt{spp}_ms"], row[f"pt{spp}_dssim"] = result.seconds * 1e3, error
-        if matched is None and error <= network_dssim:
-            matched = (spp, result.seconds)
-    if matched is not None:
-        row["pt_spp_to_match"], row["speedup"] = matched[0], matched[1] / network_seconds
-    else:
-        row["pt_spp_to_match"], row["speedup"] = (
-            f">{PATH_TRACING_SPP[-1]}",
-            row[f"pt{PATH_TRACING_SPP[-1]}_ms"] / (network_seconds * 1e3),
-        )
-    return row
+        errors, times = [], []
+        for tracer, reference in zip(tracers, references, strict=True):
+            started = time.process_time()
+            image = render(tracer, settings).image
+            times.append(time.process_time() - started)
+            errors.append(dssim(reference, image))
+        traced.append((spp, float(np.mean(errors)), float(np.median(times))))
+    rows = []
+    for antialiasing in (RGSS, ANTIALIASING):  # served frames, measured frames
+        errors, times = [], []
+        for tracer, v, reference in zip(tracers, vectors, references, strict=True):
+            for _ in range(3):
+                started = time.process_time()
+                image, _ = network_image(
+                    model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, antialiasing
+                )
+                times.append(time.process_time() - started)
+            errors.append(dssim(reference, image))
+        network_dssim, network_seconds = float(np.mean(errors)), float(np.median(times))
+        row = {
+            "scene": scene, "antialiasing": str(antialiasing), "network_ms": network_seconds * 1e3,
+            "network_dssim": network_dssim,
+            **{f"pt{spp}_ms": seconds * 1e3 for spp, _, seconds in traced},
+            **{f"pt{spp}_dssim": error for spp, error, _ in traced},
+        }  # fmt: skip
+        matched = _interpolated_seconds(traced, network_dssim)
+        row["pt_ms_to_match"] = matched * 1e3 if matched is not None else f">{PATH_TRACING_SPP[-1]} spp"
+        row["speedup"] = (matched or traced[-1][2]) / network_seconds
+        rows.append(row)
+    return rows
+
+
+def _interpolated_seconds(traced: list[tuple[int, float, float]], target: float) -> float | None:
+    """Path tracing's seconds at DSSIM `target`, log-log between the bracketing spp (None: beyond them)."""
+    if target >= traced[0][1]:
+        return traced[0][2]
+    for (_, e0, t0), (_, e1, t1) in itertools.pairwise(traced):
+        if e1 <= target <= e0:
+            w = np.log(e0 / target) / np.log(e0 / e1) if e0 > e1 else 1.0
+            return float(np.exp(np.log(t0) + w * np.log(t1 / t0)))
+    return None
 
 
 def _plot(scene: str, seed: int, curves: dict[str, list[dict]]) -> None:

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from workers.models.explore.config import PRESETS, ExploreConfig
+from workers.models.explore.evaluate import RGSS, network_image, pixel_offsets
 from workers.models.explore.explorer import Explorer, patch_losses
 from workers.models.explore.features import BUFFER_CHANNELS
 from workers.models.explore.network import PixelGenerator
@@ -89,10 +90,11 @@ def explore_run(
     torch.manual_seed(seed)
     model = PixelGenerator.of(config, spec.build().dimensions)
     explorer = Explorer(config, model.dimensions, model, seed)
-    losses, snapshots = [], []
+    losses, snapshots, ages = [], [], []
 
     def loss(m, batch):
         snapshots.append([p.detach().clone() for p in m.parameters()])
+        ages.append([chain.age for chain in explorer.chains])
         value = explorer.loss(m, batch)
         losses.append(float(value.detach()))
         return value
@@ -100,7 +102,7 @@ def explore_run(
     with InProcessRenders(spec) as renders, explorer.open(renders) as batches:
         phase = dataclasses.replace(explorer.phase(), loss=loss)
         train_phases(model, [phase], batches, TrainConfig(steps=steps, schedule={"lr": 3e-3}, eps=1e-8))
-    explorer.snapshots = snapshots
+    explorer.snapshots, explorer.ages = snapshots, np.array(ages)
     return explorer, losses, model
 
 
@@ -116,6 +118,14 @@ def test_exploration_is_deterministic_for_a_seed_and_trains_on_every_rendered_pa
     assert 0 <= stats["acceptance_rate"] <= 1
     # every rendered patch is trained on at least once: the store saw a loss for each
     assert all(w != 1.0 for w in a.store.weights.values())
+
+
+def test_the_mean_chain_age_counts_the_generations_chains_keep_their_states():
+    explorer, _, _ = explore_run(get_builtin("mirror_variable"), 4, 16, bootstrap=16, spp=1)
+    assert explorer.ages.max() > 2  # greedy chains keep states for generations
+    assert explorer.statistics()["mean_chain_age"] == pytest.approx(explorer.ages.mean())
+    rises = np.diff(explorer.ages, axis=0)
+    assert np.all((rises == 1) | (explorer.ages[1:] == 0))  # one more generation, or a move
 
 
 def test_the_average_is_the_moving_average_of_the_weights_each_step_trained_from():
@@ -180,3 +190,21 @@ def test_the_targets_are_each_patchs_loss_times_its_adam_step_of_the_layers():
         expected.append(float(loss.detach()) * float(length))
     np.testing.assert_allclose(explorer.targets(patches), expected, rtol=1e-4)
     assert all(p.grad is None for p in model.parameters())
+
+
+def test_frames_average_the_network_at_each_pixels_points():
+    source = PatchSource(PatchSourceConfig(SceneRef(get_builtin("mirror_variable")), QUICK), 0)
+    model = PixelGenerator.of(QUICK, source.dimensions)
+    v = np.full(source.dimensions, 0.5)
+    tracer = source.tracer.at(v)
+    camera = tracer.scene.spec.camera
+    grid, _ = network_image(model, tracer, camera, source.box, v, 10, 8, 2)
+    fine, _ = network_image(model, tracer, camera, source.box, v, 20, 16, 1)  # the 2 x 2 grid's centres
+    np.testing.assert_allclose(grid, fine.reshape(8, 2, 10, 2, 3).mean(axis=(1, 3)), rtol=1e-4, atol=1e-5)
+    offsets = pixel_offsets(RGSS)
+    assert len(np.unique(offsets[:, 0])) == len(np.unique(offsets[:, 1])) == 4  # 4 rooks
+    assert np.all((offsets > 0) & (offsets < 1))
+    rotated, _ = network_image(model, tracer, camera, source.box, v, 10, 8, RGSS)
+    assert np.all(np.isfinite(rotated)) and not np.allclose(rotated, grid)
+    with pytest.raises(ValueError, match=r"^antialiasing: "):
+        pixel_offsets(0)

@@ -229,3 +229,13 @@ def test_patches_stay_inside_the_image_as_the_resolution_grows():
             assert 0 <= x <= resolution - 8 and 0 <= y <= resolution - 8
     uniform = config.model_copy(update={"exploration": "uniform"})
     assert {uniform.resolution(i) for i in range(40)} == {8}
+
+
+def test_the_resolution_schedule_is_a_switch_for_either_exploration():
+    base = dict(patch=8, resolution_start=8, resolution_max=20, resolution_step=4, resolution_every=3)
+    grown = [ExploreConfig(**base).resolution(i) for i in range(40)]
+    for exploration in ("active", "uniform"):
+        on = ExploreConfig(**base, exploration=exploration, resolution_schedule=True)
+        off = ExploreConfig(**base, exploration=exploration, resolution_schedule=False)
+        assert [on.resolution(i) for i in range(40)] == grown
+        assert {off.resolution(i) for i in range(40)} == {8}

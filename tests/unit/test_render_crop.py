@@ -30,6 +30,20 @@ def test_gbuffers_of_a_window_are_the_crop_of_the_full_ones(tracer, window):
         np.testing.assert_array_equal(getattr(crop, name), getattr(full, name)[y0:y1, x0:x1], err_msg=name)
 
 
+def test_gbuffers_at_points_in_each_pixel_are_a_finer_frames_centres(tracer):
+    spec = tracer.scene.spec.camera
+    camera, fine = PinholeCamera(spec, 8, 6), PinholeCamera(spec, 16, 12)
+    grid = np.array([[0.25, 0.25], [0.75, 0.25], [0.25, 0.75], [0.75, 0.75]])  # 2 x 2, row-major
+    points = primary_gbuffers(tracer, camera, (2, 1, 7, 5), grid)
+    finer = primary_gbuffers(tracer, fine, (4, 2, 14, 10))
+    for name in ("position", "normal", "albedo", "hit"):
+        ours = getattr(points, name).reshape(4, 5, 2, 2, -1)  # rows, pixels, sample row, sample column
+        theirs = getattr(finer, name).reshape(4, 2, 5, 2, -1).transpose(0, 2, 1, 3, 4)
+        np.testing.assert_allclose(ours, theirs, atol=1e-5, err_msg=name)
+    centres = primary_gbuffers(tracer, camera, None, np.array([[0.5, 0.5]]))
+    np.testing.assert_array_equal(centres.position, primary_gbuffers(tracer, camera).position)
+
+
 def test_a_window_renders_the_crop_of_the_full_image_in_expectation(tracer):
     window = (6, 2, 20, 14)  # the light, a glossy sphere's highlight and the caustic
     x0, y0, x1, y1 = window

@@ -55,6 +55,7 @@ from workers.runtime.training import Phase
 PATCH_KEYS = ("features", "emission", "target")
 STATE_FILE = "stream-exploration.json"  # the exploration's part of a training checkpoint
 AVERAGE_FILE = "stream-average.safetensors"  # the averaged weights
+COUNTS = ("proposals", "accepted", "large_steps", "generated", "reused", "chain_age")
 AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10 + n))
 
 
@@ -74,6 +75,7 @@ def patch_losses(
 class Chain:
     state: np.ndarray | None = None
     patch_id: int | None = None  # its current state's patch in the store (pinned there)
+    age: int = 0  # generations it has kept its current state
 
 
 class Explorer:
@@ -134,7 +136,7 @@ class Explorer:
         self.chains = [Chain() for _ in range(c.chains)]
         self.loss_new, self.loss_existing = MovingAverage(c.reuse_ema), MovingAverage(c.reuse_ema)
         self.generations = 0
-        self.counts = {"proposals": 0, "accepted": 0, "large_steps": 0, "generated": 0, "reused": 0}
+        self.counts = dict.fromkeys(COUNTS, 0)
         self.average.load_state_dict(self.model.state_dict())
         self.averaged = 0
 
@@ -151,7 +153,9 @@ class Explorer:
             "counts": self.counts,
             "loss_new": self.loss_new.value,
             "loss_existing": self.loss_existing.value,
-            "chains": [[None if c.state is None else c.state.tolist(), c.patch_id] for c in self.chains],
+            "chains": [
+                [None if c.state is None else c.state.tolist(), c.patch_id, c.age] for c in self.chains
+            ],
             "store": self.store.state(asdict),
         }
         average = safetensors.torch.save(self.average.state_dict())
@@ -166,13 +170,13 @@ class Explorer:
             raise RuntimeError("the explorer restores through `open(renders)`: it renders its store again")
         state = json.loads(files[STATE_FILE])
         self._restart(state["position"])
-        self.generations, self.counts = state["generations"], state["counts"]
+        self.generations, self.counts = state["generations"], {**self.counts, **state["counts"]}
         self.averaged = state["averaged"]
         self.average.load_state_dict(safetensors.torch.load(files[AVERAGE_FILE]))
         self.loss_new.value, self.loss_existing.value = state["loss_new"], state["loss_existing"]
-        for chain, (chain_state, patch_id) in zip(self.chains, state["chains"], strict=True):
+        for chain, (chain_state, patch_id, *age) in zip(self.chains, state["chains"], strict=True):
             chain.state = None if chain_state is None else np.array(chain_state, dtype=np.float64)
-            chain.patch_id = patch_id
+            chain.patch_id, chain.age = patch_id, (age or [0])[0]
         self.store.restore(state["store"], _request, self.renders.map)
 
     def reuse_probability(self) -> float:
@@ -231,15 +235,17 @@ class Explorer:
             if accepted.get(k, True):
                 if chain.patch_id is not None:
                     self.store.unpin(chain.patch_id)
-                chain.state, chain.patch_id = states[k], ids[k]
+                chain.state, chain.patch_id, chain.age = states[k], ids[k], 0
                 self.store.pin(ids[k])
             else:
+                chain.age += 1
                 current = chain.patch_id
                 if not c.train_rejected:
                     members.pop()  # stored for reuse, not trained on now
                 members.append((current, self.store.patches[current], self.store.large[current]))
         self.generations += 1
         self.counts["generated"] += 1
+        self.counts["chain_age"] += sum(chain.age for chain in self.chains)
         return _stack(members, reused=False)
 
     def _reuse(self, rng: np.random.Generator) -> Batch:
@@ -318,6 +324,8 @@ class Explorer:
             "patches_rendered": float(self.counts["generated"] * len(self.chains)),
             "final_reuse_probability": self.reuse_probability(),
             "final_resolution": float(self.config.resolution(self.position)),
+            # generations a chain had kept its state, averaged over chains and generations
+            "mean_chain_age": self.counts["chain_age"] / max(self.counts["generated"] * len(self.chains), 1),
             "stored_patches": float(len(self.store)),
         }
 

@@ -87,8 +87,8 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
     schedule = (
         f"R {config.resolution_start} -> {config.resolution_max} by {config.resolution_step} every "
         f"{config.resolution_every} iterations"
-        if config.exploration != "uniform"
-        else f"R {config.resolution_start} fixed (uniform baseline)"
+        if config.schedules_resolution
+        else f"R {config.resolution_start} fixed"
     )
     items.append(
         PlanItem(
