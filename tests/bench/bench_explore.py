@@ -41,8 +41,8 @@ was flat across configurations and active against uniform measured noise.
 from __future__ import annotations
 
 import contextlib
-import itertools
 import json
+import math
 import multiprocessing
 import os
 import time
@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tests.bench.common import BenchSection
+from tests.bench.common import BenchSection, seconds_at_error
 from workers.models.explore import KIND
 from workers.models.explore.evaluate import (
     ANTIALIASING,
@@ -271,22 +271,12 @@ def _frame_rows(scene, model, tracers, vectors, references, box, config) -> list
             **{f"pt{spp}_ms": seconds * 1e3 for spp, _, seconds in traced},
             **{f"pt{spp}_dssim": error for spp, error, _ in traced},
         }  # fmt: skip
-        matched = _interpolated_seconds(traced, network_dssim)
-        row["pt_ms_to_match"] = matched * 1e3 if matched is not None else f">{PATH_TRACING_SPP[-1]} spp"
-        row["speedup"] = (matched or traced[-1][2]) / network_seconds
+        matched = seconds_at_error([t for _, _, t in traced], [e for _, e, _ in traced], network_dssim)
+        reached = math.isfinite(matched)
+        row["pt_ms_to_match"] = matched * 1e3 if reached else f">{PATH_TRACING_SPP[-1]} spp"
+        row["speedup"] = (matched if reached else traced[-1][2]) / network_seconds
         rows.append(row)
     return rows
-
-
-def _interpolated_seconds(traced: list[tuple[int, float, float]], target: float) -> float | None:
-    """Path tracing's seconds at DSSIM `target`, log-log between the bracketing spp (None: beyond them)."""
-    if target >= traced[0][1]:
-        return traced[0][2]
-    for (_, e0, t0), (_, e1, t1) in itertools.pairwise(traced):
-        if e1 <= target <= e0:
-            w = np.log(e0 / target) / np.log(e0 / e1) if e0 > e1 else 1.0
-            return float(np.exp(np.log(t0) + w * np.log(t1 / t0)))
-    return None
 
 
 def _plot(scene: str, seed: int, curves: dict[str, list[dict]]) -> None:

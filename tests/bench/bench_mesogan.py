@@ -19,10 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from tests.bench.common import BenchSection, median_seconds
+from tests.bench.common import BenchSection, median_seconds, seconds_at_error
 from tests.support.jobs import run_kind_job
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.aggregate import ShellAggregate
@@ -93,13 +92,20 @@ def run() -> list[BenchSection]:
             if name not in best or covered < best[name][1]:
                 best[name] = (seconds, covered)
     strand_rows = [r for r in curve.rows if r["method"] == "strands"]
+
+    def strand_seconds_at(error: float) -> float:
+        """The strands' CPU seconds at covered FLIP `error`, log-log along their rows."""
+        return seconds_at_error(
+            [r["cpu_seconds"] for r in strand_rows], [r["flip_covered"] for r in strand_rows], error
+        )
+
     for row in curve.rows:
         if row["method"] == "shell":
-            seconds = strand_seconds_at(strand_rows, row["flip_covered"])
+            seconds = strand_seconds_at(row["flip_covered"])
             row["strands_cpu_at_equal_flip"] = seconds
             row["strands_over_shell_cpu"] = seconds / row["cpu_seconds"]
     shell_seconds, shell_error = best["shell"]
-    reach = strand_seconds_at(strand_rows, shell_error)
+    reach = strand_seconds_at(shell_error)
     if math.isfinite(reach):
         curve.notes.append(
             f"strands reach the shell's best covered-pixel FLIP ({shell_error:.3f}) in {reach:.3g} CPU s: "
@@ -147,18 +153,6 @@ def run() -> list[BenchSection]:
     )
     conditioning.add(model="trained", **structure_response(model, source, 16))
     return [curve, memory, quality, conditioning]
-
-
-def strand_seconds_at(rows: list[dict], error: float) -> float:
-    """CPU seconds at which the strands' frames reach covered FLIP `error`: log-log interpolation along
-    their (cpu_seconds, flip_covered) rows; their cheapest frame's time where `error` is above all their
-    errors, inf where it is below all of them."""
-    seconds = np.log([r["cpu_seconds"] for r in rows])
-    errors = np.log([r["flip_covered"] for r in rows])
-    if math.log(error) < errors.min():
-        return math.inf
-    order = np.argsort(errors)
-    return float(np.exp(np.interp(math.log(error), errors[order], seconds[order], right=seconds.min())))
 
 
 ABLATIONS = {

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tests.bench.common import BenchSection
+from tests.bench.common import BenchSection, seconds_at_error
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
 from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
@@ -64,20 +64,14 @@ FIGURES = ("psnr_full", "psnr_indirect", "ssim_full", "ssim_indirect", "flip_ful
 
 
 def equal_error_seconds(report: Report, metric: str = "flip") -> float:
-    """Path-tracing seconds at the model's error, interpolated along the curve (inf beyond it): log-log for
-    FLIP, log seconds against PSNR (dB is already a log)."""
-    curve = sorted(report.path_tracing, key=lambda p: p.seconds_per_frame)
-    seconds = np.log([p.seconds_per_frame for p in curve])
+    """Path-tracing seconds at the model's error (`seconds_at_error`): log-log for FLIP, log seconds
+    against negated PSNR (dB is already a log)."""
+    seconds = [p.seconds_per_frame for p in report.path_tracing]
     if metric == "flip":
-        errors = np.log([p.error.flip for p in curve])
-        target = np.log(report.model.error.flip)
-    else:  # PSNR, negated so that lower is better
-        errors = -np.array([p.error.psnr for p in curve])
-        target = -report.model.error.psnr
-    if target < errors.min():
-        return float("inf")
-    order = np.argsort(errors)
-    return float(np.exp(np.interp(target, errors[order], seconds[order])))
+        errors = [p.error.flip for p in report.path_tracing]
+        return seconds_at_error(seconds, errors, report.model.error.flip)
+    errors = [-p.error.psnr for p in report.path_tracing]
+    return seconds_at_error(seconds, errors, -report.model.error.psnr, log_error=False)
 
 
 def target_noise(scene: str, section: BenchSection, pixels: int = 256, reference_spp: int = 1024) -> None:
