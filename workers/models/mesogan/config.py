@@ -157,6 +157,10 @@ PRESETS: dict[str, dict] = {
     # -> 0.282 (0.90). The seeds' brightness still scatters by some 20-30% at 500 steps. bench_mesogan,
     # seeds 5 / 6 / 7: at 16 spp the strands reach the shell's covered FLIP in 0.07 / 0.02 / 0.07 of its
     # CPU time (0.15-0.18 s a frame); model and plane 165 kB against 94 MB of strand triangles (570x).
+    # An exported moving average of the generator's weights (StyleGAN's G_ema; measured by mesogan8,
+    # not kept) did not steady it: same runs, seeds 5 / 6 / 7, covered FLIP raw 0.282 / 0.422 / 0.319
+    # (mean 0.341), averaged at decay 0.95 / 0.98 / 0.99 means 0.350 / 0.373 / 0.375; at 0.98 the covered
+    # mean over the strands' 1.31 / 1.29 / 1.00 (the average is brighter than the raw weights at every seed).
     "default": {
         "image_size": 32,
         "plane_resolution": 48,
