@@ -47,7 +47,8 @@ class CamerasConfig(BaseModel):
     """Camera trajectories around the scene camera's target (Sec. 6: spheres/helices around the scene).
 
     Training views lie on a helix at the scene camera's distance; "near" test views are held-out points
-    on the same helix, "far" test views lie on another one (`far_scale` times the distance, lower)."""
+    on the same helix, "far" test views lie on another one (`far_scale` times the distance, `far_lift`
+    degrees higher); `train_band` spreads the training views over the band between the two helices."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -62,6 +63,10 @@ class CamerasConfig(BaseModel):
     elevation_range: tuple[float, float] = (12.0, 40.0)  # degrees above the target, over the helix
     azimuth_range: float = Field(90.0, gt=0, le=360, description="degrees of arc the helix sweeps")
     far_scale: float = Field(0.8, gt=0.1, le=4)
+    far_lift: float = Field(10.0, ge=-80, le=80, description="degrees the far helix lies above the other")
+    train_band: float = Field(
+        0.0, ge=0, le=1, description="how far towards the far helix training views spread (0: one helix)"
+    )
 
 
 class PrtConfig(TrainedKindConfig):
