@@ -261,7 +261,7 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one():
 
 def test_training_views_spread_over_the_band_towards_the_far_helix_without_moving_test_views():
     base = Camera(position=(0.0, 1.0, 5.0), target=(0.0, 0.0, 0.0), width=8, height=8)
-    helix = trajectory_cameras(base, CamerasConfig(), 8)
+    helix = trajectory_cameras(base, CamerasConfig(train_band=0.0), 8)
     band = trajectory_cameras(base, CamerasConfig(train_band=1.0), 8)
 
     def distances(cameras):
