@@ -74,6 +74,9 @@ class CamerasConfig(BaseModel):
     #   band 1:   22.40 / 22.61 / 22.19,  21.65 / 21.83 / 21.47
     # Far views +1.25 / +1.29 dB (full frame far 24.74 -> 25.47, 22.57 -> 23.99), near -0.56 / -0.40, all
     # +0.35 / +0.44: the near-far gap goes from 2.2 / 2.0 dB to 0.4 / 0.4 (the paper's "within 0.5 dB").
+    # glossy_row, same set-up, band 0 -> 1, seeds 0 / 1: 17.57 / 18.23 / 16.92 -> 17.53 / 17.18 / 17.87 and
+    # 16.18 / 16.84 / 15.51 -> 16.68 / 16.43 / 16.92: far +0.95 / +1.41, near -1.05 / -0.41, all -0.04 /
+    # +0.50 (a trade there; far views, the target, gain on both scenes).
     # Quick keeps 0 (not measured there).
     train_band: float = Field(
         1.0, ge=0, le=1, description="how far towards the far helix training views spread (0: one helix)"
