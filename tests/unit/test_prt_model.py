@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from workers.models.prt.config import PRESETS, PrtConfig
+from workers.models.prt.config import PRESETS, CamerasConfig, PrtConfig
 from workers.models.prt.lighting import (
     CubeMapLight,
     cube_directions,
@@ -25,13 +25,14 @@ from workers.models.prt.selection import (
     training_selection,
     wavelets_of,
 )
+from workers.models.prt.views import trajectory_cameras
 from workers.nn.cubemap import cubemap_solid_angles
 from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
 from workers.runtime.contract import resolve_preset
 from workers.scene.envmaps import texel_directions
 from workers.scene.errors import SceneError
-from workers.scene.spec import EnvironmentMap, euler_xyz
+from workers.scene.spec import Camera, EnvironmentMap, euler_xyz
 
 SIZES = [1, 2, 4, 8, 16, 32]
 
@@ -256,3 +257,20 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one():
     escaped = ~hit
     assert escaped.any()
     np.testing.assert_allclose(denoised[escaped], reference[escaped], rtol=1e-5)
+
+
+def test_training_views_spread_over_the_band_towards_the_far_helix_without_moving_test_views():
+    base = Camera(position=(0.0, 1.0, 5.0), target=(0.0, 0.0, 0.0), width=8, height=8)
+    helix = trajectory_cameras(base, CamerasConfig(train_band=0.0), 8)
+    band = trajectory_cameras(base, CamerasConfig(train_band=1.0), 8)
+
+    def distances(cameras):
+        return np.array([np.linalg.norm(c.position) for c in cameras])
+
+    d = np.linalg.norm(base.position)
+    assert np.allclose(distances(helix["train"]), d)
+    spread = distances(band["train"])
+    assert spread.max() == pytest.approx(d) and spread.min() < 0.85 * d  # reaches towards 0.8 d
+    assert np.all(spread >= 0.8 * d - 1e-9)
+    for split in ("near", "far"):
+        assert [c.position for c in band[split]] == [c.position for c in helix[split]]
