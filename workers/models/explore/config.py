@@ -89,7 +89,14 @@ class ExploreConfig(TrainedKindConfig):
     # (uniform: 8%); those patches' loss against a converged render is as high (1.1-1.3) as against their
     # 16-spp target, i.e. real error the 64 x 3 network does not remove in the budget, while the other
     # parked patches' loss is mostly (62%) target noise. f from the loss above a noise floor (two
-    # half-spp renders per patch, the floor half their mutual loss): 1.12 / 1.22 (separate run), dropped
+    # half-spp renders per patch, the floor half their mutual loss): 1.12 / 1.22 (separate run), dropped.
+    # Also dropped (explore9; active arm alone, same budget and seeds, separate run under heavy load, over
+    # explore8's uniform_schedule 0.0335/0.0326 and 0.0780/0.0784): p_LS 0.6: cornell 0.0427/0.0389
+    # (1.27/1.19), mirror 0.0901/0.0764 (1.16/0.97), chain age 1.5/1.2 and 6.9/3.7; 16 chains (batches of
+    # 16-32 patches, 0.5-0.7x the steps): cornell 0.0386/0.0415 (1.15/1.27), mirror 0.0820/0.0800 (1.05/1.02),
+    # chain age 2.0/1.9 and 3.7/3.5; small steps halved (s1, s2 = 1/50, 1/40; separate run): cornell
+    # 0.0513/0.0420 (1.53/1.29), mirror 0.0925/0.0938 (1.19/1.20), chain age 1.1/1.1 and 2.2/2.0.
+    # None beats uniform_schedule on both scenes and seeds
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
