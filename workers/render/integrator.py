@@ -540,12 +540,12 @@ class PathTracer:
         wi_local = wavefront.to_local_rows(rows, ls.direction, sh.fs, sh.ft, sh.ns)
         f_cos, bsdf_pdf = eval_bsdf(sh.surf, sh.wo_local, wi_local)
         lights = (ls.direction, ls.distance, ls.radiance, ls.pdf, ls.delta)
-        live, contribution, origin, t_max, light_scale = wavefront.shadow_rays(
+        live, contribution, origin, direction, t_max, light_scale = wavefront.shadow_rays(
             rows, beta, _f64(f_cos), _f64(bsdf_pdf), lights, sh.position, sh.ng, sh.scale
         )
         if len(live) == 0:
             return 0
-        blocked = self._occluded(origin, ls.direction[live], t_max)
+        blocked = self._occluded(origin, direction, t_max)
         wavefront.add_unblocked(radiance, idx[live], contribution, blocked)
         if observer is not None:
             weight = beta[live] * f_cos[live] * light_scale[live, None]

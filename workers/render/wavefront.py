@@ -215,14 +215,14 @@ def to_local_rows(rows, v, fs, ft, ns):
 def shadow_rays(rows, beta, f_cos, bsdf_pdf, lights, position, ng, scale):
     """Next-event estimation at `rows` with the light samples `lights` (direction, distance, radiance,
     pdf, delta; one per row): the MIS-weighted contribution beta f |cos| L w / pdf, and for the rows where
-    it is positive (`live`, indices into `rows`) a shadow ray stopping short of the light. Also returns
-    w / pdf per sample (0 where the pdf is)."""
+    it is positive (`live`, indices into `rows`) a shadow ray (origin, direction, t_max) stopping short of
+    the light. Also returns w / pdf per sample (0 where the pdf is)."""
     direction, distance, light_radiance, light_pdf, light_delta = lights
     m = len(rows)
     light_scale = np.zeros(m)
     contribution = np.empty((m, 3))
     live = np.empty(m, np.int64)
-    origin, t_max = np.empty((m, 3)), np.empty(m)
+    origin, ray_direction, t_max = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     count = 0
     for j in range(m):
         i = rows[j]
@@ -240,11 +240,13 @@ def shadow_rays(rows, beta, f_cos, bsdf_pdf, lights, position, ng, scale):
         origin[count, 0], origin[count, 1], origin[count, 2] = offset_one(
             p[0], p[1], p[2], n[0], n[1], n[2], dr[0], dr[1], dr[2], scale[i]
         )
+        ray_direction[count, 0], ray_direction[count, 1], ray_direction[count, 2] = dr[0], dr[1], dr[2]
         dist = distance[j]
         t_max[count] = dist * (1 - 1e-5) - 2 * RAY_OFFSET * scale[i] if math.isfinite(dist) else math.inf
         live[count] = j
         count += 1
-    return live[:count], contribution[:count], origin[:count], t_max[:count], light_scale
+    rays = origin[:count], ray_direction[:count], t_max[:count]
+    return live[:count], contribution[:count], *rays, light_scale
 
 
 @kernel
