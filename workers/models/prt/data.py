@@ -12,7 +12,7 @@ Everything is a function of (scene, config, seed).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -38,6 +38,21 @@ class TrainingSet:
     rows: np.ndarray  # (P, 6 R^2, 3) float32 indirect transport
     box: np.ndarray  # (2, 3)
     map_weights: dict[str, np.ndarray]  # pixel map -> (P,) sampling weights
+    # pixel map -> (P,) normalised cumulative weights, None if the map is zero everywhere (built once: a
+    # `rng.choice(p=...)` per draw is O(P), which made a step's cost grow with the rows)
+    map_cdfs: dict[str, np.ndarray | None] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.map_cdfs = {name: _cdf(w) for name, w in self.map_weights.items()}
+
+
+def _cdf(weights: np.ndarray) -> np.ndarray | None:
+    """The normalised cumulative sum `Generator.choice` builds from p (the same draws), None if all zero."""
+    total = float(weights.sum())
+    if total <= 0:
+        return None
+    cdf = (weights / total).cumsum()
+    return cdf / cdf[-1]
 
 
 @dataclass
