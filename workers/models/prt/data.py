@@ -30,6 +30,7 @@ from workers.scene.spec import Camera
 BOX_PADDING = 0.02  # of the box's diagonal, around every point a view sees
 PIXEL_MAPS = ("uniform", "glossy", "transport_detail")
 CACHE_SIZE = 8  # traced sets and tracers kept per process (a job needs four)
+MAP_CHUNK = 4096  # rows per Haar transform of the pixel maps (float64 temporaries of ~100 MB, not GBs)
 
 
 @dataclass
@@ -171,11 +172,19 @@ def _pixel_maps(inputs: SurfaceInputs, rows: np.ndarray, size: int) -> dict[str,
     changes most with the lighting (standing in for the paper's variance-across-views and high-frequency
     maps, which need whole images)."""
     glossy = inputs.ks.mean(1) * (1 - np.clip(inputs.roughness, 0, 1))
+    detail = np.concatenate(
+        [_detail_energy(rows[i : i + MAP_CHUNK], size) for i in range(0, len(rows), MAP_CHUNK)]
+    )
+    return {"uniform": np.ones(len(rows)), "glossy": glossy, "transport_detail": detail}
+
+
+def _detail_energy(rows: np.ndarray, size: int) -> np.ndarray:
+    """The norm of each row's Haar detail coefficients (the scaling functions dropped: what is left varies
+    with direction)."""
     coefficients = cubemap_wavelets(torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double())
     coefficients = coefficients.reshape(len(rows), 6, size, size, 3)
-    coefficients[:, :, 0, 0] = 0  # drop the scaling functions: what is left varies with direction
-    detail = coefficients.square().sum(dim=(1, 2, 3, 4)).sqrt().numpy()
-    return {"uniform": np.ones(len(rows)), "glossy": glossy, "transport_detail": detail}
+    coefficients[:, :, 0, 0] = 0
+    return coefficients.square().sum(dim=(1, 2, 3, 4)).sqrt().numpy()
 
 
 def test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:
