@@ -12,7 +12,7 @@ Everything is a function of (scene, config, seed).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -30,6 +30,7 @@ from workers.scene.spec import Camera
 BOX_PADDING = 0.02  # of the box's diagonal, around every point a view sees
 PIXEL_MAPS = ("uniform", "glossy", "transport_detail")
 CACHE_SIZE = 8  # traced sets and tracers kept per process (a job needs four)
+MAP_CHUNK = 4096  # rows per Haar transform of the pixel maps (float64 temporaries of ~100 MB, not GBs)
 
 
 @dataclass
@@ -38,6 +39,21 @@ class TrainingSet:
     rows: np.ndarray  # (P, 6 R^2, 3) float32 indirect transport
     box: np.ndarray  # (2, 3)
     map_weights: dict[str, np.ndarray]  # pixel map -> (P,) sampling weights
+    # pixel map -> (P,) normalised cumulative weights, None if the map is zero everywhere (built once: a
+    # `rng.choice(p=...)` per draw is O(P), which made a step's cost grow with the rows)
+    map_cdfs: dict[str, np.ndarray | None] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.map_cdfs = {name: _cdf(w) for name, w in self.map_weights.items()}
+
+
+def _cdf(weights: np.ndarray) -> np.ndarray | None:
+    """The normalised cumulative sum `Generator.choice` builds from p (the same draws), None if all zero."""
+    total = float(weights.sum())
+    if total <= 0:
+        return None
+    cdf = (weights / total).cumsum()
+    return cdf / cdf[-1]
 
 
 @dataclass
@@ -156,11 +172,19 @@ def _pixel_maps(inputs: SurfaceInputs, rows: np.ndarray, size: int) -> dict[str,
     changes most with the lighting (standing in for the paper's variance-across-views and high-frequency
     maps, which need whole images)."""
     glossy = inputs.ks.mean(1) * (1 - np.clip(inputs.roughness, 0, 1))
+    detail = np.concatenate(
+        [_detail_energy(rows[i : i + MAP_CHUNK], size) for i in range(0, len(rows), MAP_CHUNK)]
+    )
+    return {"uniform": np.ones(len(rows)), "glossy": glossy, "transport_detail": detail}
+
+
+def _detail_energy(rows: np.ndarray, size: int) -> np.ndarray:
+    """The norm of each row's Haar detail coefficients (the scaling functions dropped: what is left varies
+    with direction)."""
     coefficients = cubemap_wavelets(torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double())
     coefficients = coefficients.reshape(len(rows), 6, size, size, 3)
-    coefficients[:, :, 0, 0] = 0  # drop the scaling functions: what is left varies with direction
-    detail = coefficients.square().sum(dim=(1, 2, 3, 4)).sqrt().numpy()
-    return {"uniform": np.ones(len(rows)), "glossy": glossy, "transport_detail": detail}
+    coefficients[:, :, 0, 0] = 0
+    return coefficients.square().sum(dim=(1, 2, 3, 4)).sqrt().numpy()
 
 
 def test_views(scene: SceneRef, config: PrtConfig, seed: int) -> list[TestView]:

@@ -77,15 +77,17 @@ def wavelet_transport(rows: np.ndarray, wavelets: torch.Tensor, size: int) -> to
 
 
 def sample_pixels(data: TrainingSet, n: int, rng: np.random.Generator) -> np.ndarray:
-    """n pixel indices, an equal share (the first map takes the remainder) from each pixel map."""
+    """n pixel indices, an equal share (the first map takes the remainder) from each pixel map: the draws
+    of `rng.choice(P, share, p=weights)` from the set's precomputed CDFs, so a step costs O(n log P)."""
     shares = np.full(len(PIXEL_MAPS), n // len(PIXEL_MAPS))
     shares[0] += n - shares.sum()
     picks = []
     for name, share in zip(PIXEL_MAPS, shares, strict=True):
-        weights = data.map_weights[name]
-        total = float(weights.sum())
-        p = weights / total if total > 0 else None  # a map that is zero everywhere falls back to uniform
-        picks.append(rng.choice(len(weights), share, p=p))
+        cdf = data.map_cdfs[name]
+        if cdf is None:  # a map that is zero everywhere falls back to uniform
+            picks.append(rng.integers(0, len(data.rows), size=share, dtype=np.int64))
+        else:
+            picks.append(cdf.searchsorted(rng.random(share), side="right").astype(np.int64))
     return np.concatenate(picks)
 
 
