@@ -90,9 +90,10 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
 
     def Render(self, request, context):
         self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
-        params = json_format.MessageToDict(request.params)
+        params, arrays = json_format.MessageToDict(request.params), _arrays(request.arrays)
         media_type = images.media_type_for(request.media_type)
-        with self.service.answering(request.artifact_id, RENDER, params, {}, 0) as (_, answer):
+        size = request.ByteSize()
+        with self.service.answering(request.artifact_id, RENDER, params, arrays, size) as (_, answer):
             context.set_trailing_metadata((("server-timing", server_timing(answer)),))
             return inference_pb2.RenderResponse(
                 media_type=media_type, data=images.encode(answer.arrays["image"], media_type)

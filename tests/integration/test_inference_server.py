@@ -58,6 +58,11 @@ def _in_process(kind: str, folder: Path):
 
 def run_and_publish(store: ArtifactStore, work: Path, kind_name: str, scene, overrides: dict, seed: int):
     spec, outcome = run_kind_job(kind_name, scene, work / f"{kind_name}-{seed}", overrides, seed=seed)
+    return publish(store, kind_name, spec, outcome)
+
+
+def publish(store: ArtifactStore, kind_name: str, spec, outcome) -> Artifact:
+    """A succeeded job's files, published into `store` as the job service does."""
     assert outcome.state == "succeeded", outcome.error
     files = {name: (path, outcome.media_types.get(name, "")) for name, path in outcome.files.items()}
     manifest = store.publish(
@@ -78,7 +83,7 @@ class Server:
     url: str
     grpc_target: str
     data_dir: Path
-    lsnif: Artifact
+    lsnif: Artifact | None = None
     render: Artifact | None = None
     corrupted: Artifact | None = None
 

@@ -8,14 +8,24 @@ The quality gate compares the trained model with the trivial baseline that predi
 
 from __future__ import annotations
 
+import base64
+
+import grpc
 import numpy as np
 import pytest
+from neuralbake.v1 import inference_pb2, inference_pb2_grpc
 
+from services.artifacts.artifacts import ArtifactStore
+from services.artifacts.store import BlobStore
+from services.inference.wire import OCTET_STREAM, encode_binary
+from tests.integration.test_api_server import TOKENS
+from tests.integration.test_inference_server import install_tokens, publish, start_server
 from tests.support.jobs import run_kind_job
 from workers.models.prt.infer import INFERENCE, PrtQuery, PrtRender
 from workers.models.registry import QUERY, RENDER
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
+from workers.scene.image_io import read_exr
 
 SEED = 5  # the contract test's: in one pytest process the traced rows (cached per process) are shared
 SCENE = "env_lit_objects"
@@ -25,9 +35,9 @@ MIN_INDIRECT_GAIN_DB = 1.0  # held-out indirect PSNR over predicting no indirect
 @pytest.fixture(scope="module")
 def job(tmp_path_factory):
     folder = tmp_path_factory.mktemp("prt")
-    _, outcome = run_kind_job("prt", get_builtin(SCENE), folder, seed=SEED)
+    spec, outcome = run_kind_job("prt", get_builtin(SCENE), folder, seed=SEED)
     assert outcome.state == "succeeded", outcome.error
-    return folder / "out", outcome
+    return folder / "out", outcome, spec
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +46,7 @@ def served(job):
 
 
 def test_the_model_beats_no_indirect_light_on_held_out_lightings_and_views(job):
-    out, _ = job
+    out, _, _ = job
     figures = Report.read(str(out)).method_metrics
     assert figures["psnr_indirect"] > figures["baseline_psnr_indirect"] + MIN_INDIRECT_GAIN_DB, figures
     assert figures["psnr_full"] > figures["baseline_psnr_full"], figures
@@ -85,3 +95,55 @@ def test_query_gives_indirect_light_at_g_buffer_points(served):
     three = served.answer(QUERY, brighter, arrays).arrays["indirect"]
     assert one.shape == (n, 3) and np.isfinite(one).all()
     np.testing.assert_allclose(three, 3 * one, rtol=1e-4, atol=1e-6)
+
+
+def test_an_uploaded_map_travels_to_the_inference_service_over_rest_and_grpc(job, served, tmp_path):
+    """`nbake serve-inference` renders with the map sent as the `environment` array of a binary body, a
+    JSON body and a gRPC request, each image equal to the in-process answer."""
+    _, outcome, spec = job
+    store = ArtifactStore(BlobStore(str(tmp_path / "store")), str(tmp_path / "store"))
+    artifact_id = publish(store, "prt", spec, outcome).artifact_id
+    install_tokens(tmp_path)
+    upload = np.random.default_rng(3).uniform(0.0, 4.0, (8, 16, 3)).astype(np.float32)
+    params = {"camera": {"width": 8, "height": 6}, "lighting": {"path": "mine.exr"}, "spp": 1}
+    expected = served.answer(RENDER, PrtRender.model_validate(params), {"environment": upload}).arrays[
+        "image"
+    ]
+    default = served.answer(RENDER, PrtRender.model_validate({**params, "lighting": None}), {}).arrays[
+        "image"
+    ]
+    assert not np.allclose(expected, default)  # the upload is what lights the frame
+
+    server = start_server(tmp_path, [])
+    try:
+        with server.client() as client:
+            binary = client.post(
+                f"/v1/artifacts/{artifact_id}:render",
+                content=encode_binary({"params": params}, {"environment": upload}),
+                headers={"Content-Type": OCTET_STREAM},
+            )
+            encoded = {"dtype": "float32", "shape": list(upload.shape)}
+            encoded["data"] = base64.b64encode(upload.tobytes()).decode()
+            body = {"params": params, "arrays": {"environment": encoded}}
+            as_json = client.post(f"/v1/artifacts/{artifact_id}:render", json=body)
+            missing = client.post(f"/v1/artifacts/{artifact_id}:render", json={"params": params})
+        with grpc.insecure_channel(server.grpc_target) as channel:
+            stub = inference_pb2_grpc.InferenceServiceStub(channel)
+            array = inference_pb2.Array(
+                name="environment", dtype="float32", shape=upload.shape, data=upload.tobytes()
+            )
+            request = inference_pb2.RenderRequest(artifact_id=artifact_id, arrays=[array])
+            request.params.update(params)
+            metadata = (("authorization", f"Bearer {TOKENS['read']}"),)
+            reply = stub.Render(request, metadata=metadata, timeout=120)
+    finally:
+        server.stop()
+    for response in (binary, as_json):
+        assert response.status_code == 200, response.text
+    images = [binary.content, as_json.content, reply.data]
+    for number, data in enumerate(images):
+        (tmp_path / f"{number}.exr").write_bytes(data)
+        np.testing.assert_array_equal(read_exr(tmp_path / f"{number}.exr"), expected)
+    problem = missing.json()  # a map named but not sent
+    assert missing.status_code == 422 and problem["field"] == "params.lighting.path", problem
+    assert "environment" in problem["detail"]

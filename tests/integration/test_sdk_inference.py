@@ -133,6 +133,11 @@ def test_inference_errors_are_typed(client, server):
     with pytest.raises(InvalidRequest) as other_size:  # the camera travels as params.camera
         client.render(artifact, camera=camera)
     assert other_size.value.field == "params.camera.width"
+    with pytest.raises(
+        InvalidRequest
+    ) as no_arrays:  # arrays travel with a render (prt's map, mesogan's mesh)
+        client.render(artifact, arrays={"environment": np.ones((4, 8, 3), np.float32)})
+    assert no_arrays.value.field == "arrays.environment" and "no arrays" in no_arrays.value.detail
     with pytest.raises(InvalidRequest) as bad_shape:
         client.query(artifact, {"pixels": np.zeros((4, 3), np.int64)})
     assert bad_shape.value.field == "arrays.pixels"
@@ -225,5 +230,8 @@ def test_nbake_render_writes_exr_and_png(env, server, tmp_path):
     assert camera.returncode == 0, camera.stderr
     resized = nbake(env, "render", artifact, "--camera", "{width: 8, height: 8}", "-o", tmp_path / "v.png")
     assert resized.returncode == 2 and "params.camera.width" in resized.stderr
+    np.save(tmp_path / "environment.npy", np.ones((4, 8, 3), np.float32))
+    upload = nbake(env, "render", artifact, "-i", tmp_path / "environment.npy", "-o", tmp_path / "u.exr")
+    assert upload.returncode == 2 and "arrays.environment" in upload.stderr  # sent; a render takes none
     unreachable = env | {"NBAKE_INFERENCE_URL": f"http://127.0.0.1:{free_port()}"}
     assert nbake(unreachable, "render", artifact, "-o", tmp_path / "x.exr").returncode == 4

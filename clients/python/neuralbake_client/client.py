@@ -335,13 +335,16 @@ class Client:
         camera: Mapping[str, Any] | None = None,
         params: dict[str, Any] | None = None,
         *,
+        arrays: Mapping[str, ArrayLike] | None = None,
         image_format: str = "exr",
     ) -> RenderedImage:
         """An image of the artifact. `camera` (position, target, up, fov, width, height; for kinds that
-        render a view) travels as `params["camera"]`; `image_format` is `exr` (linear float32,
+        render a view) travels as `params["camera"]`; `arrays` are the kind's inputs, if it takes any
+        (`prt`: an uploaded lat-long `environment` (H, W, 3); `mesogan`: an uploaded `mesh` (triangles, 3,
+        8) of position, normal and UV per corner); `image_format` is `exr` (linear float32,
         `image.pixels()`) or `png` (sRGB)."""
         if image_format not in IMAGE_FORMATS:
             raise ValueError(f"image_format {image_format!r}: use {' or '.join(IMAGE_FORMATS)}")
         body = json_value({**(params or {}), **({"camera": camera} if camera is not None else {})})
         ident, media_type = artifact_id(artifact), IMAGE_FORMATS[image_format]
-        return self.retry.call(lambda: self.inference.render(ident, body, media_type))
+        return self.retry.call(lambda: self.inference.render(ident, body, arrays or {}, media_type))

@@ -65,9 +65,14 @@ class GrpcInference:
         meta = as_dict(response.meta) if response.HasField("meta") else {}
         return QueryAnswer(response.artifact_id, response.kind, answer, meta)
 
-    def render(self, artifact_id: str, params: dict[str, Any], media_type: str) -> RenderedImage:
+    def render(
+        self, artifact_id: str, params: dict[str, Any], arrays: Mapping[str, ArrayLike], media_type: str
+    ) -> RenderedImage:
         request = inference_pb2.RenderRequest(
-            artifact_id=artifact_id, params=struct(params), media_type=media_type
+            artifact_id=artifact_id,
+            params=struct(params),
+            media_type=media_type,
+            arrays=[_array_message(name, array) for name, array in arrays.items()],
         )
         response, call = self._call(self.stub.Render, request)
         metadata = dict(call.initial_metadata() or ()) | dict(call.trailing_metadata() or ())

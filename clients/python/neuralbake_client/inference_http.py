@@ -38,12 +38,14 @@ class HttpInference:
         head, answer = decode_binary(response.content)
         return QueryAnswer(head["artifact_id"], head["kind"], answer, head.get("meta") or {})
 
-    def render(self, artifact_id: str, params: dict[str, Any], media_type: str) -> RenderedImage:
+    def render(
+        self, artifact_id: str, params: dict[str, Any], arrays: Mapping[str, ArrayLike], media_type: str
+    ) -> RenderedImage:
         response = self.http.send(
             "POST",
             f"/v1/artifacts/{artifact_id}:render",
-            json={"params": params},
-            headers={"Accept": media_type},
+            content=encode_binary({"params": params}, arrays),
+            headers={"Content-Type": OCTET_STREAM, "Accept": media_type},
         )
         sent = response.headers.get("content-type", media_type).split(";")[0].strip()
         timing = frame_time(response.headers.get("server-timing"))

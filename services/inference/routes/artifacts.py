@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.types import Receive, Scope, Send
 
@@ -36,9 +36,11 @@ BINARY_DOC = (
 )
 
 
-class RenderBody(BaseModel):
-    params: dict[str, Any] = Field(default_factory=dict, description="the kind's typed render parameters")
-
+# A body of parameters and arrays, as JSON or binary.
+BODY_CONTENT = {
+    "application/json": {"schema": wire.self_contained_schema(wire.QueryBody)},
+    wire.OCTET_STREAM: {"schema": {"type": "string", "format": "binary", "description": BINARY_DOC}},
+}
 
 # Copies of a body alive while it is received and parsed, before the working pool counts it: binary, the
 # received chunks and their join (the arrays are views of it); JSON, the same, the parsed base64 strings
@@ -95,12 +97,7 @@ def _parse(body: bytes, content_type: str | None) -> tuple[dict[str, Any], dict[
             "required": True,
             "description": "Kind-specific: `lsnif` takes `origins` and `directions` (N, 3) world-space rays; "
             "`render` takes optional `pixels` (N, 2) as (x, y) and `params.layers`.",
-            "content": {
-                "application/json": {"schema": wire.self_contained_schema(wire.QueryBody)},
-                wire.OCTET_STREAM: {
-                    "schema": {"type": "string", "format": "binary", "description": BINARY_DOC}
-                },
-            },
+            "content": BODY_CONTENT,
         }
     },
 )
@@ -110,9 +107,21 @@ async def query(artifact_id: str, request: Request, state: StateDep, principal: 
     service = state.service
     content_type, accept = request.headers.get("content-type"), request.headers.get("accept", "")
     binary = wire.OCTET_STREAM in accept or (_is_binary(content_type) and "json" not in accept)
+
+    def answer(held: ExitStack, body: bytes) -> Response:
+        return _answer_query(service, held, artifact_id, body, content_type, binary)
+
+    return await _respond(service, request, answer)
+
+
+async def _respond(
+    service: InferenceService, request: Request, answer: Callable[[ExitStack, bytes], Response]
+) -> Response:
+    """`answer(held, body)` off the event loop, once the service's reading pool holds room for the body's
+    copies; that room and whatever `answer` enters into `held` are kept until the response is sent."""
     declared = request.headers.get("content-length", "")
     size = int(declared) if declared.isdigit() else service.settings.max_body_bytes  # BodyLimit holds it
-    reading = service.admitted_body(RECEIVE_COPIES[_is_binary(content_type)] * size)
+    reading = service.admitted_body(RECEIVE_COPIES[_is_binary(request.headers.get("content-type"))] * size)
     held = ExitStack()  # the thread pushes each release once it holds the bytes, so a cancelled wait too
 
     def hold() -> None:
@@ -125,8 +134,7 @@ async def query(artifact_id: str, request: Request, state: StateDep, principal: 
         else:
             await run_in_threadpool(hold)
         body = await request.body()
-        arguments = (service, held, artifact_id, body, content_type, binary)
-        response = await run_in_threadpool(_answer_query, *arguments)
+        response = await run_in_threadpool(answer, held, body)
     except BaseException as error:
         held.__exit__(type(error), error, error.__traceback__)  # the request is counted under its error
         raise
@@ -161,19 +169,27 @@ def _answer_query(
         },
         **ERRORS,
     },
+    openapi_extra={
+        "requestBody": {
+            "required": False,
+            "description": "`params` (the kind's render parameters) and, for kinds that take them, input "
+            "arrays: `prt` an uploaded lat-long `environment` (H, W, 3), `mesogan` an uploaded `mesh` "
+            "(triangles, 3, 8): position, normal and UV per corner.",
+            "content": BODY_CONTENT,
+        }
+    },
 )
-async def render(
-    artifact_id: str, request: Request, state: StateDep, principal: CanRead, body: RenderBody | None = None
-) -> Response:
+async def render(artifact_id: str, request: Request, state: StateDep, principal: CanRead) -> Response:
     """An image of the artifact, for kinds that make one (a path-traced view takes `params.camera`:
     position, target, up, fov, width, height); `Server-Timing: frame;dur=<ms>` says how long it took."""
     await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
-    params = body.params if body else {}
+    service, content_type = state.service, request.headers.get("content-type")
     media_type = images.media_type_for(request.headers.get("accept"))
 
-    def answer() -> Response:
-        with state.service.answering(artifact_id, RENDER, params, {}, 0) as (_, answer):
-            data = images.encode(answer.arrays["image"], media_type)
-            return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})
+    def answer(held: ExitStack, body: bytes) -> Response:
+        params, arrays = _parse(body, content_type)
+        _, answer = held.enter_context(service.answering(artifact_id, RENDER, params, arrays, len(body)))
+        data = images.encode(answer.arrays["image"], media_type)
+        return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})
 
-    return await run_in_threadpool(answer)
+    return await _respond(service, request, answer)

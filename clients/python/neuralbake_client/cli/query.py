@@ -26,20 +26,21 @@ from neuralbake_client.cli.remote import (
 ArtifactArgument = Annotated[
     str, typer.Argument(metavar="ARTIFACT", help="An artifact id (sha256:...), or a job id (its artifact).")
 ]
+InputOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--input",
+        "-i",
+        help="Input arrays: FILE.npz (every array by its name), FILE.npy (named after the file) or "
+        "NAME=FILE.npy; repeat.",
+    ),
+]
 
 
 def query_command(
     artifact: ArtifactArgument,
     output: Annotated[Path, typer.Option("--output", "-o", help="The .npz file the answer's arrays go to.")],
-    input_: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--input",
-            "-i",
-            help="FILE.npz (every array by its name), FILE.npy (named after the file) or "
-            "NAME=FILE.npy; repeat.",
-        ),
-    ] = None,
+    input_: InputOption = None,
     set_: SetOption = None,
     json_lines: JsonOption = False,
     url: UrlOption = None,

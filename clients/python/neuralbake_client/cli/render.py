@@ -16,7 +16,7 @@ from typer.core import TyperCommand
 from neuralbake_client.cli import plugins
 from neuralbake_client.cli.output import Output
 from neuralbake_client.cli.overrides import SetOption, parse_sets
-from neuralbake_client.cli.query import ArtifactArgument
+from neuralbake_client.cli.query import ArtifactArgument, InputOption
 from neuralbake_client.cli.remote import (
     JOB_PREFIX,
     USAGE,
@@ -104,6 +104,7 @@ def render_command(
             show_default=False,
         ),
     ] = None,
+    input_: InputOption = None,
     set_: SetOption = None,
     json_lines: JsonOption = False,
     url: UrlOption = None,
@@ -112,7 +113,9 @@ def render_command(
 ) -> None:
     """Render ARTIFACT on the inference service (or, with the server package, a SCENE locally).
 
-    ARTIFACT is an artifact id (sha256:...) or a job id; the kind's parameters go in --set.
+    ARTIFACT is an artifact id (sha256:...) or a job id; the kind's parameters go in --set, its input
+    arrays, for kinds that take them, in --input (prt: environment=map.npy, a lat-long (H, W, 3) map;
+    mesogan: mesh=soup.npy, (triangles, 3, 8) position, normal, UV per corner).
 
     Any other first argument is a scene file or a built-in scene name, path-traced on this machine.
 
@@ -121,10 +124,13 @@ def render_command(
     image_format = IMAGE_FORMATS.get(output.suffix.lower())
     if image_format is None:
         exit_with(USAGE, f"error: --output: {output} must end in .exr or .png")
-    out, params = Output(json_lines), parse_sets(set_ or [])
+    from neuralbake_client.cli.array_files import read_inputs
+
+    out, params, arrays = Output(json_lines), parse_sets(set_ or []), read_inputs(input_ or [])
     view = read_camera(camera) if camera is not None else None
     with remote_errors(), connect(url, token, inference_url) as client:
-        image = client.render(artifact_of(client, artifact), view, params, image_format=image_format)
+        target = artifact_of(client, artifact)
+        image = client.render(target, view, params, arrays=arrays, image_format=image_format)
     try:
         image.save(output)
     except OSError as error:
