@@ -33,9 +33,20 @@ def loaded(tmp_path_factory):
 
 def test_the_plan_names_the_surfaces_and_refuses_unknown_ones():
     scene = SceneRef(get_builtin("fur_ball"))
-    plan = KIND.plan(scene, KIND.resolve_config("quick", {}))
-    assert plan.items[0].choice == "fur" and "1280 triangles" in plan.items[0].reason
+    config = KIND.resolve_config("quick", {})
+    plan = KIND.plan(scene, config)
+    surfaces, plane, networks = plan.items
+    assert surfaces.choice == "fur" and "1280 triangles" in surfaces.reason
+    assert f"shell of height {config.shell_height:g}" in surfaces.reason
+    # the ball's UV square spans 6.6 slab heights: 27 texels of 0.25, and training's mip depth
+    assert plane.choice == f"27^2 x {config.plane_channels}, {config.mip_levels} mip levels"
+    assert "closest view (2.63 away) reads level" in plane.reason
+    assert networks.choice.startswith(
+        f"generator {config.generator_layers}x{config.generator_width}, decoder"
+    )
     assert plan.estimated_seconds > 0
+    longer = KIND.plan(scene, KIND.resolve_config("quick", {"train": {"steps": 600}}))
+    assert longer.estimated_seconds > 2 * plan.estimated_seconds
     with pytest.raises(SceneError) as error:
         KIND.plan(scene, KIND.resolve_config("quick", {"surfaces": ["velvet"]}))
     assert error.value.field == "config.surfaces"
