@@ -1,4 +1,5 @@
-"""The GAN's two phases on the shared training loop, each on its own optimizer: a run stopped between
+"""The GAN's two phases on the shared training loop: the discriminator's loss carries R1 on real images;
+each phase has its own optimizer, and a run stopped between
 checkpoints and resumed (in a process whose torch stream has moved on) ends with the uninterrupted run's
 weights, bit for bit, because the latents, the planes' Fourier banks and the ray jitter are drawn from
 torch's stream, which checkpoints hold."""
@@ -11,7 +12,7 @@ import torch
 from workers.models.mesogan.config import PRESETS, MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig
-from workers.models.mesogan.train import DISCRIMINATOR, GENERATOR, phases
+from workers.models.mesogan.train import DISCRIMINATOR, GENERATOR, discriminator_loss, labels, phases
 from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.samplers import InProcessBatches
@@ -62,3 +63,23 @@ def test_a_stopped_run_resumes_to_the_uninterrupted_weights(tmp_path):
     assert {*training_state.optimizer_files(GENERATOR), *training_state.optimizer_files(DISCRIMINATOR)} < (
         final.keys()
     )
+
+
+def test_the_discriminator_loss_adds_r1_on_the_real_images():
+    """Non-saturating loss plus gamma / 2 times the squared gradient of the real logits by the real images
+    (Mescheder et al. 2018), the same fakes in both."""
+    gamma = 2.5
+    config = MesoganConfig.model_validate(PRESETS["quick"] | TINY | {"r1_gamma": gamma})
+    batch = SlabSource(SlabSourceConfig(mesogan=config), 3).batch(0)
+    torch.manual_seed(0)
+    model = MesoGAN(config)
+    plain = MesoGAN(config.model_copy(update={"r1_gamma": 0.0}))
+    plain.load_state_dict(model.state_dict())
+    losses = []
+    for m in (model, plain):
+        torch.manual_seed(1)
+        losses.append(discriminator_loss(m, batch))
+    real = batch["image"].clone().requires_grad_(True)
+    (gradient,) = torch.autograd.grad(model.discriminator(real, labels(batch)).sum(), real)
+    r1 = 0.5 * gamma * gradient.pow(2).sum((1, 2, 3)).mean()
+    assert r1 > 0 and torch.allclose(losses[0] - losses[1], r1, rtol=1e-4)
