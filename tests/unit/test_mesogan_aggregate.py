@@ -1,6 +1,7 @@
 """The shell as the path tracer's aggregate: the scatter/uncollided mixture is unbiased for a known
 constant extinction, shadow rays pass with the transmittance, the base is opaque, and events keep their
-shell coordinates."""
+shell coordinates; in the path tracer, the shell is lit as its rho says by every light type, receives other
+objects' shadows and casts its own by its transmittance."""
 
 from __future__ import annotations
 
@@ -26,12 +27,26 @@ from workers.models.mesogan.sampling import (
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes, render_slab
 from workers.models.mesogan.volume import mip_stack
+from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import ground
 from workers.scene.compile import compile_scene
 from workers.scene.mesoscale import Appearance, Structure
-from workers.scene.spec import Camera, ConstantBackground, Diffuse, DirectionalLight, SceneSpec
+from workers.scene.spec import (
+    BoxShape,
+    Camera,
+    ConstantBackground,
+    Diffuse,
+    DirectionalLight,
+    EnvironmentMap,
+    PointLight,
+    RectangleShape,
+    SceneObject,
+    SceneSpec,
+    SpotLight,
+    Transform,
+)
 
 SIGMA = 0.8  # extinction per shell height
 
@@ -211,3 +226,119 @@ def test_a_far_view_of_the_shell_matches_the_training_renderer_at_trained_footpr
     trained_view = slab_mean(config, model, planes, window, batch, 4)
     traced = shell_mean(config, scene, shell, material, 8, 64)
     assert np.allclose(traced, trained_view, rtol=0.05), (traced, trained_view)
+
+
+def covered_floor(lights, environment=None, objects=(), size: int = 16, height: float = 0.02):
+    """The floor covered by a thin constant shell, seen from above, under `lights`: the tracer, the floor
+    points the pixel-centre rays meet (N, 3) and the compiled scene."""
+    spec = SceneSpec(
+        name="slab",
+        materials={"fur": Diffuse(reflectance=(1.0, 0.0, 0.0)), "grey": Diffuse(reflectance=(0.5,) * 3)},
+        objects=[ground(40.0, "fur"), *objects],
+        lights=lights,
+        environment=environment,
+        camera=Camera(position=(0.0, 3.0, 2.0), target=(0.0, 0.0, 0.0), fov=40.0, width=size, height=size),
+    )
+    scene = compile_scene(spec)
+    shell = build_shell(scene, covering(scene, ["fur"], height, 0.25), height)
+    tracer = PathTracer(scene, aggregate=ShellAggregate(shell, ConstantTransfer(), samples=4))
+    py, px = np.mgrid[0:size, 0:size] + 0.5
+    origins, directions = PinholeCamera(spec.camera, size, size).rays(px.ravel(), py.ravel())
+    floor = origins - (origins[:, 1] / directions[:, 1])[:, None] * directions
+    return tracer, floor, scene
+
+
+def traced(tracer, spp: int = 8) -> np.ndarray:
+    """The frame's red channel as (N,) pixels in image order (the constant rho is grey)."""
+    return render(tracer, RenderSettings(spp=spp, max_depth=3, seed=0, threads=1)).image[..., 0].ravel()
+
+
+def test_the_shell_is_lit_by_every_light_type_as_its_rho_says():
+    """rho is radiance per unit irradiance from a direction, so a point or spot light adds rho I / d^2, an
+    area light rho times its radiance integrated over the solid angle it subtends, an environment map rho
+    times its radiance integrated over the upper hemisphere (rho is 0 from below)."""
+    light = np.array([0.3, 2.0, 0.2])
+    intensity = 5.0
+    for lamp in (
+        PointLight(position=tuple(light), intensity=(intensity,) * 3),
+        SpotLight(
+            position=tuple(light),
+            direction=(0, -1, 0),
+            intensity=(intensity,) * 3,
+            inner_cone=70,
+            outer_cone=80,
+        ),
+    ):
+        tracer, floor, _ = covered_floor([lamp])
+        expected = RHO * intensity / ((floor - light) ** 2).sum(1)
+        assert np.allclose(traced(tracer).mean(), expected.mean(), rtol=0.05), lamp.type
+
+    emitter = SceneObject(
+        name="lamp", shape=RectangleShape(), material="grey", emission=(20.0,) * 3,
+        transform=Transform(translate=(0.3, 2.0, 0.2), rotate=(90, 0, 0), scale=0.2),
+    )  # fmt: skip
+    tracer, floor, _ = covered_floor([], objects=[emitter])
+    g = (np.arange(8) + 0.5) / 8 * 0.4 - 0.2  # the 0.4-wide emitter facing down, in 8 x 8 patches
+    patches = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    points = np.column_stack([0.3 + patches[:, 0], np.full(len(patches), 2.0), 0.2 + patches[:, 1]])
+    to_lamp = points[None] - floor[:, None]
+    d2 = (to_lamp**2).sum(-1)
+    solid_angle = (0.4**2 / len(patches)) * to_lamp[..., 1] / np.sqrt(d2) / d2
+    expected = RHO * 20.0 * solid_angle.sum(1)
+    assert np.allclose(traced(tracer, 16).mean(), expected.mean(), rtol=0.08), "area"
+
+    sky = EnvironmentMap(procedural="sky", params={"sun_irradiance": 0.0})  # no disc: smooth to integrate
+    tracer, _, scene = covered_floor([], environment=sky)
+    image = scene.environment_image.astype(np.float64)[..., 0]  # lat-long, row i at theta (i + 1/2) pi / H
+    rows, cols = image.shape
+    theta = (np.arange(rows) + 0.5) / rows * np.pi
+    above = theta < np.pi / 2
+    upper = (image[above] * np.sin(theta[above])[:, None]).sum() * (np.pi / rows) * (2 * np.pi / cols)
+    assert np.allclose(traced(tracer, 16).mean(), RHO * upper, rtol=0.08), "environment"
+
+
+def test_shadows_fall_onto_the_shell_and_from_it():
+    """A box between the sun and the covered floor casts its shadow on the shell (0 there: no sky); the
+    shell over a raised square, thick and seen by the sun at 45 degrees, shades the floor beside the
+    square's own shadow by its transmittance exp(-sigma * length in shell heights)."""
+    beside = DirectionalLight(direction=(-1.0, -1.0, 0.0), irradiance=(SUN,) * 3)
+    box = SceneObject(
+        name="box", shape=BoxShape(), material="grey", transform=Transform(translate=(0.8, 1.0, 0), scale=0.3)
+    )
+    tracer, floor, _ = covered_floor([beside], objects=[box], size=24)
+    # the box spans x 0.5-1.1 and y 0.7-1.3: the sun rays of floor points at x from -0.8 to 0.4 cross it
+    x, z = floor[:, 0], floor[:, 2]
+    in_shadow = (x > -0.6) & (x < 0.2) & (np.abs(z) < 0.2)
+    lit = ((x < -0.9) | (np.abs(z) > 0.4)) & (x < 0.6)  # and the box itself unseen
+    image = traced(tracer)
+    assert in_shadow.sum() > 10 and image[in_shadow].max() < 0.05 * RHO * SUN
+    assert np.allclose(image[lit].mean(), RHO * SUN, rtol=0.05)
+
+    # The shell over a square raised to y = 1 (height 0.5, up to y = 1.5): floor points at z in (-2, -1.5)
+    # see the sun through the shell's volume only, 2 + z of its height.
+    raised = SceneObject(
+        name="raised", shape=RectangleShape(), material="fur",
+        transform=Transform(translate=(0, 1.0, 0), rotate=(-90, 0, 0), scale=0.5),
+    )  # fmt: skip
+    spec = SceneSpec(
+        name="raised",
+        materials={"fur": Diffuse(reflectance=(1.0, 0.0, 0.0)), "grey": Diffuse(reflectance=(0.5,) * 3)},
+        objects=[ground(40.0, "grey"), raised],
+        lights=[DirectionalLight(direction=(0.0, -1.0, -1.0), irradiance=(SUN,) * 3)],
+        camera=Camera(position=(0.0, 3.0, -4.5), target=(0.0, 0.0, -1.75), fov=30.0, width=24, height=24),
+    )
+    scene = compile_scene(spec)
+    shell = build_shell(scene, covering(scene, ["fur"], 0.5, 0.25), 0.5)
+    tracer = PathTracer(scene, aggregate=ShellAggregate(shell, ConstantTransfer(), samples=4))
+    py, px = np.mgrid[0:24, 0:24] + 0.5
+    origins, directions = PinholeCamera(spec.camera).rays(px.ravel(), py.ravel())
+    floor = origins - (origins[:, 1] / directions[:, 1])[:, None] * directions
+    inside = np.clip(2.0 + floor[:, 2], 0.0, 0.5)  # the sun ray's rise inside the shell
+    transmittance = np.exp(-SIGMA * np.sqrt(2) * inside / 0.5)
+    lit_floor = 0.5 / math.pi * SUN / math.sqrt(2)
+    image = render(tracer, RenderSettings(spp=32, max_depth=2, seed=0, threads=1)).image[..., 0].ravel()
+    strip = (np.abs(floor[:, 0]) < 0.4) & (floor[:, 2] > -1.95) & (floor[:, 2] < -1.55)
+    open_floor = (np.abs(floor[:, 0]) > 0.6) | (floor[:, 2] < -2.05)
+    assert strip.sum() > 10 and transmittance[strip].mean() < 0.8
+    assert np.allclose(image[open_floor].mean(), lit_floor, rtol=0.05)
+    assert np.allclose(image[strip].mean(), lit_floor * transmittance[strip].mean(), rtol=0.08)

@@ -1,6 +1,7 @@
 """mesogan's plan and inference on an artifact (untrained weights: these check the plumbing, not quality):
 the plan names the covered surfaces and refuses unknown ones, `generate` windows tile seamlessly,
-`query` routes appearance to radiance only, `render` returns the requested frame."""
+`query` routes appearance to radiance only, `render` returns the requested frame, of the scene asked for
+(kept, built-in or uploaded) with the shell on the surfaces named."""
 
 from __future__ import annotations
 
@@ -9,11 +10,15 @@ import pytest
 import torch
 
 from workers.models.mesogan import KIND, artifact
+from workers.models.mesogan.infer import uploaded_mesh
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.registry import get_inference
 from workers.scene.builtin import get_builtin
+from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
+from workers.scene.portable import neutral_scene
 from workers.scene.reference import SceneRef
+from workers.scene.spec import Diffuse, SceneObject
 
 
 @pytest.fixture(scope="module")
@@ -28,9 +33,20 @@ def loaded(tmp_path_factory):
 
 def test_the_plan_names_the_surfaces_and_refuses_unknown_ones():
     scene = SceneRef(get_builtin("fur_ball"))
-    plan = KIND.plan(scene, KIND.resolve_config("quick", {}))
-    assert plan.items[0].choice == "fur" and "1280 triangles" in plan.items[0].reason
+    config = KIND.resolve_config("quick", {})
+    plan = KIND.plan(scene, config)
+    surfaces, plane, networks = plan.items
+    assert surfaces.choice == "fur" and "1280 triangles" in surfaces.reason
+    assert f"shell of height {config.shell_height:g}" in surfaces.reason
+    # the ball's UV square spans 6.6 slab heights: 27 texels of 0.25, and training's mip depth
+    assert plane.choice == f"27^2 x {config.plane_channels}, {config.mip_levels} mip levels"
+    assert "closest view (2.63 away) reads level" in plane.reason
+    assert networks.choice.startswith(
+        f"generator {config.generator_layers}x{config.generator_width}, decoder"
+    )
     assert plan.estimated_seconds > 0
+    longer = KIND.plan(scene, KIND.resolve_config("quick", {"train": {"steps": 600}}))
+    assert longer.estimated_seconds > 2 * plan.estimated_seconds
     with pytest.raises(SceneError) as error:
         KIND.plan(scene, KIND.resolve_config("quick", {"surfaces": ["velvet"]}))
     assert error.value.field == "config.surfaces"
@@ -58,3 +74,55 @@ def test_render_returns_the_requested_frame(loaded):
     )
     image = model.answer("render", params, {}).arrays["image"]
     assert image.shape == (8, 12, 3) and np.isfinite(image).all() and image.max() > 0
+
+
+def render(model, inference, arrays=None, **params):
+    params = inference.operations["render"].params(camera={"width": 8, "height": 8}, spp=1, **params)
+    return model.answer("render", params, arrays or {})
+
+
+def test_render_covers_the_named_surfaces_of_the_scene_asked_for(loaded):
+    inference, model = loaded
+    fur = render(model, inference)
+    floor = render(model, inference, surfaces=["floor"])
+    # the plane spans each covering's UV square at the trained texel size: the floor's is larger
+    assert floor.meta["plane_resolution"] > fur.meta["plane_resolution"]
+    assert not np.allclose(floor.arrays["image"], fur.arrays["image"])
+    walls = render(model, inference, scene="cornell_box", surfaces=["red", "green"])
+    assert walls.arrays["image"].shape == (8, 8, 3) and np.isfinite(walls.arrays["image"]).all()
+    with pytest.raises(ValueError, match=r"^params\.surfaces: no material \['velvet'\]"):
+        render(model, inference, surfaces=["fur", "velvet"])
+    with pytest.raises(ValueError, match=r"^params\.scene: unknown built-in scene"):
+        render(model, inference, scene="no_such_scene")
+
+
+def square(size: float, uv_scale: float) -> np.ndarray:
+    """Two triangles of a square in the y = 0 plane facing +y, UVs over [0, uv_scale]^2: (2, 3, 8)."""
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float32)
+    rows = [
+        [size * x, 0.0, size * z, 0.0, 1.0, 0.0, uv_scale * (x + 1) / 2, uv_scale * (z + 1) / 2]
+        for x, z in corners
+    ]
+    return np.array([[rows[0], rows[2], rows[1]], [rows[0], rows[3], rows[2]]], np.float32)
+
+
+def test_render_covers_an_uploaded_mesh_with_its_uvs(loaded, tmp_path):
+    inference, model = loaded
+    mesh = square(1.0, 4.0)
+    mesh[0, 0, 3:6] = (0.6, 0.8, 0.0)
+    shape, _ = uploaded_mesh(mesh, tmp_path)
+    scene = compile_scene(
+        neutral_scene([SceneObject(name="m", shape=shape, material="m")], {"m": Diffuse()}), tmp_path
+    )
+    for compiled, uploaded in ((scene.positions, 0), (scene.shading_normals, 3), (scene.uvs, 6)):
+        assert np.array_equal(compiled, mesh[..., uploaded : uploaded + compiled.shape[-1]])
+    small = render(model, inference, {"mesh": square(1.0, 1.0)})
+    large_uvs = render(model, inference, {"mesh": square(1.0, 4.0)})
+    image = small.arrays["image"]
+    assert np.isfinite(image).all() and image.max() > 0
+    # the same world size over 4 times the UV span: the plane is laid over the UVs, at 1/4 the resolution
+    assert large_uvs.meta["plane_resolution"] < small.meta["plane_resolution"]
+    with pytest.raises(ValueError, match=r"arrays\.mesh: expected"):
+        render(model, inference, {"mesh": square(1.0, 1.0)[..., :5]})
+    with pytest.raises(ValueError, match=r"params\.scene"):
+        render(model, inference, {"mesh": square(1.0, 1.0)}, scene="cornell_box")

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from workers.scene.errors import SceneError
+from workers.scene.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, Structure, local_strands
 from workers.scene.procedural import GENERATORS, generate, gradient_noise
 from workers.scene.shapes import check_mesh
 
@@ -289,3 +290,29 @@ def test_lod_builtin_scenes_compile_with_named_assets():
     hits = RayScene(compiled.positions).intersect(np.tile(camera, (len(directions), 1)), directions)
     assert hits.found.all()
     assert (np.einsum("ij,ij->i", compiled.geometric_normals[hits.prim], directions) < 0).all()
+
+
+@pytest.mark.parametrize("material", MATERIAL_KINDS)
+def test_mesoscale_structure_parameters_move_every_family_their_way(material):
+    """Strands, blades and loops alike: longer reach higher, denser are more per tile, curlier reach
+    farther sideways from their roots; and the slab's neighbouring tiles repeat the centre one."""
+    rng = lambda: np.random.default_rng(0)  # noqa: E731
+
+    def strands(**structure):
+        centers, _ = local_strands(rng(), 400, material, Structure(**structure))
+        return centers
+
+    assert strands(length=0.9)[..., 2].max(1).mean() > 1.5 * strands(length=0.5)[..., 2].max(1).mean()
+    sideways = [np.linalg.norm(strands(curliness=c)[..., :2], axis=-1).max(1).mean() for c in (0.0, 1.0)]
+    assert sideways[1] > 1.2 * sideways[0], sideways
+    params = {"material": material, "tiles": 3, "tile": 1.0, "seed": 4}
+    sparse = MesoscaleSlabParams(**params, structure={"density": 10.0})
+    assert MesoscaleSlabParams(**params, structure={"density": 40.0}).strands_per_tile() > 3 * (
+        sparse.strands_per_tile()
+    )
+    mesh = generate("mesoscale_slab", params | {"structure": {"density": 10.0}}, "x")
+    per_tile = len(mesh.vertices) // 9
+    tiles = mesh.vertices.reshape(9, per_tile, 3)
+    for k in range(1, 9):
+        shift = tiles[k] - tiles[0]
+        assert np.allclose(shift, shift[0], atol=1e-9) and np.allclose(shift[0, 1], 0.0)

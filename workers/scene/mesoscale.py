@@ -49,7 +49,8 @@ def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> 
     """Polylines (n, K, 3) rooted at the origin in the local frame (z up, unit slab height) and their radii.
 
     Fur leans and curls (a quadratic bend); grass blades rise nearly straight and taper to a point;
-    carpet loops are arcs from the root back to the base, like tufted pile."""
+    carpet loops are arcs from the root back to the base, like tufted pile, that curliness twists over to
+    one side (up to 60 degrees, a frieze pile). Curliness bends every family sideways."""
     k = SEGMENTS + 1
     t = np.linspace(0.0, 1.0, k)[None, :, None]
     length = s.length * rng.uniform(0.8, 1.2, n)[:, None, None]
@@ -58,7 +59,10 @@ def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> 
     up = np.array([0.0, 0.0, 1.0])
     if kind == "carpet":
         angle = np.pi * t  # a half loop of height `length` and width `length` / 2
-        centers = length * (0.25 * (1 - np.cos(angle)) * side + np.sin(angle) * up)
+        twist = np.radians(60.0) * s.curliness * rng.uniform(0.5, 1.0, n)[:, None, None]
+        across = np.stack([-np.sin(azimuth), np.cos(azimuth), np.zeros(n)], axis=1)[:, None]
+        rise = np.cos(twist) * up + np.sin(twist) * across
+        centers = length * (0.25 * (1 - np.cos(angle)) * side + np.sin(angle) * rise)
         radius = 0.025 * np.ones((n, k))
     else:
         lean = np.radians(15.0 if kind == "fur" else 6.0) * np.sqrt(rng.uniform(0, 1, n))[:, None, None]

@@ -36,12 +36,18 @@ class Covering:
     resolution: int  # texels per side of the plane over the UV square
 
 
-def covering(scene: CompiledScene, surfaces: list[str], shell_height: float, texel: float) -> Covering:
-    """The covered triangles and the plane they imply; `SceneError` naming `surfaces` if none match."""
+def covering(
+    scene: CompiledScene,
+    surfaces: list[str],
+    shell_height: float,
+    texel: float,
+    field: str = "config.surfaces",
+) -> Covering:
+    """The covered triangles and the plane they imply; `SceneError` naming `field` if none match."""
     names = [n for n in surfaces if n in scene.material_names]
     if not names:
         raise SceneError(
-            "config.surfaces",
+            field,
             f"no scene material is named {surfaces}; the scene's materials are {scene.material_names}",
         )
     ids = [scene.material_names.index(n) for n in names]
@@ -50,7 +56,7 @@ def covering(scene: CompiledScene, surfaces: list[str], shell_height: float, tex
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
     if uv_area <= 0:
-        raise SceneError("config.surfaces", f"surfaces {names} have no UVs: the plane needs a UV layout")
+        raise SceneError(field, f"surfaces {names} have no UVs: the plane needs a UV layout")
     plane_units = math.sqrt(scene.areas[triangles].sum() / uv_area) / shell_height
     resolution = int(min(MAX_PLANE, max(8, math.ceil(plane_units / texel))))
     return Covering(triangles, plane_units, resolution)

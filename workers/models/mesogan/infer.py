@@ -5,12 +5,15 @@ given structure parameters and seed, so a client can tile or cache it: windows o
 their overlap.
 `query`: density and rho at slab points (plane x, y and height in slab heights) of the seed's plane,
 with light and view directions in the tangent frame (z up).
-`render`: the scene the artifact keeps (or a sphere under a grey sky) with the material on its
-surfaces, for the given structure, appearance, seed and camera, path-traced with the neural shell.
+`render`: a scene with the material on its named surfaces (`params.surfaces`), for the given structure,
+appearance, seed and camera, path-traced with the neural shell. The scene is the one the artifact keeps, a
+built-in one (`params.scene`), an uploaded mesh with UVs (`arrays.mesh`, under the neutral sky) or a
+sphere under the neutral sky.
 """
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import ClassVar
@@ -34,10 +37,12 @@ from workers.runtime.view_render import (
     refuse_missing_scene,
     render_view,
 )
-from workers.scene.compile import compile_scene
+from workers.scene.builtin import get_builtin
+from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.errors import SceneError
 from workers.scene.mesoscale import Appearance, Structure
-from workers.scene.portable import load_scene, neutral_scene
-from workers.scene.spec import Camera, Diffuse, SceneObject, SphereShape
+from workers.scene.portable import framing_camera, load_scene, neutral_scene
+from workers.scene.spec import Camera, Diffuse, MeshShape, SceneObject, SphereShape
 
 GENERATE = "generate"
 MAX_WINDOW = 2048
@@ -46,6 +51,11 @@ MAX_WINDOW = 2048
 # and its mip stack at the default window (a larger window needs more: not scaled by its size).
 QUERY_ROW_BYTES, QUERY_ACTIVATION_ROW_BYTES, PLANE_BYTES = 32, 2 << 10, 16 << 20
 NEUTRAL_SURFACE = "mesogan"
+# An uploaded mesh: per triangle corner its position, shading normal and UV (a triangle soup, so that it
+# is one array of rows; corners of neighbouring triangles with equal positions and normals give prisms
+# that agree on their shared faces).
+MESH = "mesh"
+MESH_CORNER = 8
 
 
 class Material(BaseModel):
@@ -68,7 +78,14 @@ class QueryParams(Material):
 
 
 class RenderParams(ViewRender, Material):
-    pass
+    scene: str | None = Field(
+        None, description="a built-in scene's name, rendered instead of the one the artifact keeps"
+    )
+    surfaces: list[str] | None = Field(
+        None,
+        min_length=1,
+        description="scene materials the shell covers; default: the artifact's, or the whole uploaded mesh",
+    )
 
 
 class MesoganModel:
@@ -83,7 +100,7 @@ class MesoganModel:
             if operation == GENERATE:
                 return self._generate(params)
             if operation == RENDER:
-                return self._render(params)
+                return self._render(params, arrays.get(MESH))
             return self._query(params, arrays)
 
     def _plane(self, params: Material, window: Window) -> torch.Tensor:
@@ -121,31 +138,67 @@ class MesoganModel:
         rho = self.model.decoder.rho(hidden, a, light, view)
         return Answer({"density": density.numpy(), "rho": rho.numpy()})
 
-    def _render(self, params: RenderParams) -> Answer:
+    def _render(self, params: RenderParams, mesh: np.ndarray | None) -> Answer:
         config = self.config
-        if params.background == SCENE:
-            refuse_missing_scene(self.stored)
-            spec, surfaces = self.stored.spec, config.surfaces
-        else:
-            ball = SceneObject(
-                name="ball", shape=SphereShape(radius=0.5, subdivisions=4), material=NEUTRAL_SURFACE
-            )
-            spec = neutral_scene([ball], {NEUTRAL_SURFACE: Diffuse()})
-            spec = spec.model_copy(
-                update={"camera": Camera(position=(0.0, 0.4, 2.0), target=(0.0, 0.0, 0.0))}
-            )
-            surfaces = [NEUTRAL_SURFACE]
-        scene = compile_scene(spec)
-        cover = covering(scene, surfaces, config.shell_height, config.texel)
+        with tempfile.TemporaryDirectory(prefix="mesogan-upload-") as folder:
+            scene, surfaces = self._scene(params, mesh, Path(folder))
+        unknown = [n for n in surfaces if n not in scene.material_names]
+        if unknown:
+            names = scene.material_names
+            raise ValueError(f"params.surfaces: no material {unknown}; the scene's are {names}")
+        cover = covering(scene, surfaces, config.shell_height, config.texel, field="params.surfaces")
         shell = build_shell(scene, cover, config.shell_height)
         material = neural_material(
             self.model, config, cover, params.structure, params.appearance, params.seed
         )
-        camera = params.camera.over(spec.camera)
+        camera = params.camera.over(scene.spec.camera)
         cone = cone_radius(camera.fov, camera.height)
         tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
         image = render_view(tracer, params, camera).image
         return Answer({"image": image}, {"plane_resolution": cover.resolution})
+
+    def _scene(
+        self, params: RenderParams, mesh: np.ndarray | None, folder: Path
+    ) -> tuple[CompiledScene, list[str]]:
+        """The compiled scene to render and the surfaces the shell covers (module docstring)."""
+        if mesh is not None or params.background != SCENE:
+            if params.scene is not None:
+                raise ValueError("params.scene: a built-in scene is rendered with background: scene")
+            if mesh is None:
+                shape = SphereShape(radius=0.5, subdivisions=4)
+                camera = Camera(position=(0.0, 0.4, 2.0), target=(0.0, 0.0, 0.0))
+            else:
+                shape, camera = uploaded_mesh(mesh, folder)
+            model = SceneObject(name="model", shape=shape, material=NEUTRAL_SURFACE)
+            spec = neutral_scene([model], {NEUTRAL_SURFACE: Diffuse()}).model_copy(update={"camera": camera})
+            return compile_scene(spec, folder), params.surfaces or [NEUTRAL_SURFACE]
+        if params.scene is not None:
+            try:
+                spec = get_builtin(params.scene)
+            except SceneError as error:
+                raise ValueError(f"params.scene: {error.problem}") from None
+            return compile_scene(spec), params.surfaces or self.config.surfaces
+        refuse_missing_scene(self.stored)
+        return compile_scene(self.stored.spec), params.surfaces or self.config.surfaces
+
+
+def uploaded_mesh(corners: np.ndarray, folder: Path) -> tuple[MeshShape, Camera]:
+    """An uploaded triangle soup (F, 3, 8) written as an OBJ file in `folder` (read back by the scene's
+    own mesh reader, which checks it), and a camera framing it."""
+    if corners.ndim != 3 or corners.shape[1:] != (3, MESH_CORNER):
+        raise ValueError(f"arrays.mesh: expected (triangles, 3, {MESH_CORNER}), got {corners.shape}")
+    rows = corners.reshape(-1, MESH_CORNER).astype(np.float64)
+    flipped = rows[:, 6:] * [1.0, -1.0] + [0.0, 1.0]  # OBJ's v runs up, the scene's UVs down
+    index = np.arange(1, len(rows) + 1).reshape(-1, 3)
+    lines = [
+        *(f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in rows[:, :3]),
+        *(f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in rows[:, 3:6]),
+        *(f"vt {u:.9g} {v:.9g}" for u, v in flipped),
+        *(f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in index),
+    ]
+    (folder / "upload.obj").write_text("\n".join(lines) + "\n")
+    bounds = np.stack([rows[:, :3].min(0), rows[:, :3].max(0)])
+    return MeshShape(path="upload.obj"), framing_camera(bounds)
 
 
 class MesoganInference:
@@ -162,7 +215,11 @@ class MesoganInference:
             call_bytes=PLANE_BYTES,
         ),
         GENERATE: Operation(params=GenerateParams, call_bytes=PLANE_BYTES),
-        RENDER: Operation(params=RenderParams, call_bytes=RENDER_WORKING_BYTES),
+        RENDER: Operation(
+            params=RenderParams,
+            inputs={MESH: ArraySpec("float32", (None, 3, MESH_CORNER), required=False)},
+            call_bytes=RENDER_WORKING_BYTES,
+        ),
     }
 
     def load(self, folder: Path, device: str) -> MesoganModel:
