@@ -371,9 +371,6 @@ def test_roulette_undoes_the_radiance_scaling_of_a_refraction():
     u = (np.arange(n) + 0.5) / n
     for eta, survival in ((1.5, RR_MAX_SURVIVAL), (1.0, 1 / 1.5**2)):
         beta = np.ones((n, 3))
-        keep = roulette_survivors(
-            beta, np.full((n, 3), 1 / 1.5**2), np.full(n, eta), u, np.zeros(n, np.int64), np.full(n, 0.5),
-            np.ones(n), RR_MAX_SURVIVAL,
-        )  # fmt: skip
+        keep = roulette_survivors(beta, np.full((n, 3), 1 / 1.5**2), np.full(n, eta), u, RR_MAX_SURVIVAL)
         assert len(keep) == round(survival * n)
         np.testing.assert_allclose(beta[keep], 1 / 1.5**2 / survival, rtol=1e-12)

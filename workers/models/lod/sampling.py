@@ -144,15 +144,14 @@ def throughput_estimates(
             add_unblocked_throughput(value, live, lit, beta, f_cos, blocked)
         u = rng.random((len(live), 4))
         sampled, weight, _, _, eta = sample_bsdf(sh.surf, sh.wo_local, u[:, :2], u[:, 2])
+        survivors = roulette_survivors(beta, _f64(weight), _f64(eta), u[:, 3], RR_MAX_SURVIVAL)
         o, d, t_exit = rays_leaving_voxels(
-            _f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale, lo, hi
+            survivors, _f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale, lo, hi
         )
-        hits = tracer.rays.intersect(o, d, t_max=t_exit)  # hits past the box end the path
-        keep = roulette_survivors(
-            beta, _f64(weight), _f64(eta), u[:, 3], hits.prim, _f64(hits.t), t_exit, RR_MAX_SURVIVAL
-        )
+        hits = tracer.rays.intersect(o, d, t_max=t_exit)
+        inside = np.flatnonzero(hits.found & (hits.t < t_exit))  # hits past the box end the path
         live, o, d, beta, lo, hi, *hit = take_voxel_paths(
-            keep, live, o, d, beta, lo, hi, hits.prim, hits.t, hits.u, hits.v
+            inside, survivors, live, beta, lo, hi, o, d, hits.prim, hits.t, hits.u, hits.v
         )
         hits = Hits(*hit)
     return np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)

@@ -98,13 +98,12 @@ def boundary_pair_rows(grid_lo, extent, resolutions, level, cells, grow, wo, u_f
 
 
 @kernel
-def roulette_survivors(beta, weight, eta, u_survive, prim, t, t_exit, max_survival):
+def roulette_survivors(beta, weight, eta, u_survive, max_survival):
     """Albedo-based Russian roulette after a BSDF sample of relative IOR `eta` (1 for a reflection): beta *=
-    weight / q with q = min(max(weight) * eta^2, max_survival) (in place), and the rows whose path goes on:
-    survived, hit the asset before leaving the voxel box (t < t_exit), with a non-zero throughput. The eta^2
-    undoes a transmission's 1/eta^2 radiance scaling (`workers.render.bsdf`), as the path tracer's roulette
-    does (`wavefront._roulette`): a refraction into glass loses no energy, so it is no reason to end the
-    path."""
+    weight / q with q = min(max(weight) * eta^2, max_survival) (in place), and the rows that survived with a
+    non-zero throughput. The eta^2 undoes a transmission's 1/eta^2 radiance scaling (`workers.render.bsdf`),
+    as the path tracer's roulette does (`wavefront._roulette`): a refraction into glass loses no energy, so
+    it is no reason to end the path. Played before the bounce ray is traced, so only survivors' rays are."""
     keep = np.empty(len(beta), np.int64)
     n_keep = 0
     for i in range(len(beta)):
@@ -113,40 +112,42 @@ def roulette_survivors(beta, weight, eta, u_survive, prim, t, t_exit, max_surviv
         scale = 1.0 / max(q, 1e-300)
         for c in range(3):
             beta[i, c] = beta[i, c] * weight[i, c] * scale
-        alive = _max3(beta[i, 0], beta[i, 1], beta[i, 2]) > 0
-        if u_survive[i] < q and prim[i] >= 0 and alive and t[i] < t_exit[i]:
+        if u_survive[i] < q and _max3(beta[i, 0], beta[i, 1], beta[i, 2]) > 0:
             keep[n_keep] = i
             n_keep += 1
     return keep[:n_keep]
 
 
 @kernel
-def take_voxel_paths(rows, live, origins, directions, beta, lo, hi, prim, t, u, v):
+def take_voxel_paths(rows, survivors, live, beta, lo, hi, origins, directions, prim, t, u, v):
     """The voxel paths (batch row, ray, throughput, box) and their hits (prim, t, u, v) at `rows`, in one
-    pass instead of ten gathers."""
+    pass instead of ten gathers. `rows` index the survivors' rays and hits (`origins` .. `v`); the paths'
+    own arrays (`live`, `beta`, `lo`, `hi`) are indexed by `survivors[rows]`."""
     m = len(rows)
     out_live, out_prim = np.empty(m, live.dtype), np.empty(m, prim.dtype)
     out_o, out_d, out_beta = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
     out_lo, out_hi = np.empty((m, 3)), np.empty((m, 3))
     out_t, out_u, out_v = np.empty(m, t.dtype), np.empty(m, u.dtype), np.empty(m, v.dtype)
     for j in range(m):
-        i = rows[j]
+        r = rows[j]
+        i = survivors[r]
         for c in range(3):
-            out_o[j, c], out_d[j, c], out_beta[j, c] = origins[i, c], directions[i, c], beta[i, c]
+            out_o[j, c], out_d[j, c], out_beta[j, c] = origins[r, c], directions[r, c], beta[i, c]
             out_lo[j, c], out_hi[j, c] = lo[i, c], hi[i, c]
-        out_live[j], out_prim[j], out_t[j], out_u[j], out_v[j] = live[i], prim[i], t[i], u[i], v[i]
+        out_live[j], out_prim[j], out_t[j], out_u[j], out_v[j] = live[i], prim[r], t[r], u[r], v[r]
     return out_live, out_o, out_d, out_beta, out_lo, out_hi, out_prim, out_t, out_u, out_v
 
 
 @kernel
-def rays_leaving_voxels(wi, fs, ft, ns, position, ng, scale, lo, hi):
-    """`wavefront.rays_leaving` and where each ray leaves its voxel box, in one pass."""
-    n = len(wi)
+def rays_leaving_voxels(rows, wi, fs, ft, ns, position, ng, scale, lo, hi):
+    """`wavefront.rays_leaving` at `rows` and where each ray leaves its voxel box, in one pass."""
+    n = len(rows)
     origins, directions, t_exit = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
-    for i in range(n):
-        o, d = origins[i], directions[i]
+    for j in range(n):
+        i = rows[j]
+        o, d = origins[j], directions[j]
         leave_one(wi[i], fs[i], ft[i], ns[i], position[i], ng[i], scale[i], o, d)
-        t_exit[i] = _exit_distance(lo, hi, i, o[0], o[1], o[2], d[0], d[1], d[2])
+        t_exit[j] = _exit_distance(lo, hi, i, o[0], o[1], o[2], d[0], d[1], d[2])
     return origins, directions, t_exit
 
 
