@@ -47,9 +47,10 @@ NO_MAP = EnvironmentTables(
 
 class EnvironmentMapLight:
     """Texels are chosen with probability proportional to the largest luminance the bilinear lookup takes
-    over them (`_bilinear_maxima`) x sin(theta), then a point uniformly inside the texel; the solid-angle pdf divides by the texel's Jacobian 2 pi^2 sin(theta).
-    Lookups and samples are compiled kernels (`lookup_rows`, `sample_rows`), which the light sampler and
-    the path tracer also call on `tables` for their own rows."""
+    over them (`_bilinear_maxima`) x sin(theta), then a point uniformly inside the texel; the solid-angle
+    pdf divides by the texel's Jacobian 2 pi^2 sin(theta). Lookups and samples are compiled kernels
+    (`lookup_rows`, `sample_rows`), which the light sampler and the path tracer also call on `tables` for
+    their own rows."""
 
     def __init__(self, image: np.ndarray, rotation: np.ndarray):
         image = np.ascontiguousarray(image, dtype=np.float32)
@@ -144,7 +145,9 @@ def _bilinear_maxima(texels: np.ndarray) -> np.ndarray:
     for row in (up, down):
         maxima = np.maximum(maxima, (texels + row) / 2)
         for shift in (1, -1):  # columns wrap
-            maxima = np.maximum(maxima, (texels + row + np.roll(texels, shift, 1) + np.roll(row, shift, 1)) / 4)
+            maxima = np.maximum(
+                maxima, (texels + row + np.roll(texels, shift, 1) + np.roll(row, shift, 1)) / 4
+            )
     for shift in (1, -1):
         maxima = np.maximum(maxima, (texels + np.roll(texels, shift, 1)) / 2)
     return maxima
