@@ -112,6 +112,25 @@ def test_point_light_over_diffuse_plane_matches_inverse_square_law():
     np.testing.assert_allclose(result.radiance[:, 0], expected, rtol=1e-5)  # float32 hit points
 
 
+def reflected_by_a_floor(tracer: PathTracer) -> float:
+    """(albedo 0.5 / pi) * the integral of the environment's red radiance (its bilinear lookup) x cos over
+    the upper hemisphere, by fine quadrature."""
+    n_theta, n_phi = 1024, 2048
+    theta = (np.arange(n_theta) + 0.5) / n_theta * (np.pi / 2)
+    phi = (np.arange(n_phi) + 0.5) / n_phi * 2 * np.pi
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    dirs = np.stack([np.sin(t) * np.sin(p), np.cos(t), -np.sin(t) * np.cos(p)], -1).reshape(-1, 3)
+    weights = (np.cos(t) * np.sin(t)).ravel() * (np.pi / 2 / n_theta) * (2 * np.pi / n_phi)
+    return 0.5 / np.pi * (tracer.lights.environment.radiance(dirs)[:, 0] * weights).sum()
+
+
+def floor_samples(tracer: PathTracer, n: int, seed: int) -> np.ndarray:
+    """The red radiance of `n` paths from above onto the floor's origin."""
+    origins = np.tile([0.0, 1.0, 0.0], (n, 1))
+    directions = np.tile([0.0, -1.0, 0.0], (n, 1))
+    return tracer.trace(origins, directions, np.random.default_rng(seed), max_depth=2).radiance[:, 0]
+
+
 def test_environment_map_direct_lighting_is_unbiased_against_quadrature():
     """A very bright small patch of texels in a dim map: NEE + MIS over seeds equals the integral."""
     h, w = 32, 64
@@ -123,20 +142,28 @@ def test_environment_map_direct_lighting_is_unbiased_against_quadrature():
     compiled = compile_scene(scene_spec)
     compiled.environment_image = image
     tracer = PathTracer(compiled)
-    # Reference: (albedo / pi) * integral of L(w) cos(w) over the upper hemisphere, by fine quadrature.
-    n_theta, n_phi = 1024, 2048
-    theta = (np.arange(n_theta) + 0.5) / n_theta * (np.pi / 2)
-    phi = (np.arange(n_phi) + 0.5) / n_phi * 2 * np.pi
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    dirs = np.stack([np.sin(t) * np.sin(p), np.cos(t), -np.sin(t) * np.cos(p)], -1).reshape(-1, 3)
-    weights = (np.cos(t) * np.sin(t)).ravel() * (np.pi / 2 / n_theta) * (2 * np.pi / n_phi)
-    expected = 0.5 / np.pi * (tracer.lights.environment.radiance(dirs)[:, 0] * weights).sum()
+    expected = reflected_by_a_floor(tracer)
     n = 200_000
-    origins = np.tile([0.0, 1.0, 0.0], (n, 1))
-    directions = np.tile([0.0, -1.0, 0.0], (n, 1))
-    values = tracer.trace(origins, directions, np.random.default_rng(1), max_depth=2).radiance[:, 0]
+    values = floor_samples(tracer, n, 1)
     se = values.std() / np.sqrt(n)
     assert abs(values.mean() - expected) < 4 * se + 1e-4 * expected
+
+
+@pytest.mark.parametrize("elevation", [15.0, 35.0, 60.0])
+def test_a_floor_under_the_sky_and_its_sun_disc_converges_at_a_few_samples(elevation):
+    """The sky's sun disc (a few texels) is importance-sampled with the light the bilinear lookup blends
+    around it: every seed's mean of 20k paths is within 2% of the integral (measured 0.3% standard
+    error). Drawing texels by their own luminance reached half-lit neighbours of the disc only with their
+    sky-dim pdf: rare huge samples, per-seed means 0.78-1.31x the integral at this sample count."""
+    scene_spec = scene_with(
+        [floor()],
+        {"m": spec.Diffuse(reflectance=(0.5, 0.5, 0.5))},
+        spec.EnvironmentMap(procedural="sky", params={"sun_elevation": elevation}),
+    )
+    tracer = PathTracer(compile_scene(scene_spec))
+    expected = reflected_by_a_floor(tracer)
+    means = [floor_samples(tracer, 20_000, seed).mean() for seed in range(3)]
+    np.testing.assert_allclose(means, expected, rtol=0.02)
 
 
 def test_rays_starting_on_a_surface_do_not_hit_it():

@@ -46,18 +46,21 @@ NO_MAP = EnvironmentTables(
 
 
 class EnvironmentMapLight:
-    """Texels are chosen with probability proportional to luminance x sin(theta), then a point
-    uniformly inside the texel; the solid-angle pdf divides by the texel's Jacobian 2 pi^2 sin(theta).
-    Lookups and samples are compiled kernels (`lookup_rows`, `sample_rows`), which the light sampler and
-    the path tracer also call on `tables` for their own rows."""
+    """Texels are chosen with probability proportional to the largest luminance the bilinear lookup takes
+    over them (`_bilinear_maxima`) x sin(theta), then a point uniformly inside the texel; the solid-angle
+    pdf divides by the texel's Jacobian 2 pi^2 sin(theta). Lookups and samples are compiled kernels
+    (`lookup_rows`, `sample_rows`), which the light sampler and the path tracer also call on `tables` for
+    their own rows."""
 
     def __init__(self, image: np.ndarray, rotation: np.ndarray):
         image = np.ascontiguousarray(image, dtype=np.float32)
         self.height, self.width = image.shape[:2]
         theta = (np.arange(self.height) + 0.5) / self.height * np.pi
-        weights = luminance(image.astype(np.float64)) * np.sin(theta)[:, None]
-        total = float(weights.sum())
-        texel_prob = weights / max(total, 1e-300)
+        sin_theta = np.sin(theta)[:, None]
+        texel_luminance = luminance(image.astype(np.float64))
+        total = float((texel_luminance * sin_theta).sum())
+        weights = _bilinear_maxima(texel_luminance) * sin_theta
+        texel_prob = weights / max(float(weights.sum()), 1e-300)
         row_cdf = _cdf(texel_prob.sum(axis=1))
         col_cdf = np.stack([_cdf(row) for row in texel_prob])
         self.tables = EnvironmentTables(
@@ -124,6 +127,30 @@ def _cdf(prob: np.ndarray) -> np.ndarray:
     cdf = np.minimum(np.cumsum(prob) / prob.sum(), 1.0)  # rounding must not lift an entry above the last
     cdf[-1] = 1.0
     return cdf
+
+
+def _bilinear_maxima(texels: np.ndarray) -> np.ndarray:
+    """The largest value the bilinear lookup (`_bilinear`) takes over each texel of `texels` (H, W).
+
+    Over the quarter of a texel towards a neighbour, the lookup blends the texel, its two edge neighbours
+    on that side and the diagonal one; a bilinear function peaks at a corner of that quarter: the texel's
+    centre (its own value), an edge's midpoint (the mean of two texels) or the texel's corner (the mean of
+    four). Drawing texels by these maxima rather than by their own values bounds radiance / pdf (up to
+    sin(theta) within a texel): by their own values, the half of a small bright disc's light that the
+    lookup blends into its dim neighbours is reached only with their dim probability, rare huge samples
+    (a sun disc of 5 texels: whole-image means of a floor at 16 spp from 0.78x to 1.31x the integral)."""
+    up = np.concatenate([texels[:1], texels[:-1]])  # rows clamp at the poles, as `_corners`
+    down = np.concatenate([texels[1:], texels[-1:]])
+    maxima = texels.copy()
+    for row in (up, down):
+        maxima = np.maximum(maxima, (texels + row) / 2)
+        for shift in (1, -1):  # columns wrap
+            maxima = np.maximum(
+                maxima, (texels + row + np.roll(texels, shift, 1) + np.roll(row, shift, 1)) / 4
+            )
+    for shift in (1, -1):
+        maxima = np.maximum(maxima, (texels + np.roll(texels, shift, 1)) / 2)
+    return maxima
 
 
 def _guide(cdf: np.ndarray) -> np.ndarray:
