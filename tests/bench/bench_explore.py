@@ -18,7 +18,8 @@ snapshot's active / uniform ratio said little; the average cuts that noise and l
 to a half (0.044 to 0.025 after 120 CPU s; never more than 1% higher; explore4 notes).
 `EXPLORE_BENCH_SEEDS` (comma-separated) repeats every run with other seeds; `EXPLORE_BENCH_OVERRIDES`
 (JSON) changes the config of every run; `EXPLORE_BENCH_ARMS` (JSON, name -> config changes) adds arms or
-redefines them, and `EXPLORE_BENCH_RUN` (comma-separated names) runs only those arms.
+redefines them, `EXPLORE_BENCH_RUN` (comma-separated names) runs only those arms and
+`EXPLORE_BENCH_SCENES` only those scenes.
 
 Time is the training process's CPU time (`time.process_time`: rendering the patches, the chains' targets
 and the Adam steps; one torch thread, patches rendered in process), not wall time: on the shared 2-core
@@ -73,7 +74,8 @@ from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 from workers.scene.variables import dimension_names
 
-SCENES = ("cornell_variable", "mirror_variable")
+# EXPLORE_BENCH_SCENES (comma-separated) runs only those scenes
+SCENES = tuple(os.environ.get("EXPLORE_BENCH_SCENES", "cornell_variable,mirror_variable").split(","))
 # the four training runs go to this many processes at once (each measures its own CPU time)
 WORKERS = int(os.environ.get("EXPLORE_BENCH_WORKERS", "2"))
 SECONDS = float(os.environ.get("EXPLORE_BENCH_SECONDS", "240"))
