@@ -157,6 +157,16 @@ def _occluded16(scene, o, d, t_far, blocked):
             blocked[start + k] = packet[_TFAR * _PACKET + k] == -np.inf
 
 
+@njit(cache=True, nogil=True)
+def _scene_prims(prim, triangle_ids):
+    """The scene's triangle index of each subset hit `prim` (int64, -1 on a miss): one pass, where four
+    NumPy operations cost a voxel bounce of a few paths about 4 us (of its about 10 us closest-hit query)."""
+    out = np.empty(len(prim), np.int64)
+    for i in range(len(prim)):
+        out[i] = triangle_ids[prim[i]] if prim[i] >= 0 else -1
+    return out
+
+
 class RayScene:
     """One Embree scene over world-space triangles (T, 3, 3)."""
 
@@ -231,8 +241,7 @@ class SubsetRayScene:
         if self._scene is None:
             return Hits.misses(len(origins))
         hits = self._scene.intersect(origins, directions, t_max)
-        found = hits.prim >= 0
-        hits.prim = np.where(found, self.triangle_ids[np.where(found, hits.prim, 0)], -1)
+        hits.prim = _scene_prims(hits.prim, self.triangle_ids)
         return hits
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:

@@ -25,11 +25,14 @@ from workers.models.lod.segments import (
     add_unblocked_throughput,
     boundary_pair_rows,
     box_exit_rows,
+    cube_coordinates_f32,
     rays_leaving_voxels,
     roulette_survivors,
+    take_pair_rows,
     take_voxel_paths,
     uniform_sphere_rows,
     voxel_ancestors,
+    voxel_centres_f32,
     voxel_shadow_rays,
 )
 from workers.render import wavefront
@@ -75,7 +78,9 @@ class BoundaryPairs:
     length: np.ndarray  # |p_i - p_o|
 
     def take(self, rows: np.ndarray) -> BoundaryPairs:
-        return BoundaryPairs(*(getattr(self, f.name)[rows] for f in fields(self)))
+        return BoundaryPairs(
+            *take_pair_rows(np.asarray(rows, np.int64), *(getattr(self, f.name) for f in fields(self)))
+        )
 
 
 def boundary_pairs(
@@ -149,9 +154,8 @@ def throughput_estimates(
             survivors, _f64(sampled), sh.fs, sh.ft, sh.ns, sh.position, sh.ng, sh.scale, lo, hi
         )
         hits = tracer.rays.intersect(o, d, t_max=t_exit)
-        inside = np.flatnonzero(hits.found & (hits.t < t_exit))  # hits past the box end the path
         live, o, d, beta, lo, hi, *hit = take_voxel_paths(
-            inside, survivors, live, beta, lo, hi, o, d, hits.prim, hits.t, hits.u, hits.v
+            survivors, t_exit, live, beta, lo, hi, o, d, hits.prim, hits.t, hits.u, hits.v
         )
         hits = Hits(*hit)
     return np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
@@ -183,16 +187,16 @@ class LodSource:
         occluded, hits = first_asset_hits(self.tracer, pairs)
         rows = np.flatnonzero(occluded)
         wi = uniform_sphere_rows(rng.random((len(rows), 2)))
-        value = throughput_estimates(
-            self.tracer, pairs.take(rows), hits.take(rows), wi, rng, lod.max_voxel_bounces
-        )
-        centre = self.grid.centres(level[rows], cells[rows])
+        appearance = pairs.take(rows)
+        value = throughput_estimates(self.tracer, appearance, hits.take(rows), wi, rng, lod.max_voxel_bounces)
+        grid = self.grid
+        resolutions = np.asarray(grid.resolutions, np.int64)
         return {
-            "vis_p_o": _tensor(self.grid.normalize(pairs.p_o)),
-            "vis_p_i": _tensor(self.grid.normalize(pairs.p_i)),
+            "vis_p_o": torch.from_numpy(cube_coordinates_f32(pairs.p_o, grid.lo, float(grid.extent))),
+            "vis_p_i": torch.from_numpy(cube_coordinates_f32(pairs.p_i, grid.lo, float(grid.extent))),
             "vis_label": _tensor(~occluded),
-            "app_centre": _tensor(centre),
-            "app_wo": _tensor(pairs.wo[rows]),
+            "app_centre": torch.from_numpy(voxel_centres_f32(rows, level, cells, resolutions)),
+            "app_wo": _tensor(appearance.wo),
             "app_wi": _tensor(wi),
             "app_value": _tensor(value),
         }

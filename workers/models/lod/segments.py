@@ -119,11 +119,18 @@ def roulette_survivors(beta, weight, eta, u_survive, max_survival):
 
 
 @kernel
-def take_voxel_paths(rows, survivors, live, beta, lo, hi, origins, directions, prim, t, u, v):
-    """The voxel paths (batch row, ray, throughput, box) and their hits (prim, t, u, v) at `rows`, in one
-    pass instead of ten gathers. `rows` index the survivors' rays and hits (`origins` .. `v`); the paths'
-    own arrays (`live`, `beta`, `lo`, `hi`) are indexed by `survivors[rows]`."""
-    m = len(rows)
+def take_voxel_paths(survivors, t_exit, live, beta, lo, hi, origins, directions, prim, t, u, v):
+    """The voxel paths (batch row, ray, throughput, box) and their hits (prim, t, u, v) that go on: the
+    survivors' rays that hit the asset inside their box (`prim >= 0` and `t < t_exit`; a hit past the box
+    ends the path), in one pass instead of a mask, a `flatnonzero` and ten gathers. The rays and hits
+    (`t_exit`, `origins` .. `v`) are indexed like `survivors`; the paths' own arrays (`live`, `beta`, `lo`,
+    `hi`) by `survivors` itself."""
+    rows = np.empty(len(survivors), np.int64)
+    m = 0
+    for r in range(len(survivors)):
+        if prim[r] >= 0 and t[r] < t_exit[r]:
+            rows[m] = r
+            m += 1
     out_live, out_prim = np.empty(m, live.dtype), np.empty(m, prim.dtype)
     out_o, out_d, out_beta = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
     out_lo, out_hi = np.empty((m, 3)), np.empty((m, 3))
@@ -179,3 +186,40 @@ def add_unblocked_throughput(value, live, lit, beta, f_cos, blocked):
         i = lit[j]
         for c in range(3):
             value[live[i], c] += beta[i, c] * f_cos[i, c]
+
+
+@kernel
+def take_pair_rows(rows, p_o, p_i, wo, lo, hi, length):
+    """`BoundaryPairs.take` in one pass (six NumPy gathers took about 0.15 ms of a menger_sponge batch)."""
+    m = len(rows)
+    out_p_o, out_p_i, out_wo = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    out_lo, out_hi, out_length = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    for j in range(m):
+        i = rows[j]
+        for c in range(3):
+            out_p_o[j, c], out_p_i[j, c], out_wo[j, c] = p_o[i, c], p_i[i, c], wo[i, c]
+            out_lo[j, c], out_hi[j, c] = lo[i, c], hi[i, c]
+        out_length[j] = length[i]
+    return out_p_o, out_p_i, out_wo, out_lo, out_hi, out_length
+
+
+@kernel
+def cube_coordinates_f32(points, lo, extent):
+    """`LodGrid.normalize` rounded to float32 (the networks' inputs), in one pass without temporaries."""
+    out = np.empty(points.shape, np.float32)
+    for i in range(len(points)):
+        for c in range(3):
+            out[i, c] = np.float32((points[i, c] - lo[c]) / extent)
+    return out
+
+
+@kernel
+def voxel_centres_f32(rows, level, cells, resolutions):
+    """`LodGrid.centres` of the voxels `rows` of (level, cells), rounded to float32, in one pass."""
+    out = np.empty((len(rows), 3), np.float32)
+    for j in range(len(rows)):
+        i = rows[j]
+        r = np.float64(resolutions[level[i]])
+        for c in range(3):
+            out[j, c] = np.float32((cells[i, c] + 0.5) / r)
+    return out
