@@ -49,6 +49,7 @@ class GltfBuilder:
         normals=None,
         uvs=None,
         tangents=None,
+        colors=None,
         material=None,
         mode=None,
         name=None,
@@ -60,6 +61,8 @@ class GltfBuilder:
             attributes.TEXCOORD_0 = self.accessor(uvs)
         if tangents is not None:
             attributes.TANGENT = self.accessor(tangents)
+        if colors is not None:
+            attributes.COLOR_0 = self.accessor(colors)
         primitive = g.Primitive(attributes=attributes, material=material, mode=mode)
         if indices is not None:
             primitive.indices = self.accessor(np.asarray(indices).ravel(), UINT32)

@@ -272,3 +272,18 @@ def test_artifact_round_trip_answers_identically(tmp_path, compiled):
     assert np.array_equal(
         walk.count, boundary_points(loaded.models["ball"].grid, origins, directions, 12).count
     )
+
+
+def test_albedo_labels_carry_the_vertex_colour_at_the_hit(compiled):
+    vertices = np.array([[-1.0, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]])
+    colors = np.c_[(vertices[:, 0] + 1) / 2, np.ones(4), np.full(4, 0.5)]  # red grows along +x
+    materials = MaterialTable(compiled)
+    origins = np.array([[-0.5, 1.0, 0.2], [0.6, 1.0, -0.3]])
+    directions = np.tile([0.0, -1.0, 0.0], (2, 1))
+    plain, coloured = (
+        ObjectReference(mesh, np.array([0]), materials).intersect(origins, directions)
+        for mesh in (MeshData(vertices, faces), MeshData(vertices, faces, colors=colors))
+    )
+    assert (plain.albedo > 0).all()
+    np.testing.assert_allclose(coloured.albedo, plain.albedo * [[0.25, 1, 0.5], [0.8, 1, 0.5]], atol=1e-12)

@@ -278,12 +278,12 @@ class PathTracer:
 
     def _tangents(self, hits: Hits) -> np.ndarray:
         """(N, 4) tangents (xyz, bitangent sign) interpolated at the hits, for normal maps."""
-        b1, b2 = hits.u.astype(np.float64)[:, None], hits.v.astype(np.float64)[:, None]
-        corners = self.scene.tangents[hits.prim].astype(np.float64)
-        return (1.0 - b1 - b2) * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
+        return hits.interpolate(self.scene.tangents[hits.prim])
 
     def _surfaces(self, hits: Hits, mat: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None):
         surf = self.materials.surfaces(mat, uv, footprint)
+        if self.scene.vertex_colors is not None:
+            surf.base *= hits.interpolate(self.scene.vertex_colors[hits.prim])
         if hits.surface is not None and hits.surface.where.any():
             surf.base[hits.surface.where] = hits.surface.albedo[hits.surface.where]
         return surf

@@ -52,6 +52,13 @@ class Hits:
         """n rays that hit nothing."""
         return Hits(np.full(n, -1, np.int32), np.full(n, np.inf), np.zeros(n), np.zeros(n))
 
+    def interpolate(self, corners: np.ndarray) -> np.ndarray:
+        """(N, C) float64 values at the hits of per-corner attributes `corners` (N, 3, C) of the hit
+        triangles: (1 - u - v) c0 + u c1 + v c2."""
+        b1, b2 = self.u.astype(np.float64)[:, None], self.v.astype(np.float64)[:, None]
+        corners = corners.astype(np.float64)
+        return (1.0 - b1 - b2) * corners[:, 0] + b1 * corners[:, 1] + b2 * corners[:, 2]
+
     def take(self, rows: np.ndarray) -> Hits:
         """The hits of `rows` only, overrides included."""
         surface = None if self.surface is None else self.surface.take(rows)

@@ -46,6 +46,8 @@ class CompiledScene:
     environment_image: np.ndarray | None = None  # (H, W, 3) float32 lat-long, already scaled
     environment_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))  # local -> world
     tangents: np.ndarray | None = None  # (T, 3, 4) float32 per corner, when a material has a normal map
+    # (T, 3, 3) float32 linear RGB per corner multiplying the base colour, when a mesh has vertex colours
+    vertex_colors: np.ndarray | None = None
 
     @property
     def num_triangles(self) -> int:
@@ -80,7 +82,7 @@ def compile_scene(
     material_names = list(scene.materials)
     material_index = {n: i for i, n in enumerate(material_names)}
     chunks: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("pos", "nrm", "uv", "mat", "obj", "inst", "emit", "two", "tan")
+        k: [] for k in ("pos", "nrm", "uv", "mat", "obj", "inst", "emit", "two", "tan", "col")
     }
     normal_mapped = {n for n, m in scene.materials.items() if getattr(m, "normal_texture", None) is not None}
     objects: list[ObjectGeometry] = []
@@ -102,6 +104,7 @@ def compile_scene(
             chunks["nrm"].append(nrm)
             uv = mesh.uvs[faces] if mesh.uvs is not None else np.zeros((n, 3, 2))
             chunks["uv"].append(uv)
+            chunks["col"].append(mesh.colors[faces] if mesh.colors is not None else None)
             chunks["mat"].append(np.full(n, material_index[obj.material], np.int32))
             chunks["obj"].append(np.full(n, i, np.int32))
             chunks["inst"].append(np.full(n, instance_counter, np.int32))
@@ -142,6 +145,7 @@ def compile_scene(
         material_names=material_names,
         objects=objects,
         tangents=np.concatenate(chunks["tan"]).astype(np.float32) if normal_mapped else None,
+        vertex_colors=_vertex_colors(chunks["col"], chunks["pos"]),
     )
     if isinstance(scene.environment, spec.EnvironmentMap):
         from workers.scene.envmaps import load_environment
@@ -152,6 +156,16 @@ def compile_scene(
     if not scene.emitters_present():
         raise SceneError("lights", "the scene has no light: add an emitter, a light or an environment")
     return compiled
+
+
+def _vertex_colors(colors: list[np.ndarray | None], positions: list[np.ndarray]) -> np.ndarray | None:
+    """Every instance's corner colours, white where its mesh has none; None when no mesh has any (so
+    uncoloured scenes cost nothing)."""
+    if all(c is None for c in colors):
+        return None
+    return np.concatenate(
+        [np.ones(p.shape) if c is None else c for c, p in zip(colors, positions, strict=True)]
+    ).astype(np.float32)
 
 
 def _place(mesh: MeshData, m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -236,6 +236,7 @@ def primitive_mesh(path: Path, mesh: int, primitive: int, field: str) -> MeshDat
         optional(attributes.NORMAL, 3),
         optional(attributes.TEXCOORD_0, 2),  # glTF's UV origin is the image's top-left, as ours
         optional(attributes.TANGENT, 4),
+        optional(attributes.COLOR_0, 3),  # linear RGB(A), floats or normalized integers; alpha dropped
     )
 
 
@@ -427,8 +428,6 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
                     raise SceneError(
                         f"{where}.mesh", problem + f"({MODE_NAMES.get(mode, '?')}), not triangles"
                     )
-                if prim.attributes.COLOR_0 is not None:
-                    importer.ignore(f"meshes[{node.mesh}].primitives[{j}]: COLOR_0 vertex colours")
                 placements.setdefault((node.mesh, j), []).append(world)
         if node.camera is not None:
             cameras.append((where, doc.cameras[node.camera], world))

@@ -4,7 +4,9 @@ Multi-part files (glTF node hierarchies, OBJ objects) are flattened with their n
 transforms. Files are loaded with `process=False` so trimesh never merges vertices
 (which would break UV seams). UVs follow Mitsuba's convention, (0, 0) at the top-left
 texel: trimesh hands out OBJ-style UVs (origin bottom-left), so v becomes 1 - v, as
-Mitsuba's own loaders do.
+Mitsuba's own loaders do. Vertex colours (and a PLY's face colours) multiply the material's base colour:
+8-bit colours of OBJ and PLY files are display (sRGB) values and are decoded to linear; glTF's COLOR_0 is
+linear by the specification, so colours of glTF/GLB files are taken as they are.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 import trimesh
 
 from workers.scene.errors import SceneError
+from workers.scene.image_io import srgb_to_linear
 from workers.scene.shapes import MeshData
 
 SUPPORTED_EXTENSIONS = (".obj", ".ply", ".gltf", ".glb", ".stl")
@@ -37,7 +40,7 @@ def load_mesh_file(path: Path, field: str) -> MeshData:
     parts = _placed_parts(loaded)
     if not parts:
         raise SceneError(field, f"{path.name} contains no triangles")
-    return _concatenate(parts)
+    return _concatenate(parts, linear_colors=extension in (".gltf", ".glb"))
 
 
 def _placed_parts(loaded) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
@@ -73,11 +76,35 @@ def _file_uvs(mesh: trimesh.Trimesh) -> np.ndarray | None:
     return uv
 
 
-def _concatenate(parts: list[tuple[trimesh.Trimesh, np.ndarray]]) -> MeshData:
-    """One indexed mesh; normals/UVs are kept when every part has them (parts without UVs get zeros)."""
-    vertices, faces, normals, uvs = [], [], [], []
+def _file_colors(mesh: trimesh.Trimesh, linear: bool) -> np.ndarray | None:
+    """(V, 3) linear RGB of a vertex-coloured mesh (see the module's docstring), else None."""
+    if mesh.visual.kind != "vertex":
+        return None
+    rgb = np.asarray(mesh.visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+    return rgb if linear else srgb_to_linear(rgb)
+
+
+def _unwelded(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A face-coloured mesh with its own three vertices per face, its face colours on them (colours are
+    per vertex here, and averaging them over shared vertices would blur every edge)."""
+    corners = np.asarray(mesh.faces).reshape(-1)
+    visual = trimesh.visual.ColorVisuals(vertex_colors=np.repeat(mesh.visual.face_colors, 3, axis=0))
+    unwelded = trimesh.Trimesh(
+        mesh.vertices[corners], np.arange(len(corners)).reshape(-1, 3), visual=visual, process=False
+    )
+    if "vertex_normals" in mesh._cache:
+        unwelded.vertex_normals = mesh.vertex_normals[corners]
+    return unwelded
+
+
+def _concatenate(parts: list[tuple[trimesh.Trimesh, np.ndarray]], linear_colors: bool) -> MeshData:
+    """One indexed mesh; normals/UVs are kept when every part has them (parts without UVs get zeros),
+    colours when any part has them (parts without are white)."""
+    vertices, faces, normals, uvs, colors = [], [], [], [], []
     offset = 0
     for mesh, matrix in parts:
+        if mesh.visual.kind == "face":
+            mesh = _unwelded(mesh)
         linear, translation = matrix[:3, :3], matrix[:3, 3]
         v = np.asarray(mesh.vertices, dtype=np.float64)
         f = np.asarray(mesh.faces, dtype=np.int64)
@@ -91,6 +118,7 @@ def _concatenate(parts: list[tuple[trimesh.Trimesh, np.ndarray]]) -> MeshData:
             n = n @ np.linalg.inv(linear)  # inverse-transpose for row vectors
         normals.append(n)
         uvs.append(_file_uvs(mesh))
+        colors.append(_file_colors(mesh, linear_colors))
         offset += len(v)
     all_normals = None if any(n is None for n in normals) else np.concatenate(normals)
     all_uvs = None
@@ -98,4 +126,9 @@ def _concatenate(parts: list[tuple[trimesh.Trimesh, np.ndarray]]) -> MeshData:
         all_uvs = np.concatenate(
             [uv if uv is not None else np.zeros((len(v), 2)) for uv, v in zip(uvs, vertices, strict=True)]
         )
-    return MeshData(np.concatenate(vertices), np.concatenate(faces), all_normals, all_uvs)
+    all_colors = None
+    if any(c is not None for c in colors):
+        all_colors = np.concatenate(
+            [c if c is not None else np.ones((len(v), 3)) for c, v in zip(colors, vertices, strict=True)]
+        )
+    return MeshData(np.concatenate(vertices), np.concatenate(faces), all_normals, all_uvs, colors=all_colors)

@@ -15,13 +15,15 @@ DEGENERATE_AREA = 1e-14  # relative to the squared bounding-box diagonal
 
 @dataclass(frozen=True)
 class MeshData:
-    """Indexed triangles; optional per-vertex shading normals and UVs."""
+    """Indexed triangles; optional per-vertex shading normals, UVs, tangents and colours."""
 
     vertices: np.ndarray  # (V, 3) float64
     faces: np.ndarray  # (F, 3) int64
     normals: np.ndarray | None = None  # (V, 3)
     uvs: np.ndarray | None = None  # (V, 2)
     tangents: np.ndarray | None = None  # (V, 4): xyz and the bitangent's sign (glTF's TANGENT)
+    # (V, 3) linear RGB that multiplies the material's base colour (glTF's COLOR_0, a PLY's colours)
+    colors: np.ndarray | None = None
 
     @property
     def num_triangles(self) -> int:
@@ -161,4 +163,9 @@ def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:
     tangents = mesh.tangents
     if tangents is not None and (tangents.shape != (len(v), 4) or not np.isfinite(tangents).all()):
         tangents = None  # unusable tangents: generated from the UVs instead
-    return MeshData(v, f, normals, uvs, tangents)
+    colors = mesh.colors
+    if colors is not None:
+        colors = np.asarray(colors, dtype=np.float64)
+        if colors.shape != (len(v), 3) or not np.isfinite(colors).all() or (colors < 0).any():
+            raise SceneError(field, "vertex colours are malformed, negative or not finite")
+    return MeshData(v, f, normals, uvs, tangents, colors)

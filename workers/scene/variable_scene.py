@@ -58,10 +58,11 @@ class CompiledVariableScene:
         present = {obj.name: obj for obj in concrete.objects}
         base = self.base
         positions, shading, uvs = base.positions, base.shading_normals, base.uvs
-        geometric, areas = base.geometric_normals, base.areas
+        geometric, areas, colors = base.geometric_normals, base.areas, base.vertex_colors
         if self.moved:
             positions, shading, uvs = positions.copy(), shading.copy(), uvs.copy()
             geometric, areas = geometric.copy(), areas.copy()
+            colors = None if colors is None else colors.copy()
         visible: list[np.ndarray] = []
         for i in self.moved:
             geometry = base.objects[i]
@@ -74,6 +75,8 @@ class CompiledVariableScene:
                 shading[start:stop] = nrm
                 if geometry.mesh.uvs is not None:
                     uvs[start:stop] = geometry.mesh.uvs[faces]
+                if geometry.mesh.colors is not None:  # a mirroring move reverses the corners
+                    colors[start:stop] = geometry.mesh.colors[faces]
                 cross = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
                 length = np.linalg.norm(cross, axis=1)
                 areas[start:stop] = 0.5 * length
@@ -94,6 +97,7 @@ class CompiledVariableScene:
             geometric_normals=geometric,
             areas=areas,
             emission=emission,
+            vertex_colors=colors,
         )
         if concrete.environment is not None and base.environment_image is not None:
             compiled.environment_rotation = euler_xyz(concrete.environment.rotate)

@@ -78,6 +78,8 @@ class ObjectReference:
         if albedo and found.any():
             sel = np.flatnonzero(found)
             base[sel] = self.materials.surfaces(self.material_ids[material[sel]], uv[sel]).base
+            if self.mesh.colors is not None:
+                base[sel] *= hits.take(sel).interpolate(self.mesh.colors[self.mesh.faces[hits.prim[sel]]])
         return Labels(found, np.where(found, hits.t, np.inf), position, ng, ns, base, material)
 
 

@@ -152,4 +152,13 @@ def with_mesh(scene: CompiledScene, mesh: MeshData, material: str, definition) -
         two_sided_emission=np.concatenate([scene.two_sided_emission, np.zeros(n, bool)]),
         material_names=[*scene.material_names, material],
         objects=[*scene.objects, geometry],
+        tangents=_extended(scene.tangents, n, 0.0),
+        vertex_colors=_extended(scene.vertex_colors, n, 1.0),
     )
+
+
+def _extended(corners: np.ndarray | None, n: int, value: float) -> np.ndarray | None:
+    """Per-corner attributes of a scene for `n` more triangles that do not use them."""
+    if corners is None:
+        return None
+    return np.concatenate([corners, np.full((n, *corners.shape[1:]), value, corners.dtype)])
