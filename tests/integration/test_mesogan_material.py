@@ -1,8 +1,9 @@
 """A scene file names a trained mesogan model as a material (`type: mesogan`): the path tracer draws its
-shell over the surfaces using it, the `render` kind renders the scene end to end, and the image is
-bit-identical to the kind's own `:render` of the same scene, parameters and seed (one code path draws
-both). An unknown artifact, a folder that holds none and misspelt parameters are refused naming the
-field; a scene whose surfaces use no such material renders as it did without it, bit for bit.
+shell over the surfaces using it, the `render` kind renders the scene end to end, in process and as a job
+of the server with the artifact uploaded in the scene's folder, and the image is bit-identical to the
+kind's own `:render` of the same scene, parameters and seed (one code path draws both). An unknown
+artifact, a folder that holds none and misspelt parameters are refused naming the field; a scene whose
+surfaces use no such material renders as it did without it, bit for bit.
 
 The model is the `mesogan` kind's example job (the `quick` preset on `fur_ball`, as the kind contract
 trains it)."""
@@ -15,6 +16,8 @@ import shutil
 import numpy as np
 import pytest
 
+from tests.integration import test_api_server as api
+from tests.integration.test_api_server import submit, wait_for
 from tests.support.jobs import run_kind_job
 from workers.models.registry import get_inference, get_kind, register_materials
 from workers.render import aggregate_materials
@@ -25,6 +28,7 @@ from workers.scene.errors import SceneError
 from workers.scene.image_io import read_exr_channels
 from workers.scene.io import load_scene, scene_from_dict
 
+database, server, client = api.incidental_database, api.server, api.client  # fixtures
 SEED = 5
 STRUCTURE = {"length": 0.6, "density": 50.0, "curliness": 0.4}
 APPEARANCE = {"hue": 0.6, "saturation": 0.7}
@@ -60,14 +64,11 @@ def write_scene(folder, material: dict, name: str = "scene.json") -> None:
     (folder / name).write_text(json.dumps(data))
 
 
-def test_the_render_kind_draws_the_material_as_mesogan_render_does(trained, tmp_path):
-    artifact, scene_dir = trained
-    spec, base_dir = load_scene(scene_dir / "scene.json")
-    overrides = {"width": SIZE, "height": SIZE, "spp": SPP, "tile_size": 64, "samplers": 0}
-    _, outcome = run_kind_job("render", spec, tmp_path, overrides, seed=RENDER_SEED, scene_dir=base_dir)
-    assert outcome.state == "succeeded", outcome.error
-    (job_image,) = read_exr_channels(tmp_path / "out" / "image.exr").values()
+OVERRIDES = {"width": SIZE, "height": SIZE, "spp": SPP, "tile_size": 64, "samplers": 0}
 
+
+def served_render(artifact) -> np.ndarray:
+    """The kind's own `:render` of the artifact's scene with the test's parameters."""
     inference = get_inference("mesogan")
     model = inference.load(artifact, "cpu")
     params = inference.operations["render"].params(
@@ -77,8 +78,16 @@ def test_the_render_kind_draws_the_material_as_mesogan_render_does(trained, tmp_
         structure=STRUCTURE,
         appearance=APPEARANCE,
     )
-    served = model.answer("render", params, {}).arrays["image"]
-    assert np.array_equal(job_image, served)
+    return model.answer("render", params, {}).arrays["image"]
+
+
+def test_the_render_kind_draws_the_material_as_mesogan_render_does(trained, tmp_path):
+    artifact, scene_dir = trained
+    spec, base_dir = load_scene(scene_dir / "scene.json")
+    _, outcome = run_kind_job("render", spec, tmp_path, OVERRIDES, seed=RENDER_SEED, scene_dir=base_dir)
+    assert outcome.state == "succeeded", outcome.error
+    (job_image,) = read_exr_channels(tmp_path / "out" / "image.exr").values()
+    assert np.array_equal(job_image, served_render(artifact))
 
     # The shell is drawn: the bare ball (its base material) is another image, and so is another colour.
     settings = RenderSettings(spp=SPP, width=SIZE, height=SIZE, seed=RENDER_SEED)
@@ -133,3 +142,26 @@ def test_a_scene_whose_surfaces_use_no_such_material_renders_as_without_it():
     settings = RenderSettings(spp=2, width=16, height=16, seed=1)
     with_unused = render(compile_scene(scene_from_dict(data)), settings).image
     assert np.array_equal(with_unused, render(compile_scene(plain), settings).image)
+
+
+def test_a_server_job_renders_the_material_from_the_uploaded_folder(trained, client, tmp_path):
+    artifact, scene_dir = trained
+    names = ["scene.json", *(f"models/fur/{f.name}" for f in (scene_dir / "models" / "fur").iterdir())]
+    files = [("files", (name, (scene_dir / name).read_bytes())) for name in names]
+    response = client.post("/v1/assets", files=files)
+    assert response.status_code == 201, response.text
+    asset = response.json()["asset_id"]
+    job = submit(client, kind="render", scene=asset, preset="quick", config=OVERRIDES, seed=RENDER_SEED)
+    done = wait_for(client, job["id"], {"SUCCEEDED", "FAILED"})
+    assert done["state"] == "SUCCEEDED", done
+    download = client.get(f"/v1/artifacts/{done['artifact_id']}/files/image.exr")
+    (tmp_path / "image.exr").write_bytes(download.content)
+    (image,) = read_exr_channels(tmp_path / "image.exr").values()
+    assert np.array_equal(image, served_render(artifact))
+
+    # A scene naming a folder the upload lacks is refused at upload, naming the field.
+    (tmp_path / "scene.json").write_text((scene_dir / "scene.json").read_text().replace("models/fur", "fur"))
+    refused = client.post(
+        "/v1/assets", files=[("files", ("scene.json", (tmp_path / "scene.json").read_bytes()))]
+    )
+    assert refused.status_code == 400 and "materials.fur.path" in refused.text, refused.text
