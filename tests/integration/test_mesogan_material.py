@@ -164,4 +164,4 @@ def test_a_server_job_renders_the_material_from_the_uploaded_folder(trained, cli
     refused = client.post(
         "/v1/assets", files=[("files", ("scene.json", (tmp_path / "scene.json").read_bytes()))]
     )
-    assert refused.status_code == 400 and "materials.fur.path" in refused.text, refused.text
+    assert refused.status_code == 422 and refused.json()["field"] == "materials.fur.path", refused.text
