@@ -111,9 +111,13 @@ def scene_error(scene_dir, material: dict) -> SceneError:
 def test_an_unknown_artifact_or_bad_parameters_name_the_field(trained, tmp_path):
     _, scene_dir = trained
     missing = scene_error(scene_dir, {"path": "models/velvet"})
-    assert missing.field == "materials.fur.path" and "no mesogan artifact" in missing.problem
+    assert missing.field == "materials.fur.path" and missing.problem.endswith("no such folder")
     (scene_dir / "empty").mkdir(exist_ok=True)
-    assert scene_error(scene_dir, {"path": "empty"}).field == "materials.fur.path"
+    empty = scene_error(scene_dir, {"path": "empty"})
+    assert empty.field == "materials.fur.path" and "not a mesogan artifact" in empty.problem
+    spec, base_dir = load_scene(scene_dir / "bad.json")
+    _, outcome = run_kind_job("render", spec, tmp_path, OVERRIDES, scene_dir=base_dir)
+    assert outcome.state == "failed" and "materials.fur.path" in outcome.error, outcome.error
     for material, field in (
         ({"path": "models/fur", "structure": {"lenght": 0.5}}, "materials.fur.structure.lenght"),
         ({"path": "models/fur", "apperance": {"hue": 0.5}}, "materials.fur.apperance"),

@@ -33,13 +33,17 @@ def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Came
     if others:
         raise SceneError(f"materials.{others[0]}", f"a scene takes one mesogan material; {name!r} is one")
     material = materials[name]
-    folder = artifact_folder(material, scene.base_dir)
+    folder, field = artifact_folder(material, scene.base_dir), f"materials.{name}.path"
+    if not (folder / artifact.MANIFEST).is_file():
+        problem = (
+            f"holds no {artifact.MANIFEST}: not a mesogan artifact" if folder.is_dir() else "no such folder"
+        )
+        raise SceneError(field, f"{material.path!r} ({folder}): {problem}")
     device = "cuda" if torch.cuda.is_available() else "cpu"
     try:
         config, model = artifact.load(folder, device)
     except (OSError, ValueError, KeyError, ValidationError) as error:
-        problem = str(error).replace(f"{folder}/", "")
-        raise SceneError(f"materials.{name}.path", f"no mesogan artifact in {folder}: {problem}") from None
+        raise SceneError(field, f"{material.path!r} is not a usable mesogan artifact: {error}") from None
     return shell_aggregate(
         scene,
         [name],
