@@ -36,9 +36,12 @@ def register_aggregate_material(name: str, builder: str) -> None:
 
 
 def used_aggregate_materials(scene: CompiledScene) -> dict[str, dict[str, AggregateMaterial]]:
-    """The scene's aggregate materials that some surface uses, by type, then by name."""
-    used = {scene.material_names[i] for i in np.unique(scene.material_ids)}
+    """The scene's aggregate materials that some surface uses, by type, then by name (no pass over the
+    triangles for a scene without any)."""
     by_type: dict[str, dict[str, AggregateMaterial]] = {}
+    if not any(isinstance(m, AggregateMaterial) for m in scene.spec.materials.values()):
+        return by_type
+    used = {scene.material_names[i] for i in np.unique(scene.material_ids)}
     for name, material in scene.spec.materials.items():
         if name in used and isinstance(material, AggregateMaterial):
             by_type.setdefault(material.type, {})[name] = material

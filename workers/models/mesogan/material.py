@@ -22,18 +22,14 @@ from workers.scene.errors import SceneError
 from workers.scene.spec import Camera, MesoganMaterial
 
 
-def artifact_folder(material: MesoganMaterial, base_dir: Path | None) -> Path:
-    path = Path(material.path)
-    return path if base_dir is None else base_dir / path
-
-
 def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Camera) -> ShellAggregate:
     """The registered family: the shell of the scene's one mesogan material (module docstring)."""
     name, *others = materials
     if others:
         raise SceneError(f"materials.{others[0]}", f"a scene takes one mesogan material; {name!r} is one")
     material = materials[name]
-    folder, field = artifact_folder(material, scene.base_dir), f"materials.{name}.path"
+    folder = Path(material.path) if scene.base_dir is None else scene.base_dir / material.path
+    field = f"materials.{name}.path"
     if not (folder / artifact.MANIFEST).is_file():
         problem = (
             f"holds no {artifact.MANIFEST}: not a mesogan artifact" if folder.is_dir() else "no such folder"
