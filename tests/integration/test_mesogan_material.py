@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from tests.integration import test_api_server as api
-from tests.integration.test_api_server import submit, wait_for
+from tests.integration.test_api_server import events, submit, wait_for
 from tests.support.jobs import run_kind_job
 from workers.models.registry import get_inference, get_kind, register_materials
 from workers.render import aggregate_materials
@@ -155,9 +155,12 @@ def test_a_server_job_renders_the_material_from_the_uploaded_folder(trained, cli
     response = client.post("/v1/assets", files=files)
     assert response.status_code == 201, response.text
     asset = response.json()["asset_id"]
-    job = submit(client, kind="render", scene=asset, preset="quick", config=OVERRIDES, seed=RENDER_SEED)
+    config = OVERRIDES | {"samplers": 1}  # the tiles are rendered in a Ray sampler actor
+    job = submit(client, kind="render", scene=asset, preset="quick", config=config, seed=RENDER_SEED)
     done = wait_for(client, job["id"], {"SUCCEEDED", "FAILED"})
     assert done["state"] == "SUCCEEDED", done
+    logs = [e["data"].get("message", "") for e in events(client, job["id"]) if e["type"] == "log"]
+    assert any("on 1 sampler actor(s)" in message for message in logs), logs
     download = client.get(f"/v1/artifacts/{done['artifact_id']}/files/image.exr")
     (tmp_path / "image.exr").write_bytes(download.content)
     (image,) = read_exr_channels(tmp_path / "image.exr").values()
