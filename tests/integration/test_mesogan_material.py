@@ -27,6 +27,7 @@ from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.image_io import read_exr_channels
 from workers.scene.io import load_scene, scene_from_dict
+from workers.scene.reference import SceneRef
 
 database, server, client = api.incidental_database, api.server, api.client  # fixtures
 SEED = 5
@@ -84,6 +85,9 @@ def served_render(artifact) -> np.ndarray:
 def test_the_render_kind_draws_the_material_as_mesogan_render_does(trained, tmp_path):
     artifact, scene_dir = trained
     spec, base_dir = load_scene(scene_dir / "scene.json")
+    kind = get_kind("render")
+    plan = kind.plan(SceneRef(spec, base_dir), kind.resolve_config("quick", OVERRIDES))
+    assert [i.choice for i in plan.items if i.name == "aggregate materials"] == ["fur (mesogan)"]
     _, outcome = run_kind_job("render", spec, tmp_path, OVERRIDES, seed=RENDER_SEED, scene_dir=base_dir)
     assert outcome.state == "succeeded", outcome.error
     (job_image,) = read_exr_channels(tmp_path / "out" / "image.exr").values()
