@@ -48,7 +48,8 @@ def check_geometry(spec: SceneSpec, base_dir: Path | None) -> None:
 
 
 def check_references(spec: SceneSpec, scene_file: str, names: set[str]) -> None:
-    """Every file the scene names resolves, relative to the scene file, to a file of the upload."""
+    """Every file the scene names resolves, relative to the scene file, to a file of the upload, or to a
+    folder of it (a mesogan material's artifact)."""
     scene_dir = posixpath.dirname(scene_file)
     for field, reference in file_references(spec.model_dump(mode="json", exclude_none=True)):
         if "\\" in reference or _ABSOLUTE.match(reference):
@@ -56,7 +57,7 @@ def check_references(spec: SceneSpec, scene_file: str, names: set[str]) -> None:
         resolved = posixpath.normpath(posixpath.join(scene_dir, reference))
         if resolved == ".." or resolved.startswith("../"):
             raise SceneError(field, f"{reference!r} points outside the upload")
-        if resolved not in names:
+        if resolved not in names and not any(name.startswith(f"{resolved}/") for name in names):
             raise SceneError(field, f"{reference!r} is not in the upload (looked for {resolved!r})")
 
 

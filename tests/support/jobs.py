@@ -27,15 +27,18 @@ def run_kind_job(
     seed: int = 0,
     events: list[JobEvent] | None = None,
     cancel_after_step: int | None = None,
+    scene_dir: Path | None = None,
 ) -> tuple[JobSpec, JobOutcome]:
-    """A `kind` job of `preset` + `overrides` on `scene`, checkpoints in folder/checkpoints and the artifact's
-    files in folder/out; its events are appended to `events`. With `cancel_after_step`, a user cancels the
-    job when it reports progress at or past that step (it stops at its next progress report)."""
+    """A `kind` job of `preset` + `overrides` on `scene` (its files in `scene_dir`), checkpoints in
+    folder/checkpoints and the artifact's files in folder/out; its events are appended to `events`. With
+    `cancel_after_step`, a user cancels the job when it reports progress at or past that step (it stops at
+    its next progress report)."""
     config = get_kind(kind).resolve_config(preset, overrides or {})
     spec = JobSpec(
         job_id=f"{kind}-{seed}",
         kind=kind,
         scene=scene.model_dump(mode="json"),
+        scene_dir=None if scene_dir is None else str(scene_dir),
         config=config.model_dump(mode="json"),
         seed=seed,
         checkpoint_dir=str(folder / "checkpoints"),

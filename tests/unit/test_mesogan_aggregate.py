@@ -32,8 +32,8 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import ground
 from workers.scene.compile import compile_scene
-from workers.scene.mesoscale import Appearance, Structure
 from workers.scene.spec import (
+    Appearance,
     BoxShape,
     Camera,
     ConstantBackground,
@@ -45,6 +45,7 @@ from workers.scene.spec import (
     SceneObject,
     SceneSpec,
     SpotLight,
+    Structure,
     Transform,
 )
 

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from workers.scene.errors import SceneError
-from workers.scene.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, Structure, local_strands
+from workers.scene.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, local_strands
 from workers.scene.procedural import GENERATORS, generate, gradient_noise
 from workers.scene.shapes import check_mesh
+from workers.scene.spec import Structure
 
 SMALL = {
     "ground_plane": {},

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from pydantic import BaseModel
 
+from workers.render.aggregate_materials import register_aggregate_material
 from workers.runtime.contract import PRESET_NAMES, Kind
 
 if TYPE_CHECKING:
@@ -30,7 +31,15 @@ KIND_MODULES = (
     "workers.models.prt",
     "workers.models.explore",
 )
-__all__ = ["PRESET_NAMES", "Kind", "UnknownKind", "get_inference", "get_kind", "kind_names"]
+__all__ = [
+    "PRESET_NAMES",
+    "Kind",
+    "UnknownKind",
+    "get_inference",
+    "get_kind",
+    "kind_names",
+    "register_materials",
+]
 
 
 class UnknownKind(KeyError):
@@ -114,7 +123,16 @@ def get_inference(name: str) -> Inference | None:
 @cache
 def _kinds() -> dict[str, Kind]:
     kinds = [importlib.import_module(module).KIND for module in KIND_MODULES]
+    for kind in kinds:
+        for material, builder in kind.materials.items():
+            register_aggregate_material(material, builder)
     return {kind.name: kind for kind in kinds}
+
+
+def register_materials() -> None:
+    """Register the scene materials the kinds draw (`Kind.materials`) with the path tracer: done by the
+    first kind lookup, and by whatever renders a scene outside a job (`nbake render`, a sampler actor)."""
+    _kinds()
 
 
 def kind_names() -> list[str]:

@@ -10,7 +10,8 @@ records, `occluded` for visibility.
 Extension points, none of which names a model kind: geometry answers through `Intersector`s
 (`workers.render.intersector`; hits may carry predicted surfaces), materials are BSDF families
 registered by name (`workers.render.bsdf`), an `Aggregate` scatters light in voxels beside the surfaces
-(`workers.render.aggregate`), and a `PathObserver` sees the events of traced paths
+(`workers.render.aggregate`; scene materials drawn as one are families registered by name too,
+`workers.render.aggregate_materials`), and a `PathObserver` sees the events of traced paths
 (`workers.render.observer`).
 """
 
@@ -22,6 +23,7 @@ import numpy as np
 
 from workers.render import heap, wavefront
 from workers.render.aggregate import Aggregate, AggregateEvents
+from workers.render.aggregate_materials import scene_aggregate, used_aggregate_materials
 from workers.render.bsdf import SurfaceBatch, eval_bsdf, sample_bsdf
 from workers.render.embree import RayScene
 from workers.render.environment import NO_MAP, EnvironmentMapLight
@@ -39,6 +41,8 @@ from workers.render.sampling import (
 )
 from workers.render.wavefront import RAY_OFFSET
 from workers.scene.compile import CompiledScene
+from workers.scene.errors import SceneError
+from workers.scene.spec import Camera
 
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
 _NO_ROWS, _NO_ROWS3 = np.zeros(0), np.zeros((0, 3))  # per-row environment values the lat-long kernels skip
@@ -150,14 +154,22 @@ class PathTracer:
         primary: Intersector | None = None,
         aggregate: Aggregate | None = None,
         aggregate_next_event: bool = True,
+        view: Camera | None = None,
     ):
         """`intersector` answers closest-hit and occlusion queries in place of an Embree scene over every
         triangle (e.g. a model's objects beside Embree); it must index hits by the scene's triangles.
         `primary` (default: the same) answers the first segment of paths and `first_hits`, as a
         rasteriser would for camera rays. `aggregate` scatters light in voxels beside the surfaces
-        (`workers.render.aggregate`); `aggregate_next_event` samples lights from its scattering voxels."""
+        (`workers.render.aggregate`); by default the one the scene's aggregate materials make
+        (`workers.render.aggregate_materials`), for paths starting at the camera `view` (default: the
+        scene's). `aggregate_next_event` samples lights from its scattering voxels."""
         heap.keep_freed_arrays()
         self.scene = scene
+        if aggregate is None:
+            aggregate = scene_aggregate(scene, view or scene.spec.camera)
+        elif used := used_aggregate_materials(scene):
+            name = next(iter(next(iter(used.values()))))
+            raise SceneError(f"materials.{name}", "this renderer brings its own aggregate; it cannot draw it")
         self.aggregate = aggregate
         self.aggregate_next_event = aggregate_next_event
         self.rays = intersector if intersector is not None else RayScene(scene.positions, robust=robust)

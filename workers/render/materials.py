@@ -1,6 +1,7 @@
 """Material parameters by scene material id: the scene's materials as arrays, textures looked up by UV.
 
-Each scene material is shaded by the BSDF family registered under its `type` (`workers.render.bsdf`);
+Each scene material is shaded by the BSDF family registered under its `type` (`workers.render.bsdf`; an
+aggregate material's surfaces by its `base`, `workers.render.aggregate_materials`);
 the family says what the material contributes to a `SurfaceBatch`, and which of its parameters are
 textured (`BSDF.textures`). Two texture slots mean the same for every family and are handled here: `normal`
 (a tangent-space normal map, glTF's convention: linear, +Y towards the image's top, unpacked as
@@ -24,7 +25,7 @@ SHADING_SLOTS = frozenset({"normal", "emission"})  # read by the renderer, not b
 
 class MaterialTable:
     def __init__(self, scene: CompiledScene):
-        materials = scene.materials
+        materials = [spec.surface_material(m) for m in scene.materials]
         self._materials = materials
         parameters = [bsdf_family(m.type).parameters(m) for m in materials]
         self.family = np.array([bsdf_code(m.type) for m in materials], dtype=np.int8)

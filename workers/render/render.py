@@ -152,6 +152,12 @@ def render_item(
     return _render_tile(tracer, camera, tile, plan.passes[pass_index], settings, rng)
 
 
+def rendered_view(camera: Camera, settings: RenderSettings) -> Camera:
+    """`camera` at the size `settings` render it (what `PathTracer`'s `view` is)."""
+    size = {"width": settings.width or camera.width, "height": settings.height or camera.height}
+    return camera.model_copy(update=size)
+
+
 def render(
     scene: CompiledScene | PathTracer,
     settings: RenderSettings | None = None,
@@ -160,7 +166,10 @@ def render(
 ) -> RenderResult:
     """An image of the scene through `view` (default: the scene camera)."""
     settings = settings or RenderSettings()
-    tracer = scene if isinstance(scene, PathTracer) else PathTracer(scene)
+    if isinstance(scene, PathTracer):
+        tracer = scene
+    else:
+        tracer = PathTracer(scene, view=rendered_view(view or scene.spec.camera, settings))
     camera = PinholeCamera(view or tracer.scene.spec.camera, settings.width, settings.height)
     plan = plan_render(camera, settings)
     accum = ImageAccumulator(plan, settings.aovs)

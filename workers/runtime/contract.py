@@ -168,6 +168,8 @@ class Kind:
     method: str | None = None  # a Method class, instantiated once per job
     run_function: str | None = None  # called as function(ctx: JobContext) -> RunOutput
     infer_module: str | None = None  # a module exposing INFERENCE, for kinds the inference service serves
+    # scene material type -> the function drawing it (`workers.render.aggregate_materials`)
+    materials: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if (self.method is None) == (self.run_function is None):

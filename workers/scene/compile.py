@@ -84,7 +84,11 @@ def compile_scene(
     chunks: dict[str, list[np.ndarray]] = {
         k: [] for k in ("pos", "nrm", "uv", "mat", "obj", "inst", "emit", "two", "tan", "col")
     }
-    normal_mapped = {n for n, m in scene.materials.items() if getattr(m, "normal_texture", None) is not None}
+    normal_mapped = {
+        n
+        for n, m in scene.materials.items()
+        if getattr(spec.surface_material(m), "normal_texture", None) is not None
+    }
     objects: list[ObjectGeometry] = []
     start = 0
     instance_counter = 0

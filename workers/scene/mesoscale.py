@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
+from pydantic import Field
 
 from workers.scene.procedural import (
     GroundPlaneParams,
@@ -27,22 +27,12 @@ from workers.scene.procedural import (
     tubes,
 )
 from workers.scene.shapes import MeshData
+from workers.scene.spec import Structure
 
 MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]
-Unit = Annotated[FiniteFloat, Field(ge=0, le=1)]
 SEGMENTS = 5  # polyline points per strand minus one: enough for a curl of half a turn
 SIDES = 3  # a strand is a triangular prism
-
-
-class Structure(BaseModel):
-    """The geometric parameters a generated instance is drawn from (what the mapping network sees)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    length: Annotated[FiniteFloat, Field(gt=0, le=1, description="strand length / slab height")] = 0.8
-    density: Annotated[FiniteFloat, Field(gt=0, le=400, description="strands per squared slab height")] = 40.0
-    curliness: Unit = 0.3
 
 
 def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> tuple[np.ndarray, np.ndarray]:
@@ -75,21 +65,6 @@ def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> 
         radius = root * np.broadcast_to(np.linspace(1.0, tip, k)[None], (n, k))
     centers[..., 2] = np.maximum(centers[..., 2], 0.0)  # never below the base
     return centers, np.array(radius)
-
-
-class Appearance(BaseModel):
-    """The strands' colour (what only the decoder's radiance head sees)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    hue: Unit = 0.02
-    saturation: Unit = 0.8
-
-    def color(self, value: float = 0.7) -> tuple[float, float, float]:
-        """The strands' reflectance: HSV with the given value."""
-        k = (np.array([5.0, 3.0, 1.0]) + self.hue * 6.0) % 6.0
-        rgb = value - value * self.saturation * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
-        return tuple(float(c) for c in rgb)
 
 
 class MesoscaleSlabParams(Params):

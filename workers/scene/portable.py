@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from workers.scene.spec import (
+    AggregateMaterial,
     Camera,
     ConstantBackground,
     DirectionalLight,
@@ -83,6 +84,9 @@ def file_references(spec: SceneSpec) -> list[str]:
     """The fields of `spec` that name a file, which only the job's folder holds."""
     fields = [f"objects[{i}].shape.path" for i, obj in enumerate(spec.objects) if reads_file(obj)]
     for name, material in spec.materials.items():
+        if isinstance(material, AggregateMaterial):
+            fields.append(f"materials.{name}.path")
+            material, name = material.base, f"{name}.base"
         fields += [
             f"materials.{name}.{field}.path" for field, value in material if isinstance(value, ImageTexture)
         ]

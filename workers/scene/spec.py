@@ -195,7 +195,66 @@ class PbrMaterial(Model):
     diffuse: Literal["energy_conserving", "burley"] = "energy_conserving"
 
 
-Material = Annotated[Diffuse | Conductor | Plastic | Dielectric | PbrMaterial, Field(discriminator="type")]
+SurfaceMaterial = Annotated[
+    Diffuse | Conductor | Plastic | Dielectric | PbrMaterial, Field(discriminator="type")
+]
+
+
+Unit = Annotated[FiniteFloat, Field(ge=0, le=1)]
+
+
+class Structure(Model):
+    """The geometric parameters a generated mesoscale instance is drawn from (what the mapping network
+    sees; `workers.scene.mesoscale`)."""
+
+    length: Annotated[FiniteFloat, Field(gt=0, le=1, description="strand length / slab height")] = 0.8
+    density: Annotated[FiniteFloat, Field(gt=0, le=400, description="strands per squared slab height")] = 40.0
+    curliness: Unit = 0.3
+
+
+class Appearance(Model):
+    """The strands' colour (what only the decoder's radiance head sees)."""
+
+    hue: Unit = 0.02
+    saturation: Unit = 0.8
+
+    def color(self, value: float = 0.7) -> tuple[float, float, float]:
+        """The strands' reflectance: HSV with the given value."""
+        k = (np.array([5.0, 3.0, 1.0]) + self.hue * 6.0) % 6.0
+        rgb = value - value * self.saturation * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
+        return tuple(float(c) for c in rgb)
+
+
+class AggregateMaterial(Model):
+    """A material drawn as a volume over the surfaces that use it, which the path tracer scatters in
+    (`workers.render.aggregate_materials`: a family registered under the material's `type` builds it);
+    `base` shades the surfaces themselves, beneath the volume."""
+
+    base: SurfaceMaterial = Diffuse()
+
+
+class MesoganMaterial(AggregateMaterial):
+    """A trained `mesogan` model's generated fur, grass or carpet on a shell over the surfaces (Diolatzis
+    2022, Sec. 6.2.8; `workers.models.mesogan.material`). `path` is the artifact's folder (as
+    `nbake download` writes it), relative to the scene file; the parameters left out are the artifact's
+    own (those its job rendered)."""
+
+    type: Literal["mesogan"] = "mesogan"
+    path: str = Field(min_length=1, description="a mesogan artifact's folder")
+    structure: Structure | None = None
+    appearance: Appearance | None = None
+    seed: Annotated[int, Field(ge=0, description="which instance of the distribution")] = 0
+    shell_height: Annotated[FiniteFloat, Field(gt=0, description="world units")] | None = None
+
+
+Material = Annotated[
+    Diffuse | Conductor | Plastic | Dielectric | PbrMaterial | MesoganMaterial, Field(discriminator="type")
+]
+
+
+def surface_material(material: Material) -> SurfaceMaterial:
+    """What shades a material's surfaces: the material itself, or an aggregate material's `base`."""
+    return material.base if isinstance(material, AggregateMaterial) else material
 
 
 # --------------------------------------------------------------------------- shapes

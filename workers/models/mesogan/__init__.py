@@ -4,8 +4,8 @@ through shell mapping (Diolatzis 2022, Ch. 6; published as MesoGAN, EGSR 2023).
 `sampling` path-traces labelled views of random procedural slabs (`workers.scene.mesoscale`);
 `networks` holds the infinite plane generator, the decoder and the discriminator, `slab` renders the
 generated slab as training does, `train` the GAN's phases; `shell` is the prism map, `aggregate` the
-material inside our path tracer, `covering` lays the plane over a scene's surfaces; `plan`, `run`,
-`artifact` and `infer` are the kind's parts.
+material inside our path tracer, `covering` lays the plane over a scene's surfaces, `material` is the
+`mesogan` material scene files name; `plan`, `run`, `artifact` and `infer` are the kind's parts.
 """
 
 from __future__ import annotations
@@ -21,4 +21,5 @@ KIND = Kind(
     example=Example("fur_ball"),
     method="workers.models.mesogan.run:MesoganMethod",
     infer_module="workers.models.mesogan.infer",
+    materials={"mesogan": "workers.models.mesogan.material:draw"},
 )

@@ -13,18 +13,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from workers.models.mesogan.aggregate import NeuralMaterial
+from workers.models.mesogan.aggregate import NeuralMaterial, ShellAggregate
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
-from workers.models.mesogan.sampling import SKIN, normalized_structure
+from workers.models.mesogan.sampling import SKIN, cone_radius, normalized_structure
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import mip_stack
 from workers.scene.compile import CompiledScene, ObjectGeometry
 from workers.scene.errors import SceneError
-from workers.scene.mesoscale import Appearance, Structure, grow_on_triangles
+from workers.scene.mesoscale import grow_on_triangles
 from workers.scene.shapes import MeshData
-from workers.scene.spec import Diffuse
+from workers.scene.spec import Appearance, Camera, Diffuse, Structure
 
 MAX_PLANE = 4096  # texels per side of a generated plane
 
@@ -62,11 +62,11 @@ def covering(
     return Covering(triangles, plane_units, resolution)
 
 
-def build_shell(scene: CompiledScene, cover: Covering, height: float) -> Shell:
+def build_shell(
+    scene: CompiledScene, cover: Covering, height: float, field: str = "config.shell_height"
+) -> Shell:
     t = cover.triangles
-    return Shell(
-        scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field="config.shell_height"
-    )
+    return Shell(scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field=field)
 
 
 def neural_material(
@@ -89,6 +89,28 @@ def neural_material(
         planes = generate_planes(model, config, s, latent, draw_noise(model, config, 1, seed), window)
     a = torch.tensor(appearance.color(), dtype=torch.float32, device=device)
     return NeuralMaterial(model, config, mip_stack(planes, config.mip_levels), window, a)
+
+
+def shell_aggregate(
+    scene: CompiledScene,
+    surfaces: list[str],
+    model: MesoGAN,
+    config: MesoganConfig,
+    structure: Structure,
+    appearance: Appearance,
+    seed: int,
+    shell_height: float,
+    view: Camera,
+    fields: tuple[str, str],
+) -> ShellAggregate:
+    """The material of the instance `seed` on a shell of `shell_height` over the scene's `surfaces` (by
+    material name), as the path tracer's aggregate for paths starting at the camera `view`: what the
+    kind's `:render` and a scene's mesogan material (`material`) draw. SceneErrors name `fields` (the
+    surfaces' and the shell height's)."""
+    cover = covering(scene, surfaces, shell_height, config.texel, field=fields[0])
+    shell = build_shell(scene, cover, shell_height, field=fields[1])
+    material = neural_material(model, config, cover, structure, appearance, seed)
+    return ShellAggregate(shell, material, config.samples_per_ray, cone_radius(view.fov, view.height))
 
 
 def with_strands(

@@ -19,7 +19,7 @@ from workers.models.mesogan.config import STRUCTURE_RANGES
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SlabSource, View, first_hit_heights, instance_tracer, stack_views
 from workers.models.mesogan.train import fake_views, view_structure
-from workers.scene.mesoscale import Structure
+from workers.scene.spec import Structure
 
 HELD_OUT_SEED_OFFSET = 1 << 20  # held-out instances come from a seed no training batch uses
 PATCH = 3

@@ -23,9 +23,8 @@ import torch
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.mesogan import artifact
-from workers.models.mesogan.aggregate import ShellAggregate
-from workers.models.mesogan.covering import build_shell, covering, neural_material
-from workers.models.mesogan.sampling import cone_radius, normalized_structure
+from workers.models.mesogan.covering import shell_aggregate
+from workers.models.mesogan.sampling import normalized_structure
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import HEIGHT_TO_RADIANS, mip_stack, sample_mipmapped
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
@@ -40,9 +39,8 @@ from workers.runtime.view_render import (
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.errors import SceneError
-from workers.scene.mesoscale import Appearance, Structure
 from workers.scene.portable import framing_camera, load_scene, neutral_scene
-from workers.scene.spec import Camera, Diffuse, MeshShape, SceneObject, SphereShape
+from workers.scene.spec import Appearance, Camera, Diffuse, MeshShape, SceneObject, SphereShape, Structure
 
 GENERATE = "generate"
 MAX_WINDOW = 2048
@@ -146,16 +144,13 @@ class MesoganModel:
         if unknown:
             names = scene.material_names
             raise ValueError(f"params.surfaces: no material {unknown}; the scene's are {names}")
-        cover = covering(scene, surfaces, config.shell_height, config.texel, field="params.surfaces")
-        shell = build_shell(scene, cover, config.shell_height)
-        material = neural_material(
-            self.model, config, cover, params.structure, params.appearance, params.seed
-        )
         camera = params.camera.over(scene.spec.camera)
-        cone = cone_radius(camera.fov, camera.height)
-        tracer = PathTracer(scene, aggregate=ShellAggregate(shell, material, config.samples_per_ray, cone))
-        image = render_view(tracer, params, camera).image
-        return Answer({"image": image}, {"plane_resolution": cover.resolution})
+        aggregate = shell_aggregate(
+            scene, surfaces, self.model, config, params.structure, params.appearance, params.seed,
+            config.shell_height, camera, ("params.surfaces", "config.shell_height"),
+        )  # fmt: skip
+        image = render_view(PathTracer(scene, aggregate=aggregate), params, camera).image
+        return Answer({"image": image}, {"plane_resolution": aggregate.material.window.size[0]})
 
     def _scene(
         self, params: RenderParams, mesh: np.ndarray | None, folder: Path

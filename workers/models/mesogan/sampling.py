@@ -32,8 +32,8 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import compile_scene
-from workers.scene.mesoscale import Appearance, Structure
 from workers.scene.spec import (
+    Appearance,
     Camera,
     ConstantBackground,
     Diffuse,
@@ -41,6 +41,7 @@ from workers.scene.spec import (
     ProceduralShape,
     SceneObject,
     SceneSpec,
+    Structure,
 )
 
 SKIN = (0.08, 0.07, 0.06)  # the base under the strands

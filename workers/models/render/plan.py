@@ -7,6 +7,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.render import MAX_PATHS_PER_ITEM, plan_render
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.reference import SceneRef
+from workers.scene.spec import AggregateMaterial
 
 RAYS_PER_SECOND_PER_CORE = 2.5e6  # Embree closest hits plus NumPy shading, measured on the build machines
 RAYS_PER_SAMPLE = 8  # camera ray, bounces and shadow rays of an average path at max_depth 8
@@ -49,5 +50,18 @@ def plan(scene: SceneRef, config: RenderConfig) -> Plan:
             f"on {cores} core(s); scenes with long paths or many lights take longer",
         ),
     ]
+    materials = scene.spec.materials
+    drawn = sorted(
+        {o.material for o in scene.spec.objects if isinstance(materials[o.material], AggregateMaterial)}
+    )
+    if drawn:
+        items.append(
+            PlanItem(
+                name="aggregate materials",
+                choice=", ".join(f"{name} ({materials[name].type})" for name in drawn),
+                reason="drawn as a volume over their surfaces by the kind that registers the type; every "
+                "process that renders (the driver or each actor) loads its model once",
+            )
+        )
     summary = f"render {config.width}x{config.height} at {config.spp} spp in {passes * tiles} items"
     return Plan(items=items, estimated_seconds=seconds, summary=summary)

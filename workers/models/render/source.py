@@ -10,9 +10,10 @@ from dataclasses import dataclass
 
 import torch
 
+from workers.models.registry import register_materials
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
-from workers.render.render import RenderSettings, TileResult, plan_render, render_item
+from workers.render.render import RenderSettings, TileResult, plan_render, render_item, rendered_view
 from workers.runtime.sources import Batch
 from workers.scene.reference import SceneRef
 
@@ -32,7 +33,9 @@ class TileSource:
 
     def __init__(self, config: TileSourceConfig, seed: int) -> None:
         self.settings = config.settings.model_copy(update={"seed": seed})
-        self.tracer = PathTracer(config.scene.compiled())
+        register_materials()
+        view = rendered_view(config.scene.spec.camera, self.settings)
+        self.tracer = PathTracer(config.scene.compiled(), view=view)
         self.camera = PinholeCamera(config.scene.spec.camera, self.settings.width, self.settings.height)
         self.plan = plan_render(self.camera, self.settings)
         self.items = self.plan.items

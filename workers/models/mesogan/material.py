@@ -1,0 +1,54 @@
+"""The mesogan material of scene files (`workers.scene.spec.MesoganMaterial`): a trained artifact's
+generated fur, grass or carpet on a shell over the surfaces that use the material, drawn by the path
+tracer as the aggregate `covering.shell_aggregate` builds, as the kind's own `:render` draws it. The kind
+registers it under its name (`KIND.materials`, `workers.render.aggregate_materials`).
+
+The artifact is the folder `path` names, relative to the scene file; structure, appearance and shell
+height left out are the artifact's own (what its job rendered).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from pydantic import ValidationError
+
+from workers.models.mesogan import artifact
+from workers.models.mesogan.aggregate import ShellAggregate
+from workers.models.mesogan.covering import shell_aggregate
+from workers.scene.compile import CompiledScene
+from workers.scene.errors import SceneError
+from workers.scene.spec import Camera, MesoganMaterial
+
+
+def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Camera) -> ShellAggregate:
+    """The registered family: the shell of the scene's one mesogan material (module docstring)."""
+    name, *others = materials
+    if others:
+        raise SceneError(f"materials.{others[0]}", f"a scene takes one mesogan material; {name!r} is one")
+    material = materials[name]
+    folder = Path(material.path) if scene.base_dir is None else scene.base_dir / material.path
+    field = f"materials.{name}.path"
+    if not (folder / artifact.MANIFEST).is_file():
+        problem = (
+            f"holds no {artifact.MANIFEST}: not a mesogan artifact" if folder.is_dir() else "no such folder"
+        )
+        raise SceneError(field, f"{material.path!r} ({folder}): {problem}")
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    try:
+        config, model = artifact.load(folder, device)
+    except (OSError, ValueError, KeyError, ValidationError) as error:
+        raise SceneError(field, f"{material.path!r} is not a usable mesogan artifact: {error}") from None
+    return shell_aggregate(
+        scene,
+        [name],
+        model,
+        config,
+        material.structure or config.structure,
+        material.appearance or config.appearance,
+        material.seed,
+        material.shell_height or config.shell_height,
+        view,
+        (f"materials.{name}", f"materials.{name}.shell_height"),
+    )
