@@ -85,8 +85,8 @@ def artifact_source(scene: CompiledScene, name: str, material: AggregateMaterial
     if scene.base_dir is None or not (folder := scene.base_dir / artifact_folder(material.artifact)).is_dir():
         raise SceneError(
             field,
-            f"{material.artifact!r} is in the job server's store, which only a job of the server fetches "
-            f"from; to render here, download it (`nbake download {material.artifact} -o DIR`) and name DIR "
-            "in `path`",
+            f"{material.artifact!r} names an artifact in the job server's store, which a job of the server "
+            f"fetches into its scene's folder ({artifact_folder(material.artifact)}); to render elsewhere, "
+            f"download it (`nbake download {material.artifact} -o DIR`) and name DIR in `path`",
         )
     return field, folder
