@@ -1,5 +1,6 @@
 """The three ways a job names its scene (an uploaded asset id, a built-in name, an inline SceneSpec),
-resolved to one validated SceneSpec, a content hash, and (for assets) a folder holding its files.
+resolved to one validated SceneSpec, a content hash, and (for assets) a folder holding its files; the
+stored artifacts its materials name are checked for the caller and join the files a job fetches.
 """
 
 from __future__ import annotations
@@ -13,17 +14,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.assets import AssetNotFound, load_asset, materialize
 from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
 from services.jobs.errors import InvalidInput
 from services.jobs.identity import scene_hash, sha256_of
+from services.jobs.material_artifacts import MaterialArtifacts, named_artifacts
 from services.jobs.tenants import Principal, Tenancy
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.errors import SceneError
 from workers.scene.io import check_nesting, load_scene, scene_from_dict
 from workers.scene.spec import SceneSpec
-from workers.scene.stored import StoredFile, StoredScene
+from workers.scene.stored import ARTIFACTS_FOLDER, StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"
 RESOLVED_CACHE_SIZE = 512  # resolved scenes (a spec of a few KB each) kept for repeated submissions
@@ -46,18 +49,20 @@ def scene_field(error: SceneError) -> str:
 
 class SceneResolver:
     """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused.
-    With `tenancy`, an asset resolves only for a caller whose tenant sees it.
+    With `tenancy`, an asset, and a stored artifact a material names, resolve only for a caller whose tenant
+    sees them.
 
     Resolutions are cached: a built-in name and an asset id (content-addressed, never rewritten) always
     resolve to the same scene, and an inline scene is keyed by the hash of its canonical JSON. A repeated
     submission then costs no validation, no store read and no hashing of the scene (they were 2 of a
-    submission's 8 ms on SQLite). The tenant check comes first, so the cache never answers for an asset
-    the caller does not see.
+    submission's 8 ms on SQLite). The tenant checks are made at every resolution, so the cache never
+    answers for an asset or a material's artifact the caller does not see.
     """
 
     def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path, tenancy: Tenancy | None = None):
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
         self.tenancy = tenancy
+        self.material_artifacts = MaterialArtifacts(ArtifactStore(blobs, assets_root), tenancy)
         self._resolved: OrderedDict[str, ResolvedScene] = OrderedDict()
         self._resolved_lock = threading.Lock()
 
@@ -68,14 +73,15 @@ class SceneResolver:
             raise InvalidInput(f"no asset {scene!r}; upload it with POST /v1/assets first", "scene")
         key = scene if isinstance(scene, str) else _inline_key(scene)
         with self._resolved_lock:
-            if (found := self._resolved.get(key)) is not None:
+            if (resolved := self._resolved.get(key)) is not None:
                 self._resolved.move_to_end(key)
-                return found
-        resolved = self._resolve(scene)
-        with self._resolved_lock:
-            self._resolved[key] = resolved
-            while len(self._resolved) > RESOLVED_CACHE_SIZE:
-                self._resolved.popitem(last=False)
+        if resolved is None:
+            resolved = self._resolve(scene)
+            with self._resolved_lock:
+                self._resolved[key] = resolved
+                while len(self._resolved) > RESOLVED_CACHE_SIZE:
+                    self._resolved.popitem(last=False)
+        self.material_artifacts.check(resolved.spec, principal)
         return resolved
 
     def _resolve(self, scene: str | dict[str, Any]) -> ResolvedScene:
@@ -103,18 +109,20 @@ class SceneResolver:
         """The folder a driver resolves the scene's relative paths against (None without files)."""
         return self._materialized(ref["asset_id"])[0] if ref["source"] == "asset" else None
 
-    def stored_files(self, ref: dict[str, str]) -> StoredScene | None:
-        """The scene's files as a driver on any node fetches them: store URLs and digests (None without
-        files)."""
-        if ref["source"] != "asset":
-            return None
-        asset = load_asset(ref["asset_id"], self.assets_root)
-        return StoredScene(
-            key=ref["asset_id"].removeprefix(ASSET_PREFIX),
-            files={
-                e.name: StoredFile(url=self.blobs.blob_url(e.digest), digest=e.digest) for e in asset.files
-            },
-        )
+    def stored_files(self, ref: dict[str, str], scene: dict[str, Any]) -> StoredScene | None:
+        """The files of the scene `ref` names (`scene`: its spec as the job stores it) as a driver on any
+        node fetches them: store URLs and digests, the stored artifacts its materials name included (None
+        without files). The cache folder is the asset's, or named by the files' content with artifacts."""
+        files = {}
+        if ref["source"] == "asset":
+            for entry in load_asset(ref["asset_id"], self.assets_root).files:
+                files[entry.name] = StoredFile(url=self.blobs.blob_url(entry.digest), digest=entry.digest)
+        artifacts = self.material_artifacts.files(SceneSpec.model_validate(scene))
+        if not artifacts:
+            return StoredScene(key=ref["asset_id"].removeprefix(ASSET_PREFIX), files=files) if files else None
+        files |= artifacts
+        key = sha256_of({name: stored.digest for name, stored in files.items()}).removeprefix("sha256:")
+        return StoredScene(key=key, files=files)
 
     def _visible(self, scene: str, principal: Principal | None) -> bool:
         """Whether `principal`'s tenant sees `scene` when it names an asset (built-in names: always)."""
@@ -131,6 +139,13 @@ class SceneResolver:
             ) from None
         _, scene_file = self._materialized(asset_id, asset)
         spec, _ = load_scene(scene_file)
+        named = list(named_artifacts(spec))
+        if named and any(entry.name.startswith(f"{ARTIFACTS_FOLDER}/") for entry in asset.files):
+            raise SceneError(
+                f"materials.{named[0]}.artifact",
+                f"the upload has a {ARTIFACTS_FOLDER}/ folder, where a job puts the stored artifacts its "
+                "materials name: rename that folder",
+            )
         files = {entry.name: entry.digest for entry in asset.files}
         ref = {"source": "asset", "name": asset.scene_name, "asset_id": asset_id}
         return _resolved(spec, ref, files)

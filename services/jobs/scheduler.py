@@ -174,7 +174,7 @@ class Scheduler:
             job_id=job.id,
             kind=job.kind,
             scene=job.scene,
-            scene_files=self.scenes.stored_files(job.scene_ref),
+            scene_files=self.scenes.stored_files(job.scene_ref, job.scene),
             config=job.config,
             seed=job.seed,
             num_gpus=self._gpus(job),

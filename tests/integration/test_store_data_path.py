@@ -83,7 +83,7 @@ def test_checkpoints_commit_resume_and_vanish_through_the_store(store_url):
 
 def test_a_node_fetches_the_scene_by_digest_into_its_own_cache(uploaded, tmp_path):
     resolver, ref = uploaded
-    stored = resolver.stored_files(ref)
+    stored = resolver.stored_files(ref, resolver.resolve(ref["asset_id"]).spec_json)
     assert all(in_store(f.url, resolver.blobs.url) for f in stored.files.values())
     folder = stored.local_folder(tmp_path / "node-cache")
     assert (folder / "meshes" / "blob.obj").read_bytes() == blob_obj()
@@ -112,11 +112,12 @@ def render_spec(resolver: SceneResolver, ref: dict, artifacts: ArtifactStore, jo
     config = get_kind("render").resolve_config(
         "quick", {"samplers": 0, "width": 32, "height": 32, "spp": 128, "tile_size": 32}
     )
+    scene = resolver.resolve(ref["asset_id"]).spec_json
     return JobSpec(
         job_id=job_id,
         kind="render",
-        scene=resolver.resolve(ref["asset_id"]).spec.model_dump(mode="json"),
-        scene_files=resolver.stored_files(ref),
+        scene=scene,
+        scene_files=resolver.stored_files(ref, scene),
         config=config.model_dump(mode="json"),
         seed=3,
         checkpoint_dir=artifacts.checkpoint_dir(job_id),

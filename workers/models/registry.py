@@ -38,6 +38,7 @@ __all__ = [
     "get_inference",
     "get_kind",
     "kind_names",
+    "material_kind",
     "register_materials",
 ]
 
@@ -133,6 +134,12 @@ def register_materials() -> None:
     """Register the scene materials the kinds draw (`Kind.materials`) with the path tracer: done by the
     first kind lookup, and by whatever renders a scene outside a job (`nbake render`, a sampler actor)."""
     _kinds()
+
+
+def material_kind(material_type: str) -> str | None:
+    """The kind whose artifacts a scene material of `material_type` draws: the one declaring it in
+    `Kind.materials` (None: no kind does)."""
+    return next((kind.name for kind in _kinds().values() if material_type in kind.materials), None)
 
 
 def kind_names() -> list[str]:

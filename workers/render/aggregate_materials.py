@@ -8,19 +8,22 @@ A family is registered as a "package.module:function" string, imported when a sc
 registering one loads neither torch nor the family's code; the model kinds register theirs
 (`workers.models.registry`). The function is called as function(scene, materials, view) -> Aggregate,
 with the compiled scene, its materials of that type by name and the camera paths start from (at the size
-rendered: a material may filter by the pixel's footprint). It raises `SceneError` naming the material's
-field (`materials.fur.path`) for what it cannot use.
+rendered: a material may filter by the pixel's footprint). It finds the model's files with
+`artifact_source` and raises `SceneError` naming the material's field (`materials.fur.path`) for what it
+cannot use.
 """
 
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from workers.scene.errors import SceneError
 from workers.scene.spec import AggregateMaterial, Camera
+from workers.scene.stored import artifact_folder
 
 if TYPE_CHECKING:
     from workers.render.aggregate import Aggregate
@@ -68,3 +71,22 @@ def scene_aggregate(scene: CompiledScene, view: Camera) -> Aggregate | None:
         )
     module, _, function = _families[kind].partition(":")
     return getattr(importlib.import_module(module), function)(scene, materials, view)
+
+
+def artifact_source(scene: CompiledScene, name: str, material: AggregateMaterial) -> tuple[str, Path]:
+    """(field, folder) of the artifact the material `name` draws: its `path`, relative to the scene file, or
+    its stored `artifact`, which a job of the server has fetched into the scene's folder. Anywhere else
+    (`nbake render` of a local scene file) a stored artifact is a SceneError naming the field: this machine
+    has no store to fetch it from."""
+    if material.path is not None:
+        folder = Path(material.path) if scene.base_dir is None else scene.base_dir / material.path
+        return f"materials.{name}.path", folder
+    field = f"materials.{name}.artifact"
+    if scene.base_dir is None or not (folder := scene.base_dir / artifact_folder(material.artifact)).is_dir():
+        raise SceneError(
+            field,
+            f"{material.artifact!r} names an artifact in the job server's store, which a job of the server "
+            f"fetches into its scene's folder ({artifact_folder(material.artifact)}); to render elsewhere, "
+            f"download it (`nbake download {material.artifact} -o DIR`) and name DIR in `path`",
+        )
+    return field, folder

@@ -81,11 +81,12 @@ def reads_file(obj: SceneObject) -> bool:
 
 
 def file_references(spec: SceneSpec) -> list[str]:
-    """The fields of `spec` that name a file, which only the job's folder holds."""
+    """The fields of `spec` that name a file, which only the job's folder holds (a stored artifact a
+    material names included: the job fetched it into its folder)."""
     fields = [f"objects[{i}].shape.path" for i, obj in enumerate(spec.objects) if reads_file(obj)]
     for name, material in spec.materials.items():
         if isinstance(material, AggregateMaterial):
-            fields.append(f"materials.{name}.path")
+            fields.append(f"materials.{name}.{'path' if material.path is not None else 'artifact'}")
             material, name = material.base, f"{name}.base"
         fields += [
             f"materials.{name}.{field}.path" for field, value in material if isinstance(value, ImageTexture)

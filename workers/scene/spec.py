@@ -11,10 +11,19 @@ Conventions: right-handed, y-up; colours are linear RGB; roughness is the GGX
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 NonNegRGB = tuple[
@@ -225,22 +234,45 @@ class Appearance(Model):
         return tuple(float(c) for c in rgb)
 
 
+ARTIFACT_ID = re.compile(r"sha256:[0-9a-f]{64}")
+
+
 class AggregateMaterial(Model):
-    """A material drawn as a volume over the surfaces that use it, which the path tracer scatters in
+    """A trained model drawn as a volume over the surfaces that use it, which the path tracer scatters in
     (`workers.render.aggregate_materials`: a family registered under the material's `type` builds it);
-    `base` shades the surfaces themselves, beneath the volume."""
+    `base` shades the surfaces themselves, beneath the volume.
+
+    The model is an artifact of the kind that declares the material's `type` (`Kind.materials`), named
+    by exactly one of `path`, its folder relative to the scene file (as `nbake download` writes it), or
+    `artifact`, its id in the job server's store (`sha256:...`, as a finished job reports it), which the
+    server checks at submission and fetches into the job's folder (`workers.scene.stored.artifact_folder`).
+    """
 
     base: SurfaceMaterial = Diffuse()
+    path: str | None = Field(None, min_length=1, description="the artifact's folder, relative to the scene")
+    artifact: str | None = Field(None, validate_default=True, description="a stored artifact's id")
+
+    @field_validator("artifact")
+    @classmethod
+    def _one_source(cls, artifact: str | None, info: ValidationInfo) -> str | None:
+        if artifact is not None and ARTIFACT_ID.fullmatch(artifact) is None:
+            raise ValueError("an artifact id is 'sha256:' and 64 hex digits, as a finished job reports it")
+        if "path" not in info.data:
+            return artifact  # `path` itself was refused: that error is the one reported
+        if (artifact is None) == (info.data["path"] is None):
+            raise ValueError(
+                "give exactly one of `path` (the artifact's folder, relative to the scene file) or "
+                "`artifact` (its id in the job server's store)"
+            )
+        return artifact
 
 
 class MesoganMaterial(AggregateMaterial):
     """A trained `mesogan` model's generated fur, grass or carpet on a shell over the surfaces (Diolatzis
-    2022, Sec. 6.2.8; `workers.models.mesogan.material`). `path` is the artifact's folder (as
-    `nbake download` writes it), relative to the scene file; the parameters left out are the artifact's
-    own (those its job rendered)."""
+    2022, Sec. 6.2.8; `workers.models.mesogan.material`), its artifact named by `path` or `artifact`; the
+    parameters left out are the artifact's own (those its job rendered)."""
 
     type: Literal["mesogan"] = "mesogan"
-    path: str = Field(min_length=1, description="a mesogan artifact's folder")
     structure: Structure | None = None
     appearance: Appearance | None = None
     seed: Annotated[int, Field(ge=0, description="which instance of the distribution")] = 0

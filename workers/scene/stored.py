@@ -5,6 +5,9 @@ the job is each file's store URL and sha256 digest, and every process that compi
 each sampler actor) downloads them once per node into `<cache>/<key>/`, verifying every byte against its
 digest. The folder appears by an atomic rename, so processes racing on one node see either nothing or the
 whole scene; the cache is keyed by content, so it never goes stale.
+
+A stored artifact a scene's material names (`artifact: sha256:...`) travels the same way: the server adds
+its files to the job's under `.artifacts/<hex>/` (`artifact_folder`), where the material loads it.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from workers.scene.errors import SceneError
 
 CACHE_ENV = "NBAKE_SCENE_CACHE"  # where a node keeps fetched scenes; default <temp dir>/nbake-scenes
 CHUNK_BYTES = 1 << 20
+ARTIFACTS_FOLDER = ".artifacts"  # in a job's scene folder: the stored artifacts its materials name
 
 
 class StoredFile(BaseModel):
@@ -60,6 +64,11 @@ class StoredScene(BaseModel):
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         return folder
+
+
+def artifact_folder(artifact_id: str) -> PurePosixPath:
+    """Where the files of the stored artifact `artifact_id` lie in the scene's folder of a job naming it."""
+    return PurePosixPath(ARTIFACTS_FOLDER, artifact_id.removeprefix("sha256:"))
 
 
 def relative(name: str) -> PurePosixPath:

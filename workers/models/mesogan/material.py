@@ -3,13 +3,12 @@ generated fur, grass or carpet on a shell over the surfaces that use the materia
 tracer as the aggregate `covering.shell_aggregate` builds, as the kind's own `:render` draws it. The kind
 registers it under its name (`KIND.materials`, `workers.render.aggregate_materials`).
 
-The artifact is the folder `path` names, relative to the scene file; structure, appearance and shell
-height left out are the artifact's own (what its job rendered).
+The artifact is the folder `path` names, relative to the scene file, or the stored `artifact` a server job
+fetched (`aggregate_materials.artifact_source`); structure, appearance and shell height left out are the
+artifact's own (what its job rendered).
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import torch
 from pydantic import ValidationError
@@ -17,6 +16,7 @@ from pydantic import ValidationError
 from workers.models.mesogan import artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import shell_aggregate
+from workers.render.aggregate_materials import artifact_source
 from workers.scene.compile import CompiledScene
 from workers.scene.errors import SceneError
 from workers.scene.spec import Camera, MesoganMaterial
@@ -28,18 +28,18 @@ def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Came
     if others:
         raise SceneError(f"materials.{others[0]}", f"a scene takes one mesogan material; {name!r} is one")
     material = materials[name]
-    folder = Path(material.path) if scene.base_dir is None else scene.base_dir / material.path
-    field = f"materials.{name}.path"
+    field, folder = artifact_source(scene, name, material)
+    source = material.path or material.artifact
     if not (folder / artifact.MANIFEST).is_file():
         problem = (
             f"holds no {artifact.MANIFEST}: not a mesogan artifact" if folder.is_dir() else "no such folder"
         )
-        raise SceneError(field, f"{material.path!r} ({folder}): {problem}")
+        raise SceneError(field, f"{source!r} ({folder}): {problem}")
     device = "cuda" if torch.cuda.is_available() else "cpu"
     try:
         config, model = artifact.load(folder, device)
     except (OSError, ValueError, KeyError, ValidationError) as error:
-        raise SceneError(field, f"{material.path!r} is not a usable mesogan artifact: {error}") from None
+        raise SceneError(field, f"{source!r} is not a usable mesogan artifact: {error}") from None
     return shell_aggregate(
         scene,
         [name],
