@@ -6,12 +6,13 @@ ambient sky, and a camera on the hemisphere at one of the configured distances (
 the slab's centre tile with its neighbours around it. Coarse views (`coarse_distances`) have
 `coarse_block` times wider pixels, so their cone footprints reach the plane's coarse mip levels (Sec.
 6.2.7), each traced with `coarse_block`^2 times the samples (`view_spp`); a view's pixels must stay on
-the slab (fewer, wider pixels from a nearer camera let coarse views look down obliquely). The image is HDR, tonemapped x / (x + 1) for the discriminator. Each view also
-carries the height at which every pixel-centre ray first meets the geometry (0 on the skin): the coverage
-and height of the pile as the camera sees it, which the generator's structure terms match (`train`) and
-the conditioning figures compare against (`evaluate`). A batch draws `batch_size` instances of a pool of
-`pool` (each rendered once per process and cached), so batches are a pure function of (seed, index) and
-a job can bound its rendering cost.
+the slab (fewer, wider pixels from a nearer camera let coarse views look down obliquely). The image is
+HDR, tonemapped x / (x + 1) for the discriminator. Each view also carries the height at which every
+pixel-centre ray first meets the geometry (0 on the skin): the coverage and height of the pile as the
+camera sees it, which the generator's structure terms match (`train`) and the conditioning figures compare
+against (`evaluate`). A batch draws `batch_size` instances of a pool of `pool` (each rendered once per
+process and cached), so batches are a pure function of (seed, index) and a job can bound its rendering
+cost.
 
 Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
 """
