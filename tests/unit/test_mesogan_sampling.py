@@ -14,19 +14,15 @@ from workers.models.mesogan.config import PRESETS, MesoganConfig
 from workers.models.mesogan.covering import covering
 from workers.models.mesogan.plan import closest_view
 from workers.models.mesogan.sampling import (
-    SlabSource,
-    SlabSourceConfig,
     View,
     draw_instance,
     normalized_structure,
-    render_instance,
     stack_views,
     to_local,
-    view_spp,
     widest_footprint,
 )
 from workers.models.mesogan.slab import march
-from workers.models.mesogan.volume import mip_level, tonemap
+from workers.models.mesogan.volume import mip_level
 from workers.render.camera import PinholeCamera
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
@@ -92,20 +88,3 @@ def test_the_default_presets_views_stay_on_the_slab_and_the_generated_window():
         hits = origins - (origins[:, 2] / directions[:, 2])[:, None] * directions
         reach = max(reach, float(np.abs(hits[:, :2]).max()))
     assert reach < min(slab, window), (reach, slab, window)
-
-
-def test_a_coarse_views_pixels_are_traced_to_converge_like_the_fine_ones():
-    """A coarse view's pixel stands for `coarse_block`^2 fine ones and is traced with as many times their
-    samples (`view_spp`), so it shows its footprint's filtered radiance, not Monte Carlo noise. Four
-    default-preset far views (seed 5): noise 0.030-0.057 at `training_spp` alone (tonemapped RMS), where
-    their pixels differ from each other by 0.005-0.007 without noise; 0.0045-0.007 at `view_spp`."""
-    config = MesoganConfig.model_validate(PRESETS["default"])
-    source = SlabSource(SlabSourceConfig(mesogan=config), 5)
-    j = next(j for j in range(64) if source.draw(j).camera.width < config.image_size)
-    instance = source.draw(j)
-    spp = view_spp(config, instance.camera)
-    assert spp * instance.camera.width**2 == config.training_spp * config.image_size**2
-    trained_on = tonemap(torch.from_numpy(source.instance(j).image))
-    converged = tonemap(torch.from_numpy(render_instance(config, instance, 4 * spp, seed=1).image))
-    noise = float((trained_on - converged).pow(2).mean().sqrt())
-    assert noise < 0.01, noise  # 0.036 with the view traced at training_spp

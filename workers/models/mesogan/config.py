@@ -71,11 +71,12 @@ class MesoganConfig(TrainedKindConfig):
     # Aliasing at distance without mip levels (measured by mesogan11b: fur, default preset, 300 steps, seed
     # 3, `evaluate.far_view_shimmer`: the RMS change of held-out far-view pixels under sub-pixel pans,
     # path-traced strands 0.0020; the far-view SWD cannot see it). The default's far pixels span about 3
-    # texels and read levels 0-1: without mip levels the model shimmers 1.23 (95% over views 1.16-1.30)
-    # times the full model over 64 far views (0.0029 / 0.0023; far SWD 0.206 / 0.196, held-out SWD 0.411 /
-    # 0.433). On a plane twice as fine (texel 0.125, 96 texels, 41% more training CPU; far views read
-    # levels 1-2) 1.64 (1.52-1.78) times (0.0041 / 0.0025; far SWD 0.208 / 0.196, held-out SWD 0.402 /
-    # 0.399). Over 16 views the full weights shimmer 0.0020 / 0.0023 and, read at level 0, 0.0028 / 0.0042.
+    # texels and read levels 0-1: without mip levels the model shimmers 1.14 (95% over views 1.07-1.20)
+    # times the full model over 64 far views (16 views: 0.0026 / 0.0023; far SWD 0.199 / 0.200, held-out
+    # SWD 0.374 / 0.392). Trained with converged far views (below) 1.23 (1.16-1.30), and on a plane twice
+    # as fine as well (texel 0.125, 96 texels, 41% more training CPU; far views read levels 1-2) 1.64
+    # (1.52-1.78): 0.0036 / 0.0023 over 16 views, far SWD 0.208 / 0.196, held-out SWD 0.402 / 0.399.
+    # Over 16 views the full weights read at level 0 shimmer 0.0030 (0.0042 on the finer plane).
     mipmapping: bool = Field(True, description="cone footprints select mip levels (Sec. 6.2.7)")
 
     # Decoder and rendering (Sec. 6.2.6-6.2.7).
@@ -185,6 +186,12 @@ PRESETS: dict[str, dict] = {
     # SWD 0.440. Curliness barely moves real blades (coverage 0.42 -> 0.46). A red / blue colour label moves
     # the views' mean red minus blue to +0.10 / -0.06 and leaves density and stop height exactly unchanged.
     # The quick preset's 0.33 of the coverage spread on grass (60 steps) is its few steps, not grass.
+    # Far (coarse) training views traced with coarse_block^2 times training_spp, so each pixel is its
+    # footprint's converged radiance as held-out views are (`evaluate.reference_spp`; measured by
+    # mesogan11b, not kept). 300 steps, seeds 3 / 5 / 7: far shimmer 0.92 / 0.81 / 0.86 times (64 views),
+    # but held-out SWD 0.392 / 0.323 / 0.321 -> 0.433 / 0.337 / 0.308, far SWD 0.200 / 0.165 / 0.153 ->
+    # 0.196 / 0.177 / 0.158, coverage response over the real 0.95 / 1.01 / 0.74 -> 0.91 / 0.59 / 0.80,
+    # stop height 0.81 / 0.64 / 0.49 -> 0.78 / 0.39 / 0.44. The fur ball was not measured.
     "default": {
         "image_size": 32,
         "plane_resolution": 48,

@@ -5,14 +5,13 @@ Instance j of a source is a pure function of (seed, j): structure parameters dra
 ambient sky, and a camera on the hemisphere at one of the configured distances (multi-scale) looking at
 the slab's centre tile with its neighbours around it. Coarse views (`coarse_distances`) have
 `coarse_block` times wider pixels, so their cone footprints reach the plane's coarse mip levels (Sec.
-6.2.7), each traced with `coarse_block`^2 times the samples (`view_spp`); a view's pixels must stay on
-the slab (fewer, wider pixels from a nearer camera let coarse views look down obliquely). The image is
-HDR, tonemapped x / (x + 1) for the discriminator. Each view also carries the height at which every
-pixel-centre ray first meets the geometry (0 on the skin): the coverage and height of the pile as the
-camera sees it, which the generator's structure terms match (`train`) and the conditioning figures compare
-against (`evaluate`). A batch draws `batch_size` instances of a pool of `pool` (each rendered once per
-process and cached), so batches are a pure function of (seed, index) and a job can bound its rendering
-cost.
+6.2.7); a view's pixels must stay on the slab (fewer, wider pixels from a nearer camera let coarse views
+look down obliquely). The image is HDR, tonemapped x / (x + 1) for the discriminator. Each view also
+carries the height at which every pixel-centre ray first meets the geometry (0 on the skin): the coverage
+and height of the pile as the camera sees it, which the generator's structure terms match (`train`) and
+the conditioning figures compare against (`evaluate`). A batch draws `batch_size` instances of a pool of
+`pool` (each rendered once per process and cached), so batches are a pure function of (seed, index) and
+a job can bound its rendering cost.
 
 Slab frame: tangent x, y and height z in slab heights; the scene's y-up axes are (x, z, -y) of it.
 """
@@ -220,19 +219,6 @@ def first_hit_heights(tracer: PathTracer, camera: Camera) -> np.ndarray:
     return np.clip(height, 0.0, 1.0)
 
 
-def view_spp(config: MesoganConfig, camera: Camera) -> int:
-    """Samples per pixel of a training view: a coarse view's pixel stands for `coarse_block`^2 fine pixels
-    and takes as many times their samples, so every view traces `image_size`^2 x `training_spp` paths and
-    a coarse pixel shows the filtered radiance of its footprint, which the mip levels stand for (Sec.
-    6.2.7). At `training_spp` alone, default-preset far views carried 0.03-0.06 of Monte Carlo noise
-    (tonemapped RMS) where their pixels differ by 0.005-0.007: the discriminator was shown noise that no
-    filtered pixel can make, and the far-view figures compared models with noise.
-    Default preset, 300 steps, seed 3, 64 held-out far views: a model without mip levels shimmers 1.14
-    (1.07-1.20) times the full model trained on noisy far views, 1.23 (1.16-1.30) times on these; over 16
-    views the full model's shimmer 0.0023 -> 0.0020 (path-traced strands 0.0020)."""
-    return config.training_spp * (config.image_size // camera.width) ** 2
-
-
 def instance_tracer(config: MesoganConfig, instance: Instance) -> PathTracer:
     return PathTracer(compile_scene(slab_scene(config, instance)))
 
@@ -260,8 +246,7 @@ class SlabSource:
         """Instance j's view, rendered on first use."""
         if j not in self._views:
             c = self.config.mesogan
-            instance = self.draw(j)
-            self._views[j] = render_instance(c, instance, view_spp(c, instance.camera), seed=j)
+            self._views[j] = render_instance(c, self.draw(j), c.training_spp, seed=j)
         return self._views[j]
 
     def batch(self, index: int) -> Batch:
