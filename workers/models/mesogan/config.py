@@ -178,14 +178,14 @@ PRESETS: dict[str, dict] = {
     # over the strands: 0.62 / 1.08 / 1.02 and 0.70 / 1.08 / 1.01 (main at seed 5: 0.87 and 0.90): the
     # two terms agree with each other, but their common level still scatters by seed; seed 5 got 0.10
     # worse, so the mean's 0.02 is within the seeds' scatter. Held-out SWD at seed 5 0.312 -> 0.317.
-    # Grass (`material: grass`; measured by mesogan11b, seed 3, one thread, coarse views then traced at
-    # training_spp, evaluated on 16 held-out views): at 300 steps held-out SWD 0.398 (black 1.03; fur at
-    # the same seed and steps 0.392), generated coverage at density 10 / 80 0.13 / 0.54 (real blades 0.11 /
-    # 0.60: 0.85 of the real spread; fur 0.95), stop height at length 0.4 / 1.0 0.06 / 0.23 (real 0.04 /
-    # 0.22: 0.97; fur 0.81); at 1000 steps (390 s CPU with the renders) 0.98 and 1.11 of the real spreads,
-    # SWD 0.440. Curliness barely moves real blades (coverage 0.42 -> 0.46). A red / blue colour label moves
-    # the views' mean red minus blue to +0.10 / -0.06 and leaves density and stop height exactly unchanged.
-    # The quick preset's 0.33 of the coverage spread on grass (60 steps) is its few steps, not grass.
+    # Grass (`material: grass`; measured by mesogan11b, seed 3, one thread, evaluated on 16 held-out views
+    # whose far ones are converged, `evaluate.reference_spp`): at 300 steps held-out SWD 0.398 (black 1.03;
+    # fur at the same seed and steps 0.392), generated coverage at density 10 / 80 0.13 / 0.54 (real blades
+    # 0.11 / 0.60: 0.85 of the real spread; fur 0.95), stop height at length 0.4 / 1.0 0.06 / 0.23 (real
+    # 0.04 / 0.22: 0.97; fur 0.81); at 1000 steps (390 s CPU with the renders) 0.98 and 1.11 of the real
+    # spreads, SWD 0.440. Curliness barely moves real blades (coverage 0.42 -> 0.46). A red / blue colour
+    # label moves the views' mean red minus blue to +0.10 / -0.06 and leaves density and stop height exactly
+    # unchanged. The quick preset's 0.33 of the coverage spread on grass (60 steps) is its few steps.
     # Far (coarse) training views traced with coarse_block^2 times training_spp, so each pixel is its
     # footprint's converged radiance as held-out views are (`evaluate.reference_spp`; measured by
     # mesogan11b, not kept). 300 steps, seeds 3 / 5 / 7: far shimmer 0.92 / 0.81 / 0.86 times (64 views),
