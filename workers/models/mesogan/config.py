@@ -73,10 +73,11 @@ class MesoganConfig(TrainedKindConfig):
     # path-traced strands 0.0020; the far-view SWD cannot see it). The default's far pixels span about 3
     # texels and read levels 0-1: without mip levels the model shimmers 1.14 (95% over views 1.07-1.20)
     # times the full model over 64 far views (16 views: 0.0026 / 0.0023; far SWD 0.199 / 0.200, held-out
-    # SWD 0.374 / 0.392). Trained with converged far views (below) 1.23 (1.16-1.30), and on a plane twice
+    # SWD 0.374 / 0.392). Trained on converged far views (default preset) 1.23 (1.16-1.30); on a plane twice
     # as fine as well (texel 0.125, 96 texels, 41% more training CPU; far views read levels 1-2) 1.64
     # (1.52-1.78): 0.0036 / 0.0023 over 16 views, far SWD 0.208 / 0.196, held-out SWD 0.402 / 0.399.
-    # Over 16 views the full weights read at level 0 shimmer 0.0030 (0.0042 on the finer plane).
+    # Over 16 views the full weights read at level 0 shimmer 0.0030 (0.0042 on the finer plane). The finer
+    # plane on main's training data, seed 5: 1.69 (1.60-1.78) over 64 views (0.0047 / 0.0028), all of them.
     mipmapping: bool = Field(True, description="cone footprints select mip levels (Sec. 6.2.7)")
 
     # Decoder and rendering (Sec. 6.2.6-6.2.7).
