@@ -5,10 +5,13 @@ shell covers), median frame CPU times (one thread), CPU time to equal error, and
 against strand triangles); plus held-out generation quality (pyramid SWD and block error against a black
 image).
 
-The model is trained here at the `quick` preset with `MESOGAN_BENCH_STEPS` steps (default 200, minutes on
-this CPU), or read from the artifact folder `MESOGAN_ARTIFACT`. With `MESOGAN_BENCH_ABLATION_STEPS` > 0,
-the thesis's ablations (no mipmapping, fixed frequencies, no injection) and the full model are each
-trained that many quick steps and scored on the same held-out views.
+The model is trained here at the preset `MESOGAN_BENCH_PRESET` (default `quick`) with `MESOGAN_BENCH_STEPS`
+steps (default 200, minutes on this CPU), or read from the artifact folder `MESOGAN_ARTIFACT`. With
+`MESOGAN_BENCH_ABLATION_STEPS` > 0, the thesis's ablations (no mipmapping, fixed frequencies, no
+injection) and the full model are each trained that many steps at that preset and scored on the same
+held-out views. Where the preset has far (coarse) views, every model's far views are also scored, and
+their aliasing measured as shimmer under sub-pixel pans against path-traced strands
+(`evaluate.far_view_shimmer`): the SWD cannot see it there.
 """
 
 from __future__ import annotations
@@ -26,7 +29,16 @@ from tests.support.jobs import run_kind_job
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import build_shell, covering, neural_material, with_strands
-from workers.models.mesogan.evaluate import generation_scores, held_out_views, structure_response
+from workers.models.mesogan.evaluate import (
+    SHIMMER_SPP,
+    far_view_pans,
+    generated_pans,
+    generation_scores,
+    held_out_views,
+    real_pans,
+    shimmer_figures,
+    structure_response,
+)
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.run import TRIANGLE_BYTES, covered_pixels
 from workers.models.mesogan.sampling import SlabSource, SlabSourceConfig, cone_radius
@@ -44,6 +56,7 @@ SIZE = 32
 SPPS = (1, 2, 4, 8, 16, 64)
 REFERENCE_SPP = 256
 SEED = 5
+PRESET = os.environ.get("MESOGAN_BENCH_PRESET", "quick")
 
 
 def trained_artifact() -> Path:
@@ -52,7 +65,7 @@ def trained_artifact() -> Path:
     steps = int(os.environ.get("MESOGAN_BENCH_STEPS", "200"))
     folder = Path(tempfile.mkdtemp(prefix="bench-mesogan-"))
     overrides = {"train": {"steps": steps}}
-    _, outcome = run_kind_job("mesogan", get_builtin("fur_ball"), folder, overrides, seed=SEED)
+    _, outcome = run_kind_job("mesogan", get_builtin("fur_ball"), folder, overrides, preset=PRESET, seed=SEED)
     assert outcome.state == "succeeded", outcome.error
     return folder / "out"
 
@@ -136,23 +149,32 @@ def run() -> list[BenchSection]:
     quality = BenchSection("mesogan generation on 16 held-out path-traced slab views")
     source = SlabSource(SlabSourceConfig(mesogan=config), SEED)
     held_out = held_out_views(source, 16)
-    quality.add(model="trained", **generation_scores(model, held_out))
-    if config.coarse_distances:  # the far views, whose pixels read the coarse mip levels (Sec. 6.2.7)
-        far = held_out_views(source, 16, coarse=True)
-        quality.add(model="trained, coarse views only", **generation_scores(model, far))
+    far = held_out_views(source, 16, coarse=True) if config.coarse_distances else None
+    aliasing = BenchSection(
+        "mesogan aliasing at distance: 16 held-out far views panned by k/8 of a pixel (k < 8), RMS of each "
+        "pixel's standard deviation over the pans (shimmer) and over a view's pixels (contrast), "
+        f"tonemapped; path-traced strands at {SHIMMER_SPP} spp, their noise taken out"
+    )
+    models = {"trained": model}
     if steps := int(os.environ.get("MESOGAN_BENCH_ABLATION_STEPS", "0")):
-        for name, overrides in ABLATIONS.items():
-            quality.add(
-                model=f"{name}, {steps} steps",
-                **generation_scores(ablation(name, overrides, steps), held_out),
-            )
+        models |= {f"{name}, {steps} steps": ablation(name, o, steps) for name, o in ABLATIONS.items()}
+    if far is not None:
+        panned = far_view_pans(source, 16)
+        real, noise_variance = real_pans(config, panned, SHIMMER_SPP)
+        aliasing.add(model="path-traced strands", **shimmer_figures(real, noise_variance))
+        aliasing.notes.append(f"the truth's Monte Carlo noise, taken out: {noise_variance**0.5:.4f}")
+    for name, scored in models.items():
+        quality.add(model=name, **generation_scores(scored, held_out))
+        if far is not None:  # the far views, whose pixels read the coarse mip levels (Sec. 6.2.7)
+            quality.add(model=f"{name}, far views only", **generation_scores(scored, far))
+            aliasing.add(model=name, **shimmer_figures(generated_pans(scored, panned)))
     conditioning = BenchSection(
         "mesogan conditioning on 16 held-out views: coverage at the lowest / highest density and curliness "
         "labels, height where rays stop at the shortest / longest length label, generated and of real "
         "strands (_real)"
     )
     conditioning.add(model="trained", **structure_response(model, source, 16))
-    return [curve, memory, quality, conditioning]
+    return [curve, memory, quality, *([aliasing] if far is not None else []), conditioning]
 
 
 ABLATIONS = {
@@ -164,7 +186,7 @@ ABLATIONS = {
 
 
 def ablation(name: str, overrides: dict, steps: int) -> MesoGAN:
-    config = KIND.resolve_config("quick", {**overrides, "train": {"steps": steps}})
+    config = KIND.resolve_config(PRESET, {**overrides, "train": {"steps": steps}})
     spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), SEED)
     torch.manual_seed(SEED)
     model = MesoGAN(config)

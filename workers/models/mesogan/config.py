@@ -69,6 +69,16 @@ class MesoganConfig(TrainedKindConfig):
     # Ablations of the thesis (measured in the report's figures).
     inject: bool = Field(True, description="random Fourier features injected at every layer (Sec. 6.2.5)")
     redraw_frequencies: bool = Field(True, description="input frequencies re-drawn every step (Sec. 6.2.4)")
+    # Aliasing at distance without mip levels (measured by mesogan11b: fur, default preset, 300 steps, seed
+    # 3, `evaluate.far_view_shimmer`: the RMS change of held-out far-view pixels under sub-pixel pans,
+    # path-traced strands 0.0020; the far-view SWD cannot see it). The default's far pixels span about 3
+    # texels and read levels 0-1: without mip levels the model shimmers 1.14 (95% over views 1.07-1.20)
+    # times the full model over 64 far views (16 views: 0.0026 / 0.0023; far SWD 0.199 / 0.200, held-out
+    # SWD 0.374 / 0.392). Trained on converged far views (default preset) 1.23 (1.16-1.30); on a plane twice
+    # as fine as well (texel 0.125, 96 texels, 41% more training CPU; far views read levels 1-2) 1.64
+    # (1.52-1.78): 0.0036 / 0.0023 over 16 views, far SWD 0.208 / 0.196, held-out SWD 0.402 / 0.399.
+    # Over 16 views the full weights read at level 0 shimmer 0.0030 (0.0042 on the finer plane). The finer
+    # plane on main's training data, seed 5: 1.69 (1.60-1.78) over 64 views (0.0047 / 0.0028), all of them.
     mipmapping: bool = Field(True, description="cone footprints select mip levels (Sec. 6.2.7)")
 
     # Decoder and rendering (Sec. 6.2.6-6.2.7).
@@ -170,6 +180,20 @@ PRESETS: dict[str, dict] = {
     # over the strands: 0.62 / 1.08 / 1.02 and 0.70 / 1.08 / 1.01 (main at seed 5: 0.87 and 0.90): the
     # two terms agree with each other, but their common level still scatters by seed; seed 5 got 0.10
     # worse, so the mean's 0.02 is within the seeds' scatter. Held-out SWD at seed 5 0.312 -> 0.317.
+    # Grass (`material: grass`; measured by mesogan11b, seed 3, one thread, evaluated on 16 held-out views
+    # whose far ones are converged, `evaluate.reference_spp`): at 300 steps held-out SWD 0.398 (black 1.03;
+    # fur at the same seed and steps 0.392), generated coverage at density 10 / 80 0.13 / 0.54 (real blades
+    # 0.11 / 0.60: 0.85 of the real spread; fur 0.95), stop height at length 0.4 / 1.0 0.06 / 0.23 (real
+    # 0.04 / 0.22: 0.97; fur 0.81); at 1000 steps (390 s CPU with the renders) 0.98 and 1.11 of the real
+    # spreads, SWD 0.440. Curliness barely moves real blades (coverage 0.42 -> 0.46). A red / blue colour
+    # label moves the views' mean red minus blue to +0.10 / -0.06 and leaves density and stop height exactly
+    # unchanged. The quick preset's 0.33 of the coverage spread on grass (60 steps) is its few steps.
+    # Far (coarse) training views traced with coarse_block^2 times training_spp, so each pixel is its
+    # footprint's converged radiance as held-out views are (`evaluate.reference_spp`; measured by
+    # mesogan11b, not kept). 300 steps, seeds 3 / 5 / 7: far shimmer 0.92 / 0.81 / 0.86 times (64 views),
+    # but held-out SWD 0.392 / 0.323 / 0.321 -> 0.433 / 0.337 / 0.308, far SWD 0.200 / 0.165 / 0.153 ->
+    # 0.196 / 0.177 / 0.158, coverage response over the real 0.95 / 1.01 / 0.74 -> 0.91 / 0.59 / 0.80,
+    # stop height 0.81 / 0.64 / 0.49 -> 0.78 / 0.39 / 0.44. The fur ball was not measured.
     "default": {
         "image_size": 32,
         "plane_resolution": 48,
