@@ -1,7 +1,8 @@
 """The traced data a `prt` job learns from and is measured on, built once per process and cached.
 
 - The training set: for each training view, `rows_per_view` pixels that see geometry, their G-buffer
-  inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from.
+  inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from and
+  each row's nearest rows, whose mean is its training target (`neighbours`).
 - The test set: the near and far held-out views and their G-buffers (their ground truth depends on the
   lighting: `evaluate.truth` path-traces it importance-sampled per held-out lighting).
 - The box of the hash grid: what the camera sees from every view, padded.
