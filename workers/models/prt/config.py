@@ -129,8 +129,8 @@ class PrtConfig(TrainedKindConfig):
     #                    rows 1,  M 64: 26.52 (30.26) / 25.70 (30.22) [24.96 / 24.17]   85-87 s
     #                    rows 16, M 16: 25.88 (29.87) / 25.01 (29.58) [24.41 / 23.77]   50-52 s
     #                    rows 16, M 64: 27.59 (30.58) / 26.81 (30.36) [25.52 / 24.90]   96-105 s
-    #   glossy_row (seed 0 only): rows 1, M 16: 20.33 (23.77) [19.44 / 23.16 full]   64 s
-    #                             rows 16, M 64: 22.61 (26.28) [21.08 / 25.17 full]  119 s
+    #   glossy_row       rows 1,  M 16: 20.33 (23.77) / 19.84 (23.53) [19.44 / 19.08]   59-64 s
+    #                    rows 16, M 64: 22.61 (26.28) / 21.88 (25.73) [21.08 / 20.63]   101-119 s
     # Rerunning rows 16, M 64 with the rows averaged once beforehand (float32) gave 27.62 / 27.06: runs
     # differ by ~0.25 dB. M 16 at 4000 steps comes as far, 28.01 (30.85) / 26.19 (30.22), for 135-144 s.
     # Quick and paper keep 2 features (the paper: 32 levels x 2 = 64).
