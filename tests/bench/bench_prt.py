@@ -24,7 +24,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tests.bench.common import BenchSection, seconds_at_error
 from tests.support.jobs import run_kind_job
@@ -34,6 +33,7 @@ from workers.models.prt.evaluate import truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.neighbours import mean_rows, nearest_rows
 from workers.models.prt.probe import modelled_objects
 from workers.models.prt.source import unit_mean
 from workers.models.prt.transport import trace_rows
@@ -49,11 +49,6 @@ SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
 TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "1024"))  # the 256-spp job truth caps PSNR near 27 dB
 NEAREST_ROWS = 16  # training rows averaged per held-out pixel by the model-free baseline
-# Reflected directions against positions (box diagonals) in the baseline's distance, env_lit_objects,
-# default preset, held-out indirect PSNR against a 1024-spp truth: weight 0 / 0.01 / 0.02 / 0.03 / 0.05 /
-# 0.1 / 0.3 / 1 scored 23.4 / 25.6 / 26.1 / 26.2 / 26.1 / 25.2 / 22.7 / 21.4 dB (chosen on the held-out
-# truth: if anything, the baseline is flattered).
-DIRECTION_WEIGHT = 0.03
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
 ABLATION = (
     ("table 2^10", {"grid": {"log2_table_size": 10}}),
@@ -121,20 +116,11 @@ def nearest_rows_indirect(
     data: TrainingSet, inputs: SurfaceInputs, objects: np.ndarray, cube: np.ndarray
 ) -> np.ndarray:
     """The model-free baseline: each modelled pixel's indirect light (N, 3) under `cube` is the mean of its
-    `NEAREST_ROWS` nearest training rows on the same object (by position in box diagonals and
-    `DIRECTION_WEIGHT` times the reflected direction), dotted with the lighting; 0 elsewhere."""
-    diagonal = float(np.linalg.norm(data.box[1] - data.box[0]))
-    features = lambda s: np.hstack([s.position / diagonal, DIRECTION_WEIGHT * s.reflected])  # noqa: E731
-    radiance = np.einsum("pjc,jc->pc", data.rows, cube.reshape(-1, 3))
+    `NEAREST_ROWS` nearest traced training rows on the same object (`neighbours`), dotted with the
+    lighting; 0 elsewhere."""
     out = np.zeros((len(inputs.hit), 3))
-    for obj in objects:
-        train = np.flatnonzero(data.inputs.object_id == obj)
-        query = np.flatnonzero(inputs.modelled(np.array([obj])))
-        if len(train) == 0 or len(query) == 0:
-            continue
-        k = min(NEAREST_ROWS, len(train))
-        _, nearest = cKDTree(features(data.inputs.take(train))).query(features(inputs.take(query)), k=k)
-        out[query] = radiance[train[nearest.reshape(len(query), k)]].mean(axis=1)
+    for pixels, nearest in nearest_rows(data.inputs, inputs, data.box, objects, NEAREST_ROWS):
+        out[pixels] = np.einsum("pjc,jc->pc", mean_rows(data.rows, nearest), cube.reshape(-1, 3))
     return out
 
 

@@ -186,6 +186,51 @@ def test_per_wavelet_transport_targets_sum_to_the_row_dotted_with_the_lighting()
     )
 
 
+def _points_on_a_line(n: int):
+    from workers.models.prt.gbuffer import SurfaceInputs
+
+    up = np.tile([0.0, 1.0, 0.0], (n, 1))
+    position = np.zeros((n, 3))
+    position[:, 0] = 0.1 * np.arange(n)
+    inputs = SurfaceInputs(
+        hit=np.ones(n, bool), position=position, normal=up, reflected=up, kd=np.full((n, 3), 0.5),
+        ks=np.zeros((n, 3)), roughness=np.ones(n), object_id=np.arange(n) % 2,
+    )  # fmt: skip
+    return inputs, np.array([[0.0, -1.0, -1.0], [0.1 * n, 1.0, 1.0]])
+
+
+def test_row_neighbours_are_the_nearest_rows_on_the_row_s_own_object():
+    from workers.models.prt.neighbours import row_neighbours
+
+    inputs, box = _points_on_a_line(12)  # two objects, alternating along the line
+    neighbours = row_neighbours(inputs, box, 3)
+    assert neighbours.shape == (12, 3)
+    for i in range(2, 10):  # away from the ends: the row and the next ones of its object on either side
+        assert set(neighbours[i]) == {i - 2, i, i + 2}
+    assert (inputs.object_id[neighbours] == inputs.object_id[:, None]).all()
+    # an object with fewer rows than k: every row of it, the farthest repeated
+    lonely = row_neighbours(inputs, box, 8)
+    assert all(set(lonely[i]) == set(range(i % 2, 12, 2)) for i in range(12))
+
+
+def test_training_targets_are_the_mean_of_the_neighbours_rows():
+    from workers.models.prt.data import TrainingSet
+    from workers.models.prt.neighbours import row_neighbours
+
+    inputs, box = _points_on_a_line(12)
+    rows = np.random.default_rng(4).random((12, 6 * 2 * 2, 3)).astype(np.float32)
+    maps = {"uniform": np.ones(12)}
+    picked = np.array([3, 3, 8, 11])
+    smoothed = TrainingSet(inputs, rows, box, maps, row_neighbours(inputs, box, 3))
+    targets = smoothed.targets(picked)
+    assert targets.shape == (4, 24, 3) and targets.dtype == np.float64
+    nearest = {3: [1, 3, 5], 8: [6, 8, 10], 11: [7, 9, 11]}  # on the row's object, along the line
+    for target, i in zip(targets, picked, strict=True):
+        np.testing.assert_allclose(target, rows[nearest[i]].mean(0), rtol=1e-6)
+    itself = TrainingSet(inputs, rows, box, maps, row_neighbours(inputs, box, 1))
+    assert (itself.targets(picked) == rows[picked]).all()  # k = 1: the traced rows, unchanged
+
+
 def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wavelets():
     from workers.models.prt.train import prt_loss
     from workers.nn.losses import mu_law_l2

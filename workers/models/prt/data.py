@@ -1,7 +1,8 @@
 """The traced data a `prt` job learns from and is measured on, built once per process and cached.
 
 - The training set: for each training view, `rows_per_view` pixels that see geometry, their G-buffer
-  inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from.
+  inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from and
+  each row's nearest rows, whose mean is its training target (`neighbours`).
 - The test set: the near and far held-out views and their G-buffers (their ground truth depends on the
   lighting: `evaluate.truth` path-traces it importance-sampled per held-out lighting).
 - The box of the hash grid: what the camera sees from every view, padded.
@@ -20,6 +21,7 @@ import torch
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
 from workers.models.prt.lighting import relit_tracer, uniform_cube
+from workers.models.prt.neighbours import mean_rows, row_neighbours
 from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays, trajectory_cameras
 from workers.nn.haar import cubemap_wavelets
@@ -39,12 +41,18 @@ class TrainingSet:
     rows: np.ndarray  # (P, 6 R^2, 3) float32 indirect transport
     box: np.ndarray  # (2, 3)
     map_weights: dict[str, np.ndarray]  # pixel map -> (P,) sampling weights
+    neighbours: np.ndarray  # (P, k) the rows whose mean is each row's training target (k = 1: itself)
     # pixel map -> (P,) normalised cumulative weights, None if the map is zero everywhere (built once: a
     # `rng.choice(p=...)` per draw is O(P), which made a step's cost grow with the rows)
     map_cdfs: dict[str, np.ndarray | None] = field(init=False)
 
     def __post_init__(self) -> None:
         self.map_cdfs = {name: _cdf(w) for name, w in self.map_weights.items()}
+
+    def targets(self, picked: np.ndarray) -> np.ndarray:
+        """(N, 6 R^2, 3) float64: the transport training takes for pixels `picked`, the mean of each one's
+        `neighbours`' rows (`PrtConfig.row_neighbours`)."""
+        return mean_rows(self.rows, self.neighbours[picked])
 
 
 def _cdf(weights: np.ndarray) -> np.ndarray | None:
@@ -89,6 +97,7 @@ TRACING_FIELDS = {
     "max_depth",
     "probe_spp",
     "cameras",
+    "row_neighbours",
 }
 
 
@@ -161,8 +170,13 @@ def _build_training_set(
         *(np.concatenate([getattr(i, k) for i in inputs]) for k in SurfaceInputs.__dataclass_fields__)
     )
     all_rows = np.concatenate(rows)
+    box = scene_box(scene, config)
     return TrainingSet(
-        merged, all_rows, scene_box(scene, config), _pixel_maps(merged, all_rows, config.cube_size)
+        merged,
+        all_rows,
+        box,
+        _pixel_maps(merged, all_rows, config.cube_size),
+        row_neighbours(merged, box, config.row_neighbours),
     )
 
 

@@ -2,7 +2,8 @@
 distribution (the paper one, here `lightings_per_step`: one lighting's gradient pulls the whole network
 towards a single sun or sky, and which lightings came first decided the result), takes each one's Haar
 transform and picks its wavelets (largest + uniform), then samples an equal share of the pixels for each
-from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L.
+from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L,
+the row being the mean of the pixel's `row_neighbours` nearest traced rows (`neighbours`).
 Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss). With
 `lighting_pool` > 0 the lightings are drawn from a pool built once per job (cube, Haar transform and
 ranking precomputed), so many lightings per step cost little; the wavelets and pixels stay fresh per draw.
@@ -110,18 +111,20 @@ class PrtSource:
         `wavelets` [G, K], `coefficients` [G, K, 3], pixels group after group."""
         c = self.config.prt
         rng = batch_rng(self.seed, index)
-        wavelets, values, pixels, targets = [], [], [], []
+        wavelets, values, pixels, targets, transports = [], [], [], [], []
         for share in lighting_shares(c.pixels_per_step, c.lightings_per_step):
             lighting = self.lighting(rng)
             chosen = training_selection(
                 lighting.wavelets, c.train_top_wavelets, c.train_uniform_wavelets, rng
             )
             picked = sample_pixels(self.data, share, rng)
-            rows = self.data.rows[picked].astype(np.float64)
+            rows = self.data.targets(picked)
             targets.append(np.einsum("pjc,jc->pc", rows, lighting.cube))
             wavelets.append(chosen.indices.long())
             values.append(chosen.values.float())
             pixels.append(picked)
+            if c.transport_weight > 0:
+                transports.append(wavelet_transport(rows, wavelets[-1], c.cube_size))
         picked = np.concatenate(pixels)
         batch = self.data.inputs.take(picked).tensors(self.data.box)
         batch.update(
@@ -129,13 +132,8 @@ class PrtSource:
             coefficients=torch.stack(values),
             target=torch.from_numpy(np.concatenate(targets).astype(np.float32)),
         )
-        if c.transport_weight > 0:
-            batch["transport"] = torch.cat(
-                [
-                    wavelet_transport(self.data.rows[p], w, c.cube_size)
-                    for p, w in zip(pixels, wavelets, strict=True)
-                ]
-            )
+        if transports:
+            batch["transport"] = torch.cat(transports)
         return batch
 
 
