@@ -19,7 +19,10 @@ from workers.scene.reference import SceneRef
 # Measured on the default preset's env_lit_objects job, 2-core CPU under a load of ~15 (bench_prt): 2.2M
 # binned paths in ~55 s; 2000 steps of 128 pixels x 96 wavelets in 481 s.
 PATHS_PER_SECOND = 40_000.0
-STEP_PAIRS_PER_SECOND = 50_000.0  # pixel-wavelet pairs through f per second, forward and backward
+STEP_PAIRS_PER_SECOND = 50_000.0  # pixel-wavelet pairs through f per second at M = 16, forward and backward
+# A pair's cost grows with M (U is M x M, h_k of width M feeds f): 2000 default steps took 52-54 CPU s at
+# M = 16 and 96-105 s at M = 64 (prt11, loaded machine), 1.85x: a pair costs 1 + (M - 16) / 56 times
+# what it costs at M = 16 (`_pair_cost`).
 BYTES_PER_PARAMETER = 2  # float16 as stored
 
 
@@ -82,7 +85,13 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         * config.pixels_per_step
         * (config.train_top_wavelets + config.train_uniform_wavelets)
     )
-    seconds = paths / PATHS_PER_SECOND + pairs / STEP_PAIRS_PER_SECOND
+    seconds = paths / PATHS_PER_SECOND + pairs * _pair_cost(config) / STEP_PAIRS_PER_SECOND
     modelled = sum(c.modelled for c in choices)
     summary = f"indirect light of {modelled} of {len(choices)} objects under any lighting; {rows} rows"
     return Plan(items=items, estimated_seconds=seconds, summary=summary)
+
+
+def _pair_cost(config: PrtConfig) -> float:
+    """A pixel-wavelet pair's cost relative to M = 16 (see STEP_PAIRS_PER_SECOND)."""
+    m = config.grid.levels * config.grid.features_per_level
+    return 1.0 + (m - 16) / 56
