@@ -58,7 +58,11 @@ def check_references(spec: SceneSpec, scene_file: str, names: set[str]) -> None:
         if resolved == ".." or resolved.startswith("../"):
             raise SceneError(field, f"{reference!r} points outside the upload")
         if resolved not in names and not any(name.startswith(f"{resolved}/") for name in names):
-            raise SceneError(field, f"{reference!r} is not in the upload (looked for {resolved!r})")
+            raise SceneError(
+                field,
+                f"{reference!r} is not in the upload (looked for {resolved!r}); upload the scene's folder "
+                "(`nbake submit FOLDER`) to send the files it names",
+            )
 
 
 def file_references(data: Any, field: str = "") -> Iterator[tuple[str, str]]:

@@ -305,6 +305,7 @@ def test_the_scene_file_must_be_found_unambiguously(blobs):
 def test_a_missing_mesh_names_the_field(blobs):
     error = scene_error(loose(scene_files(**{"meshes/box.obj": None})), blobs)
     assert error.field == "objects[0].shape.path" and "meshes/box.obj" in error.problem
+    assert "upload the scene's folder" in error.problem  # a user who sent the scene file alone learns how
 
 
 def test_a_missing_texture_names_the_field(blobs):
