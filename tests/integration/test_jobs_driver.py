@@ -1,11 +1,14 @@
 """The job driver through a real local Ray cluster: results equal direct renders, cancel, resume, failures."""
 
 import json
+import tempfile
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
 import pytest
+import ray
 
 from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
@@ -166,3 +169,47 @@ def test_a_config_the_kind_rejects_fails_the_job_naming_the_field(ray_cluster, t
 
 def test_attaching_to_an_unknown_job_finds_nothing(ray_cluster):
     assert attach_job("no-such-job") is None
+
+
+def scratch_folders(job_id: str) -> list[Path]:
+    """The private folders drivers of `job_id` made (on this node, for a job without an output_dir)."""
+    return list(Path(tempfile.gettempdir()).glob(f"nbake-{job_id}-p*"))
+
+
+def uploading_spec(tmp_path, job_id: str, overrides: dict) -> JobSpec:
+    """A service's job: the artifact is written to a private folder, then uploaded to the store."""
+    spec = job_spec(tmp_path, job_id, overrides)
+    return spec.model_copy(
+        update={
+            "checkpoint_dir": str(tmp_path / job_id / "checkpoints"),
+            "output_dir": None,
+            "output_url": (tmp_path / job_id / "store").as_uri(),
+        }
+    )
+
+
+def test_ending_a_running_driver_removes_its_private_folder(ray_cluster, tmp_path):
+    job_id = f"scratch-{uuid.uuid4().hex[:8]}"
+    handle = start_job(uploading_spec(tmp_path, job_id, {"width": 32, "height": 32, "spp": 4096}))
+    follow(handle, until=progress_steps)
+    assert len(scratch_folders(job_id)) == 1
+    handle.release()  # as the service ends an abandoned or lost job: its `finally` never runs
+    assert scratch_folders(job_id) == []
+
+
+def test_a_driver_that_died_unannounced_has_its_folder_removed_by_the_next_job(ray_cluster, tmp_path):
+    crashed, job_id = f"crash-{uuid.uuid4().hex[:8]}", f"next-{uuid.uuid4().hex[:8]}"
+    handle = start_job(uploading_spec(tmp_path, crashed, {"width": 32, "height": 32, "spp": 4096}))
+    follow(handle, until=progress_steps)
+    ray.kill(handle.actor, no_restart=True)  # a crash: nobody asks it to clean up
+    deadline = time.monotonic() + WAIT_S
+    while handle.alive() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    handle.release()  # as the service does once it stored the failure: the driver cannot answer now
+    assert len(scratch_folders(crashed)) == 1
+
+    following = start_job(uploading_spec(tmp_path, job_id, {"width": 8, "height": 8, "spp": 1}))
+    outcome, _ = follow(following)
+    following.release()
+    assert outcome.state == "succeeded", outcome.error
+    assert scratch_folders(crashed) == [] and scratch_folders(job_id) == []

@@ -12,7 +12,6 @@ import collections
 import contextlib
 import math
 import shutil
-import tempfile
 import threading
 import time
 import traceback
@@ -34,6 +33,7 @@ from ray.exceptions import (
     WorkerCrashedError,
 )
 
+from workers.driver import scratch
 from workers.driver.placement import remove_reservation, sampler_reserver
 from workers.models.registry import get_kind
 from workers.runtime.checkpoints import CheckpointStore
@@ -140,7 +140,9 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
     def log(message: str) -> None:
         emit(JobEvent(type="log", time=time.time(), message=message))
 
-    output_dir = Path(spec.output_dir or tempfile.mkdtemp(prefix=f"nbake-{spec.job_id}-"))
+    if spec.output_dir is None:
+        scratch.sweep()  # what drivers on this node that were ended from outside left behind
+    output_dir = Path(spec.output_dir) if spec.output_dir else scratch.make(spec.job_id)
     try:
         kind = get_kind(spec.kind)
         ctx = JobContext(
@@ -249,6 +251,10 @@ class JobDriver:
     def ping(self) -> bool:
         return True
 
+    def remove_scratch(self) -> None:
+        """Remove the job's private folder before the driver is ended (its `finally` will not run)."""
+        scratch.remove_own()
+
 
 def actor_name(job_id: str) -> str:
     return f"nbake-job-{job_id}"
@@ -305,6 +311,8 @@ class JobHandle:
 
     def release(self) -> None:
         """End the driver process and free its samplers' reservation (after its outcome was stored)."""
+        with contextlib.suppress(RayActorError):  # a dead driver's folder goes with the node's next job
+            self._call(self.actor.remove_scratch, default=None)
         ray.kill(self.actor, no_restart=True)
         remove_reservation(self.job_id)
 
