@@ -48,6 +48,16 @@ class ExploreConfig(TrainedKindConfig):
     # rendered the hard light positions at 0.97-1.14x the uniform rate; with whole-frame patches
     # (patch = R = 32) at 0.8-2.8x (explore4 notes)
     patch: int = Field(16, ge=4, le=128, description="side of a training patch, pixels")
+    # Chains over v alone, so that f ranks configurations rather than patch positions, were measured as an
+    # option and dropped (explore12; bench_explore 60 CPU s, seeds 3/4, one run under heavy load, averaged
+    # weights, DSSIM over the second half against uniform, cornell / mirror). Paired: each generation draws
+    # every chain a fresh position and renders the proposal and the current v there (the position's share
+    # of the loss cancels; twice the renders): 1.08/0.99 and 1.05/1.25 (over uniform_schedule 1.17/1.10,
+    # 1.04/1.14) at 0.74-0.78x uniform's steps; acceptance 0.49-0.51 and a state kept ~1 generation: at one
+    # position f barely tells one v from another, so the chains walk nearly at random in v (at equal steps
+    # 0.90/0.80 and 0.98/1.21). Unpaired (a fresh position per proposal, judged against the current v's
+    # stored patch): 0.99/0.83 and 1.08/1.14, the chains parking again on the highlight's patch. Whole-view
+    # patches (patch = R = 32, 2 chains, no schedule): 1.34/1.20 and 1.40/1.35.
     chains: int = Field(8, ge=1, le=256, description="Markov chains, one patch each per generation")
     # The schedule (Sec. 5.5.2), bench_explore 60 CPU s, seeds 3/4, averaged weights (explore7): active
     # without it is 28-32% worse on cornell_variable (0.041/0.040 vs 0.032/0.031) but 23-25% better on
