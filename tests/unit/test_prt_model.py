@@ -26,7 +26,7 @@ from workers.models.prt.selection import (
     wavelets_of,
 )
 from workers.models.prt.views import trajectory_cameras
-from workers.nn.cubemap import cubemap_solid_angles
+from workers.nn.cubemap import cubemap_solid_angles, direction_to_texel
 from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
 from workers.runtime.contract import resolve_preset
@@ -61,6 +61,17 @@ def test_a_constant_map_has_exactly_six_nonzero_coefficients(size):
 def test_texel_directions_round_trip_and_solid_angles_cover_the_sphere(size):
     assert np.array_equal(texels_of(cube_directions(size), size), np.arange(6 * size * size))
     assert cubemap_solid_angles(size, torch.float64).sum().item() == pytest.approx(4 * math.pi, rel=1e-12)
+
+
+@pytest.mark.parametrize("size", [1, 8, 64])
+def test_compiled_texel_lookup_is_the_torch_one(size):
+    """Ties between components (cube edges and corners) go to the first largest one, as torch's argmax."""
+    rng = np.random.default_rng(0)
+    directions = np.concatenate(
+        [rng.normal(size=(20000, 3)), np.round(rng.normal(size=(2000, 3))), np.eye(3), -np.eye(3)]
+    )
+    expected = direction_to_texel(torch.from_numpy(directions), size).numpy()
+    assert np.array_equal(texels_of(directions, size), expected)
 
 
 def test_a_rotated_map_resamples_to_the_texels_the_path_tracer_reads():
