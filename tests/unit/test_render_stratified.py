@@ -16,12 +16,21 @@ from workers.scene.compile import compile_scene
 
 @pytest.mark.parametrize(("spp", "dims"), [(16, 2), (8, 2), (7, 2), (16, 1), (1, 2)])
 def test_each_pixel_takes_every_stratum_once(spp, dims):
-    u = stratified(np.random.default_rng(0), 5, spp, dims).reshape(5, spp, dims)
+    groups = ((0, 1),) if dims == 2 else ((0,),)
+    u = stratified(np.random.default_rng(0), 5, spp, groups).reshape(5, spp, dims)
     assert ((u >= 0) & (u < 1)).all()
     sizes = grid(spp) if dims == 2 else (spp,)
     cells = np.floor(u * np.asarray(sizes)).astype(int)
     flat = cells[..., 0] + (cells[..., 1] * sizes[0] if dims == 2 else 0)
     assert all(sorted(pixel) == list(range(spp)) for pixel in flat)
+
+
+def test_a_subset_of_paths_keeps_the_strata_all_paths_would_take():
+    """The first vertex's uniforms of the paths that hit lie in those paths' strata among every path's."""
+    groups, paths = ((0,), (1, 2)), np.array([0, 3, 5, 6, 11])
+    every = np.floor(stratified(np.random.default_rng(1), 3, 4, groups) * [4, 2, 2])
+    subset = np.floor(stratified(np.random.default_rng(1), 3, 4, groups, paths) * [4, 2, 2])
+    assert np.array_equal(subset, every[paths])
 
 
 def test_grid_is_the_most_nearly_square_factorisation():
