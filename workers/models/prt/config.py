@@ -244,7 +244,30 @@ class PrtConfig(TrainedKindConfig):
     # penalises the slight blur. bench_prt (report's far view, wall clock on the loaded machine, same run):
     # equal-time ratio env_lit_objects 3.7 by FLIP / 1.7 by PSNR, glossy_row 10.6 / 4.0 (prt6's 128 raw, a
     # run apart: 7.2 / 18.8 by FLIP); against the 1024-spp truth, full frame 26.25 -> 26.45 dB and 21.88 ->
-    # 21.91 (same networks). Quick keeps the raw direct light; the paper denoises (Sec. 6).
+    # 21.91 (same networks).
+    # The frame as a curve (prt12a; bench_prt's `frame_curve`: report's far view, lighting and 256-spp
+    # reference, CPU s of one frame on one thread, medians of 3 seeds, two runs on the loaded machine; the
+    # direct light and path tracing now stratified (`workers.render.stratified`) and the cube lookup
+    # compiled, which made path tracing 1.4x faster at 64 spp and +2.9 dB). (spp: s, dB, FLIP):
+    #   env_lit_objects  path tracing      16: 0.045-0.050 28.36 0.063, 64: 0.17-0.19 34.28 0.034
+    #                    model raw         4: 0.11-0.12 22.04 0.125, 16: 0.15-0.16 29.28 0.067,
+    #                                      64: 0.25-0.29 34.03 0.046
+    #                    model denoised    4: 0.13-0.17 24.61 0.112, 16: 0.16-0.19 30.71 0.065,
+    #                                      64: 0.28-0.30 34.36 0.046
+    #   glossy_row       path tracing      8: 0.035-0.036 23.08 0.113, 16: 0.062-0.067 26.27 0.080
+    #                    model raw         8: 0.14-0.15 26.16 0.139, 16: 0.16-0.19 27.72 0.127,
+    #                                      64: 0.25-0.28 28.62 0.120
+    #                    model denoised    16: 0.18-0.20 28.07 0.126, 64: 0.28-0.30 28.62 0.121
+    # Best equal-time ratios (against the faster of stratified and independent path tracing): FLIP 2.5-3.1
+    # and PSNR 1.4-1.8 on env_lit_objects (64 spp, raw or denoised within the runs' noise), FLIP 5.4-5.5
+    # and PSNR 1.7-1.8 on glossy_row (8-16 spp): over 1 at every setting. A frame costs 0.10-0.20 s even at
+    # 1 spp: the network (64 wavelets x 2304 pixels through f) takes ~0.1 s, what path tracing spends on 32
+    # to 64 spp; its error floor on glossy_row (28.6 dB, FLIP 0.12) is path tracing's at ~28 spp by PSNR
+    # and ~7 by FLIP. Denoising still pays below 16 spp (serving's default is 4) and is even at 64 (the
+    # order flips between runs): the defaults stay. Stratifying the direct light (path tracing stratified
+    # in both cases) lifted the model's 64 spp denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on
+    # env_lit_objects, 28.46 / 0.126 -> 28.62 / 0.121 on glossy_row. Quick keeps the raw direct light; the
+    # paper denoises (Sec. 6).
     evaluation_spp: int = Field(
         64, ge=1, le=65536, description="spp of the model's direct light (before denoising)"
     )
