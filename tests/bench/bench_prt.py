@@ -7,6 +7,8 @@ driver: PSNR / SSIM of the full frame and of indirect light, FLIP, on near and f
 held-out lightings (HDRIs and procedural maps never trained on), against the trivial baseline of no
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
+Then the model's frame as a curve (`frame_curve`: its direct light's spp, raw and denoised, beside path
+tracing with either sampler, in CPU s), with the equal-time ratio of every setting.
 Then the same held-out views and lightings against a truth at `TRUTH_SPP` (two independent halves: their
 difference estimates the truth's own noise, so the section states the PSNR a perfect model would score and
 the PSNR with that noise taken out), the network beside the model-free nearest-rows baseline on the same
