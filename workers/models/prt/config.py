@@ -262,12 +262,14 @@ class PrtConfig(TrainedKindConfig):
     # and PSNR 1.4-1.8 on env_lit_objects (64 spp, raw or denoised within the runs' noise), FLIP 5.4-5.5
     # and PSNR 1.7-1.8 on glossy_row (8-16 spp): over 1 at every setting. A frame costs 0.10-0.20 s even at
     # 1 spp: the network (64 wavelets x 2304 pixels through f) takes ~0.1 s, what path tracing spends on 32
-    # to 64 spp; its error floor on glossy_row (28.6 dB, FLIP 0.12) is path tracing's at ~28 spp by PSNR
-    # and ~7 by FLIP. Denoising still pays below 16 spp (serving's default is 4) and is even at 64 (the
-    # order flips between runs): the defaults stay. Stratifying the direct light (path tracing stratified
-    # in both cases) lifted the model's 64 spp denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on
-    # env_lit_objects, 28.46 / 0.126 -> 28.62 / 0.121 on glossy_row. Quick keeps the raw direct light; the
-    # paper denoises (Sec. 6).
+    # to 64 spp. In bench_prt's own process (after its job) the network took 0.05-0.06 s, frames 0.07 s at
+    # 1 spp and 0.17 at 64 raw, path tracing as above: env_lit_objects 1.81 by FLIP and 1.09 by PSNR (32
+    # raw; 64 raw 1.82 / 1.11), why unexplained (not load, heap or denormals). The network's error floor on
+    # glossy_row (28.6 dB, FLIP 0.12) is path tracing's at ~28 spp by PSNR and ~7 by FLIP. Denoising still
+    # pays below 16 spp (serving's default is 4) and is even at 64 (the order flips between runs): the
+    # defaults stay. Stratifying the direct light (path tracing stratified in both cases) lifted the model's
+    # 64 spp denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on env_lit_objects, 28.46 / 0.126 ->
+    # 28.62 / 0.121 on glossy_row. Quick keeps the raw direct light; the paper denoises (Sec. 6).
     evaluation_spp: int = Field(
         64, ge=1, le=65536, description="spp of the model's direct light (before denoising)"
     )
