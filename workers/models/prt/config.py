@@ -246,30 +246,33 @@ class PrtConfig(TrainedKindConfig):
     # run apart: 7.2 / 18.8 by FLIP); against the 1024-spp truth, full frame 26.25 -> 26.45 dB and 21.88 ->
     # 21.91 (same networks).
     # The frame as a curve (prt12a; bench_prt's `frame_curve`: report's far view, lighting and 256-spp
-    # reference, CPU s of one frame on one thread, medians of 3 seeds, two runs on the loaded machine; the
+    # reference, CPU s of one frame on one thread (torch's set explicitly, as jobs and serving do: a process
+    # started with OMP_NUM_THREADS=1 ran the network 2.3x slower until it was), medians of 3 seeds; the
     # direct light and path tracing now stratified (`workers.render.stratified`) and the cube lookup
-    # compiled, which made path tracing 1.4x faster at 64 spp and +2.9 dB). (spp: s, dB, FLIP):
-    #   env_lit_objects  path tracing      16: 0.045-0.050 28.36 0.063, 64: 0.17-0.19 34.28 0.034
-    #                    model raw         4: 0.11-0.12 22.04 0.125, 16: 0.15-0.16 29.28 0.067,
-    #                                      64: 0.25-0.29 34.03 0.046
-    #                    model denoised    4: 0.13-0.17 24.61 0.112, 16: 0.16-0.19 30.71 0.065,
-    #                                      64: 0.28-0.30 34.36 0.046
-    #   glossy_row       path tracing      8: 0.035-0.036 23.08 0.113, 16: 0.062-0.067 26.27 0.080
-    #                    model raw         8: 0.14-0.15 26.16 0.139, 16: 0.16-0.19 27.72 0.127,
-    #                                      64: 0.25-0.28 28.62 0.120
-    #                    model denoised    16: 0.18-0.20 28.07 0.126, 64: 0.28-0.30 28.62 0.121
-    # Best equal-time ratios (against the faster of stratified and independent path tracing): FLIP 2.5-3.1
-    # and PSNR 1.4-1.8 on env_lit_objects (64 spp, raw or denoised within the runs' noise), FLIP 5.4-5.5
-    # and PSNR 1.7-1.8 on glossy_row (8-16 spp): over 1 at every setting. A frame costs 0.10-0.20 s even at
-    # 1 spp: the network (64 wavelets x 2304 pixels through f) takes ~0.1 s, what path tracing spends on 32
-    # to 64 spp. In bench_prt's own process (after its job) the network took 0.05-0.06 s, frames 0.07 s at
-    # 1 spp and 0.17 at 64 raw, path tracing as above: env_lit_objects 1.81 by FLIP and 1.09 by PSNR (32
-    # raw; 64 raw 1.82 / 1.11), why unexplained (not load, heap or denormals). The network's error floor on
-    # glossy_row (28.6 dB, FLIP 0.12) is path tracing's at ~28 spp by PSNR and ~7 by FLIP. Denoising still
-    # pays below 16 spp (serving's default is 4) and is even at 64 (the order flips between runs): the
-    # defaults stay. Stratifying the direct light (path tracing stratified in both cases) lifted the model's
-    # 64 spp denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on env_lit_objects, 28.46 / 0.126 ->
-    # 28.62 / 0.121 on glossy_row. Quick keeps the raw direct light; the paper denoises (Sec. 6).
+    # compiled, which made path tracing ~1.4x faster at 64 spp and +2.9 dB). Two runs on env_lit_objects
+    # (the bench's and one of the same models apart), one on glossy_row. (spp: s, dB, FLIP):
+    #   env_lit_objects  path tracing      16: 0.043-0.047 28.36 0.063, 64: 0.16-0.17 34.28 0.034
+    #                    model raw         4: 0.068-0.071 22.04 0.125, 16: 0.087-0.092 29.28 0.067,
+    #                                      32: 0.12 32.12 0.055, 64: 0.17-0.18 34.03 0.046
+    #                    model denoised    4: 0.083-0.084 24.61 0.112, 16: 0.10-0.11 30.71 0.065,
+    #                                      32: 0.14 32.69 0.053, 64: 0.19-0.20 34.36 0.046
+    #   glossy_row       path tracing      8: 0.033 23.08 0.113, 16: 0.061 26.27 0.080, 32: 0.12 29.10 0.058
+    #                    model raw         8: 0.080 26.16 0.139, 16: 0.092 27.72 0.127, 64: 0.18 28.62 0.120
+    #                    model denoised    16: 0.11 28.07 0.126, 32: 0.13 28.42 0.122, 64: 0.20 28.62 0.121
+    # Best equal-time ratios (against the faster of stratified and independent path tracing), FLIP / PSNR:
+    # env_lit_objects 1.81-1.95 / 1.09-1.11 (32-64 raw; 64 denoised 1.96-2.14 / 1.13-1.14), glossy_row
+    # 3.44 / 1.05 (16 raw; 16 denoised 3.93 / 1.11; 64 denoised 6.97 / 1.84): over 1 at every setting. At
+    # 1 spp a frame costs 0.063-0.068 s, the network (64 wavelets x 2304 pixels through f) ~0.06 of it:
+    # what path tracing spends on ~22 spp. The network's error floor on glossy_row (28.6 dB, FLIP 0.12)
+    # is path tracing's at ~28 spp by PSNR and ~7 by FLIP. From 32 spp up raw tied or beat denoised (by up
+    # to 10% at 64: the filter's 0.015-0.02 s buys little on stratified light); at 16 denoised won by PSNR
+    # on env_lit_objects, below that clearly (4 spp: 22.04 -> 24.61 dB), and serving's default is 4 spp
+    # with this flag: it stays. 32 denoised beat 64 denoised on glossy_row (4.67 / 1.28, one run) and tied
+    # on env_lit_objects (2.00-2.08 / 1.16-1.18): not enough to trade the held-out quality (34.36 -> 32.69
+    # dB here) for it.
+    # Stratifying the direct light (path tracing stratified in both cases) lifted the model's 64 spp
+    # denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on env_lit_objects, 28.46 / 0.126 -> 28.62 /
+    # 0.121 on glossy_row. Quick keeps the raw direct light; the paper denoises (Sec. 6).
     evaluation_spp: int = Field(
         64, ge=1, le=65536, description="spp of the model's direct light (before denoising)"
     )
