@@ -246,8 +246,8 @@ class PrtConfig(TrainedKindConfig):
     # run apart: 7.2 / 18.8 by FLIP); against the 1024-spp truth, full frame 26.25 -> 26.45 dB and 21.88 ->
     # 21.91 (same networks).
     # The frame as a curve (prt12a; bench_prt's `frame_curve`: report's far view, lighting and 256-spp
-    # reference, CPU s of one frame on one thread (torch's set explicitly, as jobs and serving do: a process
-    # started with OMP_NUM_THREADS=1 ran the network 2.3x slower until it was), medians of 3 seeds; the
+    # reference, CPU s of one frame on one thread (under `torch_threads(1)` as in jobs and serving; without
+    # it standalone processes ran the network 2-2.5x slower, not understood), medians of 3 seeds; the
     # direct light and path tracing now stratified (`workers.render.stratified`) and the cube lookup
     # compiled, which made path tracing ~1.4x faster at 64 spp and +2.9 dB). Two runs on env_lit_objects
     # (the bench's and one of the same models apart), one on glossy_row. (spp: s, dB, FLIP):
