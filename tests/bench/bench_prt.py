@@ -7,6 +7,8 @@ driver: PSNR / SSIM of the full frame and of indirect light, FLIP, on near and f
 held-out lightings (HDRIs and procedural maps never trained on), against the trivial baseline of no
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
+Then the model's frame as a curve (`frame_curve`: its direct light's spp, raw and denoised, beside path
+tracing with either sampler, in CPU s), with the equal-time ratio of every setting.
 Then the same held-out views and lightings against a truth at `TRUTH_SPP` (two independent halves: their
 difference estimates the truth's own noise, so the section states the PSNR a perfect model would score and
 the PSNR with that noise taken out), the network beside the model-free nearest-rows baseline on the same
@@ -21,6 +23,9 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +34,7 @@ from tests.bench.common import BenchSection, seconds_at_error
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
 from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
-from workers.models.prt.evaluate import truth
+from workers.models.prt.evaluate import report_view, truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
@@ -39,7 +44,9 @@ from workers.models.prt.source import unit_mean
 from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.nn.metrics import flip, psnr
+from workers.render.render import render
 from workers.runtime.report import Report
+from workers.runtime.threads import torch_threads
 from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
@@ -47,6 +54,9 @@ PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
 SCENES = tuple(os.environ.get("PRT_BENCH_SCENES", "env_lit_objects,glossy_row").split(","))
 SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
+DIRECT_SPP = (1, 2, 4, 8, 16, 32, 64)  # the model's frame curve: its direct light's spp, raw and denoised
+CURVE_SPP = (1, 2, 4, 8, 16, 32, 64, 128)  # path tracing's curve beside it (below the reference's spp)
+CURVE_SEEDS = (0, 11, 23)  # not the reference's seed (2): its first pass would share their samples
 TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "1024"))  # the 256-spp job truth caps PSNR near 27 dB
 NEAREST_ROWS = 16  # training rows averaged per held-out pixel by the model-free baseline
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
@@ -70,13 +80,12 @@ def equal_error_seconds(report: Report, metric: str = "flip") -> float:
     return seconds_at_error(seconds, errors, -report.model.error.psnr, log_error=False)
 
 
-def equal_time_ratio(report: Report, pt_seconds: float) -> float | str:
+def equal_time_ratio(model_seconds: float, pt_seconds: float, longest: float) -> float | str:
     """The model's frame time over path tracing's at the model's error; where path tracing never reaches
-    it on the report's curve, the bound its longest render gives ("<")."""
+    it on the curve, the bound its `longest` render gives ("<")."""
     if math.isfinite(pt_seconds):
-        return report.model.seconds_per_frame / pt_seconds
-    longest = max(p.seconds_per_frame for p in report.path_tracing)
-    return f"<{report.model.seconds_per_frame / longest:.3g}"
+        return model_seconds / pt_seconds
+    return f"<{model_seconds / longest:.3g}"
 
 
 def target_noise(scene: str, section: BenchSection, pixels: int = 256, reference_spp: int = 1024) -> None:
@@ -202,6 +211,94 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
         )  # fmt: skip
 
 
+def cpu_timed(make: Callable[[int], np.ndarray]) -> tuple[float, list[np.ndarray]]:
+    """The median CPU seconds of `make(seed)` over `CURVE_SEEDS`, and its images: CPU time, as the machine
+    is shared (every render runs on one thread)."""
+    seconds, images = [], []
+    for seed in CURVE_SEEDS:
+        start = time.process_time()
+        images.append(make(seed))
+        seconds.append(time.process_time() - start)
+    return float(np.median(seconds)), images
+
+
+def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
+    """The model's frame as a curve: its direct light at each of `DIRECT_SPP`, raw and denoised, beside path
+    tracing at `CURVE_SPP` with either sampler (`RenderSettings.sampler`), on the report's view, lighting and
+    reference, timed in the same window (CPU s, one thread, medians over `CURVE_SEEDS`). Each setting's
+    equal-time ratio by FLIP and by PSNR is its time over the faster path tracer's at its error
+    (`seconds_at_error` over these curves); the notes name the best setting per metric."""
+    artifact = load(folder)
+    config = artifact.config
+    report = report_view(SceneRef(get_builtin(scene)), config, SEED)
+    reference = report.view.reference()
+
+    def measured(make: Callable[[int], np.ndarray]) -> dict[str, float]:
+        seconds, images = cpu_timed(make)
+        return {
+            "cpu_s": seconds,
+            "flip": float(np.median([flip(reference, image) for image in images])),
+            "psnr": float(np.median([psnr(reference, image) for image in images])),
+        }
+
+    def path_traced(spp: int, sampler: str) -> Callable[[int], np.ndarray]:
+        settings = report.view.at(spp).model_copy(update={"sampler": sampler})
+        return lambda seed: render(report.tracer, settings.model_copy(update={"seed": seed})).image
+
+    def model_frame(spp: int, denoise: bool) -> Callable[[int], np.ndarray]:
+        def make(seed: int) -> np.ndarray:
+            # As jobs and serving run it. Without, standalone processes ran the network 2-2.5x slower (0.15
+            # against 0.06 CPU s); setting the count sped one up and not another: not understood.
+            with torch_threads(1):
+                return render_frame(
+                    artifact.model, artifact.box, artifact.objects, report.tracer, report.cube,
+                    report.camera, k=config.wavelets, weighting=config.selection, spp=spp, seed=seed,
+                    denoise=denoise,
+                ).image  # fmt: skip
+
+        return make
+
+    curves = {}
+    traced_spp = [spp for spp in CURVE_SPP if spp < config.reference_spp]
+    for sampler in ("stratified", "independent"):
+        curves[sampler] = [measured(path_traced(spp, sampler)) for spp in traced_spp]
+        for spp, point in zip(traced_spp, curves[sampler], strict=True):
+            section.add(scene=scene, method=f"path tracing ({sampler})", spp=spp, **point)
+    longest = max(p["cpu_s"] for points in curves.values() for p in points)
+
+    def pt_seconds(metric: str, error: float) -> float:
+        """The faster path tracer's seconds at `error` (FLIP, or negated PSNR)."""
+        sign, log = (1, True) if metric == "flip" else (-1, False)
+        return min(
+            seconds_at_error([p["cpu_s"] for p in points], [sign * p[metric] for p in points], error, log)
+            for points in curves.values()
+        )
+
+    best: dict[str, tuple[float | str, str]] = {}
+    settings = [(spp, denoise) for denoise in (False, True) for spp in DIRECT_SPP if spp > 1 or not denoise]
+    for spp, denoise in settings:
+        point = measured(model_frame(spp, denoise))
+        ratios = {
+            "flip": equal_time_ratio(point["cpu_s"], pt_seconds("flip", point["flip"]), longest),
+            "psnr": equal_time_ratio(point["cpu_s"], pt_seconds("psnr", -point["psnr"]), longest),
+        }
+        label = f"direct {spp} spp{' denoised' if denoise else ''}"
+        section.add(
+            scene=scene, method=label, spp=spp, **point, **{f"ratio_{m}": r for m, r in ratios.items()}
+        )
+        for metric, ratio in ratios.items():
+            if metric not in best or ratio_bound(ratio) < ratio_bound(best[metric][0]):
+                best[metric] = (ratio, label)
+    for metric, (ratio, label) in best.items():
+        shown = ratio if isinstance(ratio, str) else f"{ratio:.3g}"
+        section.notes.append(f"{scene}: best equal-time ratio by {metric}: {shown} ({label})")
+
+
+def ratio_bound(ratio: float | str) -> float:
+    """An `equal_time_ratio` as a number (a "<" bound as its bound)."""
+    return float(str(ratio).lstrip("<"))
+
+
 def run() -> list[BenchSection]:
     quality = BenchSection(
         f"prt held-out quality ({PRESET} preset; Table 1 layout; direct light as `denoise_direct`, "
@@ -211,6 +308,7 @@ def run() -> list[BenchSection]:
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")
     fine = BenchSection(f"prt held-out against a {TRUTH_SPP}-spp truth: network, nearest rows, no indirect")
     sweep = BenchSection("prt time per frame and error against K (Table 2 on this CPU)")
+    curve = BenchSection("prt the model's frame against its direct light's spp, beside path tracing")
     noise = BenchSection(f"prt ground-truth noise: indirect PSNR against {1024}-spp importance sampling")
     ablation = BenchSection(f"prt ablation on env_lit_objects, {ABLATION_STEPS} steps each (Tables 3, 6)")
     with tempfile.TemporaryDirectory(prefix="bench-prt-") as tmp:
@@ -230,14 +328,17 @@ def run() -> list[BenchSection]:
             for name in held_out_lightings(config.lighting, SEED):
                 lightings.add(scene=scene, lighting=name, **{k: m[f"{name}.{k}"] for k in FIGURES[:5]})
             pt_seconds = equal_error_seconds(report)
+            longest = max(p.seconds_per_frame for p in report.path_tracing)
+            ratio = partial(equal_time_ratio, report.model.seconds_per_frame, longest=longest)
             timing.add(
                 scene=scene, model=report.model.label, model_s=report.model.seconds_per_frame,
                 model_flip=report.model.error.flip, equal_time_pt=report.path_tracing_equal_time.label,
                 equal_time_pt_flip=report.path_tracing_equal_time.error.flip, pt_s_at_model_flip=pt_seconds,
-                equal_time_ratio=equal_time_ratio(report, pt_seconds), model_psnr=report.model.error.psnr,
-                equal_time_ratio_psnr=equal_time_ratio(report, equal_error_seconds(report, "psnr")),
+                equal_time_ratio=ratio(pt_seconds), model_psnr=report.model.error.psnr,
+                equal_time_ratio_psnr=ratio(equal_error_seconds(report, "psnr")),
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
+            frame_curve(folder / "out", scene, curve)
             against_fine_truth(folder / "out", scene, fine)
             k_sweep(folder / "out", scene, sweep)
         for label, overrides in ABLATION if ABLATION_STEPS else ():
@@ -260,7 +361,11 @@ def run() -> list[BenchSection]:
         "nearest_rows: the mean of the 16 nearest training rows dotted with the lighting (no network); "
         "_ceiling: a perfect model's PSNR (the truth's noise); _denoised: PSNR without the truth's noise"
     )
-    return [noise, quality, fine, lightings, timing, sweep, ablation]
+    curve.notes.append(
+        "report's view, lighting and reference; cpu_s: CPU s of one frame (one thread, median of 3 seeds); "
+        "ratio_*: cpu_s / the faster path tracer's cpu_s at the same FLIP (PSNR) on this section's curves"
+    )
+    return [noise, quality, fine, lightings, timing, curve, sweep, ablation]
 
 
 def get_kind_config(preset: str):

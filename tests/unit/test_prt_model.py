@@ -26,7 +26,7 @@ from workers.models.prt.selection import (
     wavelets_of,
 )
 from workers.models.prt.views import trajectory_cameras
-from workers.nn.cubemap import cubemap_solid_angles
+from workers.nn.cubemap import cubemap_solid_angles, direction_to_texel
 from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
 from workers.runtime.contract import resolve_preset
@@ -61,6 +61,17 @@ def test_a_constant_map_has_exactly_six_nonzero_coefficients(size):
 def test_texel_directions_round_trip_and_solid_angles_cover_the_sphere(size):
     assert np.array_equal(texels_of(cube_directions(size), size), np.arange(6 * size * size))
     assert cubemap_solid_angles(size, torch.float64).sum().item() == pytest.approx(4 * math.pi, rel=1e-12)
+
+
+@pytest.mark.parametrize("size", [1, 8, 64])
+def test_compiled_texel_lookup_is_the_torch_one(size):
+    """Ties between components (cube edges and corners) go to the first largest one, as torch's argmax."""
+    rng = np.random.default_rng(0)
+    directions = np.concatenate(
+        [rng.normal(size=(20000, 3)), np.round(rng.normal(size=(2000, 3))), np.eye(3), -np.eye(3)]
+    )
+    expected = direction_to_texel(torch.from_numpy(directions), size).numpy()
+    assert np.array_equal(texels_of(directions, size), expected)
 
 
 def test_a_rotated_map_resamples_to_the_texels_the_path_tracer_reads():
@@ -278,9 +289,13 @@ def test_a_pooled_batch_lights_each_group_by_one_lighting_of_a_pool_built_once()
         assert any(torch.allclose(c[wavelets].float(), coefficients) for c in pooled)
 
 
-def test_the_denoised_direct_light_is_closer_to_a_converged_one():
+@pytest.mark.parametrize(("sampler", "most"), [("independent", 0.5), ("stratified", 0.95)])
+def test_the_denoised_direct_light_is_closer_to_a_converged_one(monkeypatch, sampler, most):
     """The frame's direct light at 8 spp, filtered, against 512 spp: at most half the raw squared error where
-    the filter acts (away from silhouettes), and pixels that see the environment are not filtered."""
+    the filter acts (away from silhouettes) with independent samples; stratified raw light under this
+    uniform lighting is far less noisy (its error was 0.00097, the filtered one 0.00088), and the filter
+    still lowers it. Pixels that see the environment are not filtered."""
+    from workers.models.prt import frame
     from workers.models.prt.frame import direct_light
     from workers.models.prt.gbuffer import surface_inputs
     from workers.models.prt.lighting import relit_tracer, uniform_cube
@@ -289,6 +304,7 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one():
     from workers.scene.builtin import get_builtin
     from workers.scene.compile import compile_scene
 
+    monkeypatch.setattr(frame, "SAMPLER", sampler)
     spec = get_builtin("env_lit_objects")
     tracer = relit_tracer(compile_scene(spec), uniform_cube(4))
     camera = spec.camera.model_copy(update={"width": 24, "height": 24})
@@ -298,7 +314,7 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one():
     hit = inputs.hit.reshape(24, 24)
     filtered = interior(hit, inputs.object_id.reshape(24, 24))
     error = lambda image: float(((image - reference)[filtered] ** 2).mean())  # noqa: E731
-    assert error(denoised) < 0.5 * error(raw)
+    assert error(denoised) < most * error(raw)
     escaped = ~hit
     assert escaped.any()
     np.testing.assert_allclose(denoised[escaped], reference[escaped], rtol=1e-5)

@@ -39,6 +39,7 @@ from workers.render.sampling import (
     to_local,
     to_world,
 )
+from workers.render.stratified import surface_uniforms
 from workers.render.wavefront import RAY_OFFSET
 from workers.scene.compile import CompiledScene
 from workers.scene.errors import SceneError
@@ -426,7 +427,8 @@ class PathTracer:
             return paths.take(np.zeros(0, np.int64)), 0
 
         sh = self._shade(it, hits, d, self._footprint(hits, it, d, paths.spread))
-        u_select, u_light, u_bsdf, u_lobe, u_roulette = wavefront.vertex_uniforms(rng.random((len(idx), 7)))
+        uniforms = surface_uniforms(rng, idx, segment)
+        u_select, u_light, u_bsdf, u_lobe, u_roulette = wavefront.vertex_uniforms(uniforms)
 
         shadow_rays = self._next_event(idx, sh, beta, u_select, u_light, radiance, observer)
 

@@ -9,18 +9,21 @@ trace 1.9x the rays of one (forked processes measured no better).
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
+from workers.render.stratified import StratifiedUniforms
 from workers.scene.compile import CompiledScene
 from workers.scene.spec import Camera
 
@@ -44,6 +47,11 @@ class RenderSettings(BaseModel):
     aovs: bool = False
     window: tuple[int, int, int, int] | None = Field(
         None, description="render only pixels x0 <= x < x1, y0 <= y < y1 of the image (a crop window)"
+    )
+    sampler: Literal["independent", "stratified"] = Field(
+        "independent",
+        description="stratified: a pixel's samples in a pass lie in strata at the camera and the first "
+        "vertex (`workers.render.stratified`), and tiles shrink so that a pass holds all of them",
     )
 
 
@@ -127,6 +135,9 @@ def plan_render(camera: PinholeCamera, settings: RenderSettings) -> RenderPlan:
     so a window's expected value is the crop of the full image's."""
     x_start, y_start, x_stop, y_stop = crop_window(camera, settings)
     width, height, size = x_stop - x_start, y_stop - y_start, settings.tile_size
+    if settings.sampler == "stratified":  # the largest tile (down to 8) whose pass holds every sample
+        per_pixel = math.isqrt(max(1, MAX_PATHS_PER_ITEM // settings.spp))
+        size = min(size, max(8, 1 << (per_pixel.bit_length() - 1)))
     tiles = []
     for y0 in range(y_start, y_stop, size):
         for x0 in range(x_start, x_stop, size):
@@ -149,7 +160,10 @@ def render_item(
 ) -> TileResult:
     """One (pass, tile) work item with its own random stream: the same result wherever it runs."""
     rng = np.random.default_rng([settings.seed, pass_index, tile.index])
-    return _render_tile(tracer, camera, tile, plan.passes[pass_index], settings, rng)
+    spp = plan.passes[pass_index]
+    if settings.sampler == "stratified":
+        rng = StratifiedUniforms(rng, (tile.x1 - tile.x0) * (tile.y1 - tile.y0), spp)
+    return _render_tile(tracer, camera, tile, spp, settings, rng)
 
 
 def rendered_view(camera: Camera, settings: RenderSettings) -> Camera:
@@ -236,7 +250,7 @@ def _render_tile(
     ys, xs = np.mgrid[tile.y0 : tile.y1, tile.x0 : tile.x1]
     xs = np.repeat(xs.ravel(), spp)
     ys = np.repeat(ys.ravel(), spp)
-    jitter = rng.random((len(xs), 2))
+    jitter = rng.jitter() if isinstance(rng, StratifiedUniforms) else rng.random((len(xs), 2))
     origins, directions = camera.rays(xs + jitter[:, 0], ys + jitter[:, 1])
     result = tracer.trace(
         origins, directions, rng, settings.max_depth, settings.rr_depth, spread=camera.spread

@@ -244,7 +244,38 @@ class PrtConfig(TrainedKindConfig):
     # penalises the slight blur. bench_prt (report's far view, wall clock on the loaded machine, same run):
     # equal-time ratio env_lit_objects 3.7 by FLIP / 1.7 by PSNR, glossy_row 10.6 / 4.0 (prt6's 128 raw, a
     # run apart: 7.2 / 18.8 by FLIP); against the 1024-spp truth, full frame 26.25 -> 26.45 dB and 21.88 ->
-    # 21.91 (same networks). Quick keeps the raw direct light; the paper denoises (Sec. 6).
+    # 21.91 (same networks).
+    # The frame as a curve (prt12a; bench_prt's `frame_curve`: report's far view, lighting and 256-spp
+    # reference, CPU s of one frame on one thread (under `torch_threads(1)` as in jobs and serving; without
+    # it standalone processes ran the network 2-2.5x slower, not understood), medians of 3 seeds; the
+    # direct light and path tracing now stratified (`workers.render.stratified`) and the cube lookup
+    # compiled, which made path tracing ~1.4x faster at 64 spp and +2.9 dB). Three runs on
+    # env_lit_objects (the bench's and two of the same models apart), two on glossy_row (spp: s, dB, FLIP):
+    #   env_lit_objects  path tracing      16: 0.043-0.047 28.36 0.063, 64: 0.16-0.17 34.28 0.034
+    #                    model raw         4: 0.068-0.071 22.04 0.125, 16: 0.087-0.092 29.28 0.067,
+    #                                      32: 0.12 32.12 0.055, 64: 0.17-0.18 34.03 0.046
+    #                    model denoised    4: 0.083-0.084 24.61 0.112, 16: 0.10-0.12 30.71 0.065,
+    #                                      32: 0.14 32.69 0.053, 64: 0.19-0.20 34.36 0.046
+    #   glossy_row       path tracing      8: 0.031-0.033 23.08 0.113, 16: 0.061 26.27 0.080,
+    #                                      32: 0.12 29.10 0.058
+    #                    model raw         8: 0.080-0.082 26.16 0.139, 16: 0.092-0.11 27.72 0.127,
+    #                                      64: 0.18-0.22 28.62 0.120
+    #                    model denoised    16: 0.11-0.12 28.07 0.126, 32: 0.13-0.15 28.42 0.122,
+    #                                      64: 0.20-0.21 28.62 0.121
+    # Best equal-time ratios (against the faster of stratified and independent path tracing), FLIP / PSNR:
+    # env_lit_objects 1.74-1.95 / 1.05-1.11 (32-64 raw; 64 denoised 1.90-2.14 / 1.09-1.14), glossy_row
+    # 3.44-3.59 / 1.05-1.22 (8-16 raw; 16 denoised 3.93-4.46 / 1.11-1.23; 64 denoised 6.97-7.45 /
+    # 1.84-1.91): over 1 at every setting. At 1 spp a frame costs 0.063-0.087 s, the network (64 wavelets x
+    # 2304 pixels through f) ~0.06 of it: what path tracing spends on ~22 spp. The network's error floor on
+    # glossy_row (28.6 dB, FLIP 0.12) is path tracing's at ~28 spp by PSNR and ~7 by FLIP. From 32 spp up
+    # raw tied or beat denoised (by up to 10% at 64: the filter's 0.015-0.02 s buys little on stratified
+    # light); at 16 denoised won by PSNR on env_lit_objects, below that clearly (4 spp: 22.04 -> 24.61 dB),
+    # and serving's default is 4 spp with this flag: it stays. 32 denoised beat 64 denoised on glossy_row
+    # (4.67-5.28 / 1.28-1.40) and tied on env_lit_objects (1.89-2.08 / 1.07-1.18): not enough to trade the
+    # held-out quality (34.36 -> 32.69 dB on this view) for it.
+    # Stratifying the direct light (path tracing stratified in both cases) lifted the model's 64 spp
+    # denoised from 32.27 dB / FLIP 0.056 to 34.36 / 0.046 on env_lit_objects, 28.46 / 0.126 -> 28.62 /
+    # 0.121 on glossy_row. Quick keeps the raw direct light; the paper denoises (Sec. 6).
     evaluation_spp: int = Field(
         64, ge=1, le=65536, description="spp of the model's direct light (before denoising)"
     )

@@ -10,22 +10,24 @@ the same direct light with no indirect at all."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from workers.models.prt.config import PrtConfig
-from workers.models.prt.data import TestView, test_views
-from workers.models.prt.frame import DIRECT_DEPTH, Frame, render_frame
+from workers.models.prt.data import TestView, cameras, test_views
+from workers.models.prt.frame import DIRECT_DEPTH, SAMPLER, Frame, render_frame
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.source import unit_mean
 from workers.models.prt.transport import trace_rows
-from workers.models.prt.views import pixel_rays
+from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays
 from workers.nn.metrics import flip, psnr, ssim
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
+from workers.runtime.view import PathTracedView
 from workers.scene.reference import SceneRef
+from workers.scene.spec import Camera
 
 TRUTH_SEED = 1000  # the direct ground truth's noise is independent of the frame's
 
@@ -92,6 +94,35 @@ def held_out_cases(
             )  # fmt: skip
             cases.append(Case(view.name, name, full, indirect, frame))
     return cases
+
+
+@dataclass
+class ReportView:
+    """The view the report measures the model on: a far (else near, else training) view under the first
+    held-out lighting, `cube` as the network's cube map and `view` as path tracing of it (curve and
+    reference)."""
+
+    camera: Camera
+    lighting: str
+    cube: np.ndarray
+    tracer: PathTracer
+    view: PathTracedView
+
+
+def report_view(scene: SceneRef, config: PrtConfig, seed: int) -> ReportView:
+    views = cameras(scene, config)
+    camera = (views[FAR] or views[NEAR] or views[TRAIN])[0]
+    name, env = next(iter(held_out_lightings(config.lighting, seed).items()))
+    cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
+    compiled = scene.compiled()
+    at_view = replace(compiled, spec=compiled.spec.model_copy(update={"camera": camera}))
+    tracer = relit_tracer(at_view, cube)
+    settings = RenderSettings(
+        spp=config.evaluation_spp, width=camera.width, height=camera.height, max_depth=config.max_depth,
+        seed=seed, threads=1, sampler=SAMPLER,
+    )  # fmt: skip
+    view = PathTracedView(at_view, settings, config.reference_spp, tracer)
+    return ReportView(camera, name, cube, tracer, view)
 
 
 def summarise(cases: list[Case]) -> dict[str, float]:

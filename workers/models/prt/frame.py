@@ -25,6 +25,7 @@ from workers.scene.spec import Camera
 
 DIRECT_DEPTH = 2  # camera segment + one bounce: emitters seen, NEE and BSDF-sampled escapes at the first hit
 SECOND_HALF_SEED = 1 << 20  # seed offset of the direct light's second half (independent of the first)
+SAMPLER = "stratified"  # the direct light's (`RenderSettings.sampler`; the report's path tracing uses it too)
 
 
 @dataclass
@@ -90,7 +91,7 @@ def direct_light(
     def half(samples: int, seed: int) -> np.ndarray:
         settings = RenderSettings(
             spp=samples, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed,
-            threads=threads,
+            threads=threads, sampler=SAMPLER,
         )  # fmt: skip
         return render(tracer, settings, view=camera).image
 
