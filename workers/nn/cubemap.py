@@ -15,7 +15,7 @@ from torch import Tensor
 from torch.nn import functional as F
 
 # For each face: direction = major * axis + sc * s_axis + tc * t_axis, with sc, tc in [-1, 1].
-_FACE_FRAMES = torch.tensor(
+FACE_FRAMES = torch.tensor(
     [
         [[1, 0, 0], [0, 0, -1], [0, -1, 0]],
         [[-1, 0, 0], [0, 0, 1], [0, -1, 0]],
@@ -34,7 +34,7 @@ def _texel_centres(size: int, like: Tensor) -> Tensor:
 
 def face_uv_to_direction(face: Tensor, s: Tensor, t: Tensor) -> Tensor:
     """Unit directions [..., 3] of face coordinates (s, t) in [0, 1] on faces `face` (int64)."""
-    frames = _FACE_FRAMES.to(device=s.device, dtype=s.dtype)[face]
+    frames = FACE_FRAMES.to(device=s.device, dtype=s.dtype)[face]
     d = (
         frames[..., 0, :]
         + (2 * s - 1)[..., None] * frames[..., 1, :]
@@ -48,7 +48,7 @@ def direction_to_face_uv(direction: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     axis = direction.abs().argmax(dim=-1)
     major = direction.gather(-1, axis[..., None]).squeeze(-1)
     face = 2 * axis + (major < 0).long()
-    frames = _FACE_FRAMES.to(device=direction.device, dtype=direction.dtype)[face]
+    frames = FACE_FRAMES.to(device=direction.device, dtype=direction.dtype)[face]
     scale = major.abs().clamp(min=1e-30)
     s = ((direction * frames[..., 1, :]).sum(-1) / scale + 1) / 2
     t = ((direction * frames[..., 2, :]).sum(-1) / scale + 1) / 2

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from workers.models.prt.config import LightingConfig
-from workers.nn.cubemap import _FACE_FRAMES, cubemap_directions, latlong_to_cubemap
+from workers.nn.cubemap import FACE_FRAMES, cubemap_directions, latlong_to_cubemap
 from workers.render.integrator import PathTracer
 from workers.render.jit import njit
 from workers.render.sampling import luminance
@@ -158,10 +158,10 @@ class CubeMapLight:
 def texels_of(directions: np.ndarray, size: int) -> np.ndarray:
     """Flat cube texel index of each direction (N, 3), nearest texel: `direction_to_texel`'s, compiled (in
     torch it was a fifth of the CPU time of prt's direct light and of path tracing under a cube map)."""
-    return _texels(np.ascontiguousarray(directions, dtype=np.float64), size, FACE_FRAMES)
+    return _texels(np.ascontiguousarray(directions, dtype=np.float64), size, FACE_FRAMES_NP)
 
 
-FACE_FRAMES = _FACE_FRAMES.numpy()
+FACE_FRAMES_NP = FACE_FRAMES.numpy()  # each face's (major axis, s axis, t axis), for the compiled lookup
 
 
 @njit(cache=True, nogil=True)
