@@ -219,8 +219,15 @@ class PrtConfig(TrainedKindConfig):
     cameras: CamerasConfig = CamerasConfig()
     # lr 0.003 (default preset, env_lit_objects, 500 steps, held-out indirect against importance-sampled
     # truth): 19.1 dB against 16.1 at lr 0.01 (no indirect: 12.7); quick keeps its measured 0.01.
+    # 4000 steps instead of 2000 (prt12b, M = 64 and averaged rows as `grid`): held-out far views, indirect
+    # (full frame) against a 1024-spp truth, seeds 0 / 1, CPU s of training (one torch thread,
+    # OMP_WAIT_POLICY=PASSIVE, loaded machine):
+    #   env_lit_objects  2000 (prt11): 27.59 (30.58) / 26.81 (30.36)   96-105 s
+    #                    4000:         28.68 (31.14) / 28.16 (30.75)   177-179 s
+    #   glossy_row       2000 (prt11): 22.61 (26.28) / 21.88 (25.73)   101-119 s
+    #                    4000:         23.62 (27.04) / 23.60 (27.51)   159-163 s
     train: TrainConfig = TrainConfig(
-        steps=2000,
+        steps=4000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
         checkpoint_every=500,
         progress_every=20,
