@@ -204,6 +204,8 @@ class PrtConfig(TrainedKindConfig):
     #   16              64 (`grid`)    27.59 (30.58) / 26.81 (30.36)   [25.52 / 24.90]          96-105
     # (The M 16 row averaged the rows once beforehand; the job averages each step's, 4 ms a step.) Finding
     # the neighbours takes 7 s. Quick (768 rows) and paper keep 1 (not measured there).
+    # 32 neighbours (prt12b, 4000 steps, glossy_row seed 0): 23.62 (27.04) -> 23.26 (26.88), though the
+    # model-free mean of 32 rows beats 16 on held-out far pixels (24.89 against 24.70): kept 16.
     row_neighbours: int = Field(
         16,
         ge=1,
@@ -226,6 +228,7 @@ class PrtConfig(TrainedKindConfig):
     #                    4000:         28.68 (31.14) / 28.16 (30.75)   177-179 s
     #   glossy_row       2000 (prt11): 22.61 (26.28) / 21.88 (25.73)   101-119 s
     #                    4000:         23.62 (27.04) / 23.60 (27.51)   159-163 s
+    # At 4000 steps, glossy_row seed 0: lr 0.006 23.64 (27.18), 169 s: kept 0.003.
     train: TrainConfig = TrainConfig(
         steps=4000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
