@@ -185,7 +185,10 @@ class PrtConfig(TrainedKindConfig):
     # either way; 4000 steps instead of 2000 gained 0.81 dB far on 24 x 512 (seed 0) for +56 s, and 0.64 on
     # 96 x 1536 (24.47, seed 0) for +41 s; 96 x 1536 rows gain 1.4-2.0 dB for +55 s of tracing. Fewer paths
     # per row at equal paths: 96 x 1536 at 32 spp (31 s) 22.77 far against 24 x 1536 at 128 (13 s) 22.34 and
-    # 96 x 1536 at 128 (58 s) 23.51 (seed 1).
+    # 96 x 1536 at 128 (58 s) 23.51 (seed 1). With averaged targets, M = 64 and 4000 steps (prt12b, far views
+    # against the 1024-spp truth, indirect (full)), glossy_row seeds 0 / 1: 96 x 1536 at 128 spp 23.62
+    # (27.04) / 23.60 (27.51), tracing 49-51 CPU s; 192 x 1536 at 64 spp (same paths) 23.77 (27.45) / 23.95
+    # (27.90), 63-66 s: +0.15 / +0.35 dB for twice the rows' memory (not measured on env_lit_objects): kept.
     # Rows take 4.5 kB each: 650 MiB in the job's process. Quick keeps 96 x 8 views.
     rows_per_view: int = Field(
         1536, ge=1, description="pixels per training view whose transport is stored (at most all it sees)"
