@@ -185,7 +185,10 @@ class PrtConfig(TrainedKindConfig):
     # either way; 4000 steps instead of 2000 gained 0.81 dB far on 24 x 512 (seed 0) for +56 s, and 0.64 on
     # 96 x 1536 (24.47, seed 0) for +41 s; 96 x 1536 rows gain 1.4-2.0 dB for +55 s of tracing. Fewer paths
     # per row at equal paths: 96 x 1536 at 32 spp (31 s) 22.77 far against 24 x 1536 at 128 (13 s) 22.34 and
-    # 96 x 1536 at 128 (58 s) 23.51 (seed 1).
+    # 96 x 1536 at 128 (58 s) 23.51 (seed 1). With averaged targets, M = 64 and 4000 steps (prt12b, far views
+    # against the 1024-spp truth, indirect (full)), glossy_row seeds 0 / 1: 96 x 1536 at 128 spp 23.62
+    # (27.04) / 23.60 (27.51), tracing 49-51 CPU s; 192 x 1536 at 64 spp (same paths) 23.77 (27.45) / 23.95
+    # (27.90), 63-66 s: +0.15 / +0.35 dB for twice the rows' memory (not measured on env_lit_objects): kept.
     # Rows take 4.5 kB each: 650 MiB in the job's process. Quick keeps 96 x 8 views.
     rows_per_view: int = Field(
         1536, ge=1, description="pixels per training view whose transport is stored (at most all it sees)"
@@ -204,6 +207,8 @@ class PrtConfig(TrainedKindConfig):
     #   16              64 (`grid`)    27.59 (30.58) / 26.81 (30.36)   [25.52 / 24.90]          96-105
     # (The M 16 row averaged the rows once beforehand; the job averages each step's, 4 ms a step.) Finding
     # the neighbours takes 7 s. Quick (768 rows) and paper keep 1 (not measured there).
+    # 32 neighbours (prt12b, 4000 steps, glossy_row seed 0): 23.62 (27.04) -> 23.26 (26.88), though the
+    # model-free mean of 32 rows beats 16 on held-out far pixels (24.89 against 24.70): kept 16.
     row_neighbours: int = Field(
         16,
         ge=1,
@@ -219,8 +224,17 @@ class PrtConfig(TrainedKindConfig):
     cameras: CamerasConfig = CamerasConfig()
     # lr 0.003 (default preset, env_lit_objects, 500 steps, held-out indirect against importance-sampled
     # truth): 19.1 dB against 16.1 at lr 0.01 (no indirect: 12.7); quick keeps its measured 0.01.
+    # 4000 steps instead of 2000 (prt12b, M = 64 and averaged rows as `grid`): held-out far views, indirect
+    # (full frame) against a 1024-spp truth, seeds 0 / 1, CPU s of training (one torch thread,
+    # OMP_WAIT_POLICY=PASSIVE, loaded machine):
+    #   env_lit_objects  2000 (prt11): 27.59 (30.58) / 26.81 (30.36)   96-105 s
+    #                    4000:         28.68 (31.14) / 28.16 (30.75)   177-179 s
+    #   glossy_row       2000 (prt11): 22.61 (26.28) / 21.88 (25.73)   101-119 s
+    #                    4000:         23.62 (27.04) / 23.60 (27.51)   159-163 s
+    # Rerunning 2000 steps the same way as 4000 (env_lit_objects seed 1): 27.08 (30.51), 88 s. At 4000
+    # steps, glossy_row seed 0: lr 0.006 23.64 (27.18), 169 s: kept 0.003.
     train: TrainConfig = TrainConfig(
-        steps=2000,
+        steps=4000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
         checkpoint_every=500,
         progress_every=20,

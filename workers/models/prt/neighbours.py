@@ -19,6 +19,14 @@ from workers.models.prt.gbuffer import SurfaceInputs
 # the bench's baseline (mean of 16 nearest rows), held-out indirect PSNR against a 1024-spp truth: weight
 # 0 / 0.01 / 0.02 / 0.03 / 0.05 / 0.1 / 0.3 / 1 scored 23.4 / 25.6 / 26.1 / 26.2 / 26.1 / 25.2 / 22.7 /
 # 21.4 dB (chosen on the held-out truth: if anything, the baseline is flattered).
+# prt12b, default preset (96 x 1536 rows), far views, indirect, 1024-spp truth, mean of 16 (32) rows:
+# glossy_row, all of whose surfaces are glossy (GGX alpha 0.05-0.25), prefers a larger weight: 0.03 / 0.1 /
+# 0.3 24.70 (24.89) / 26.06 (26.56) / 26.14 (26.60) dB (seed 0); a weight 0.03 / clip(alpha, 0.1, 1),
+# growing on glossy surfaces only, 24.70 -> 26.35 (26.78) and 24.96 -> 26.43 (26.95) (seeds 0 / 1), but
+# env_lit_objects 28.89 (29.35) -> 28.49 (28.97) (seed 0; clip at 0.3: 28.72, glossy_row 26.06). As the
+# training targets' neighbours (4000 steps, network far indirect (full)): glossy_row 23.62 (27.04) ->
+# 24.47 (28.08) and 23.60 (27.51) -> 23.47 (27.27) (seeds 0 / 1), env_lit_objects 28.68 (31.14) -> 28.60
+# (30.80) (seed 0): seed 1 does not confirm, kept 0.03.
 DIRECTION_WEIGHT = 0.03
 MEAN_CHUNK = 2048  # rows averaged at once (a chunk's k neighbours' rows are gathered into one array)
 
