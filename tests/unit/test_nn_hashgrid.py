@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numba
 import pytest
@@ -212,3 +216,22 @@ def test_cpu_kernels_reject_level_blocks_that_do_not_tile_the_table():
     short = [*grid.level_blocks[:-1], (grid.level_blocks[-1][0], grid.level_blocks[-1][1] - 1)]
     with pytest.raises(ValueError, match="cover"):
         interpolate_grid(points, grid.table, grid.geometry, short, grid)
+
+
+def test_the_kernels_leave_torchs_thread_count_as_it_was():
+    """Numba's OpenMP pool starts at the process's first parallel kernel and shares torch's OpenMP runtime:
+    a thread count set in torch before that must hold after it (a fresh process, so the pool starts here)."""
+    probe = (
+        "import torch\n"
+        "torch.set_num_threads(1)\n"
+        "assert torch.get_num_threads() == 1\n"  # read, as `torch_threads` does: then Numba resets it
+        "from workers.nn.encodings.hashgrid import HashGrid\n"
+        "grid = HashGrid(3, n_levels=4, log2_hashmap_size=10, base_resolution=4)\n"
+        "points = torch.rand(4096, 3, requires_grad=True)\n"
+        "grid(points).sum().backward()\n"
+        "print(torch.get_num_threads())\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]), "OMP_NUM_THREADS": "2"}
+    env["NUMBA_NUM_THREADS"] = "2"
+    done = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True)
+    assert done.stdout.split()[-1] == "1"

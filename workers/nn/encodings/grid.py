@@ -211,6 +211,21 @@ class _KernelArguments:
         )
 
 
+@contextmanager
+def _torch_threads_kept() -> Iterator[None]:
+    """Keep torch's intra-op thread count across a kernel call. Numba's OpenMP pool and torch share one
+    OpenMP runtime, and the pool, started by the process's first parallel kernel, sets the runtime's thread
+    count to Numba's (once torch has read it): a `torch.set_num_threads(1)` made before was undone, and prt's
+    network then ran on two threads, 172-221 against 138-141 CPU ms a 48^2 frame on the loaded 2-core
+    machine (the "network is faster in some processes" prt12a saw)."""
+    threads = torch.get_num_threads()
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+
+
 class _GridInterpolation(torch.autograd.Function):
     """Interpolates all levels. On the CPU the fused kernels of `grid_kernels` compute each point's
     rows, weights and sums in one pass. Elsewhere a fused weighted gather (`embedding_bag`) per level
@@ -235,7 +250,8 @@ class _GridInterpolation(torch.autograd.Function):
         if _uses_kernels(x, table):
             out = table.new_empty(n_points, geometry.n_levels * n_features)  # the kernel writes every entry
             arguments = _KernelArguments.of(geometry, blocks, index, table)
-            grid_kernels.grid_forward(x.detach().numpy(), table.detach().numpy(), *arguments, out.numpy())
+            with _torch_threads_kept():
+                grid_kernels.grid_forward(x.detach().numpy(), table.detach().numpy(), *arguments, out.numpy())
             return out
         out = table.new_empty(n_points, geometry.n_levels, n_features)
         for level, (start, size) in enumerate(blocks):
@@ -254,14 +270,15 @@ class _GridInterpolation(torch.autograd.Function):
             grad_x = x.new_empty(x.shape if ctx.needs_input_grad[0] else (0, x.shape[1]))
             grad_table = table.new_empty(table.shape if ctx.needs_input_grad[1] else (0, table.shape[1]))
             arguments = _KernelArguments.of(ctx.geometry, ctx.blocks, ctx.index, table)
-            grid_kernels.grid_backward(
-                x.detach().numpy(),
-                table.detach().numpy(),
-                grad_out.to(table.dtype).contiguous().numpy(),
-                *arguments,
-                grad_table.numpy(),
-                grad_x.numpy(),
-            )
+            with _torch_threads_kept():
+                grid_kernels.grid_backward(
+                    x.detach().numpy(),
+                    table.detach().numpy(),
+                    grad_out.to(table.dtype).contiguous().numpy(),
+                    *arguments,
+                    grad_table.numpy(),
+                    grad_x.numpy(),
+                )
             return (
                 grad_x if ctx.needs_input_grad[0] else None,
                 grad_table if ctx.needs_input_grad[1] else None,
