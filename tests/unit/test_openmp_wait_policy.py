@@ -1,4 +1,5 @@
-"""Every entry point has OpenMP's idle threads wait passively by the time torch loads (`workers`)."""
+"""Every entry point that loads torch has OpenMP's idle threads wait passively by then: each imports
+`workers`, which sets the policy, before torch (the client's remote commands load neither)."""
 
 import os
 import subprocess
@@ -35,7 +36,15 @@ def policy_when_torch_loads(module: str, **env: str) -> str:
 
 @pytest.mark.parametrize(
     "module",
-    ["services.api.app", "services.inference.app", "services.cli.plugin", "workers.driver.jobs"],
+    [
+        "services.api.app",
+        "services.inference.app",
+        "services.cli.serve",
+        "services.cli.serve_inference",
+        "services.cli.render",
+        "services.cli.scenes",
+        "workers.driver.jobs",
+    ],
 )
 def test_torch_loads_with_passive_waiting(module):
     assert policy_when_torch_loads(module) == "PASSIVE"
