@@ -247,8 +247,7 @@ def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
 
     def model_frame(spp: int, denoise: bool) -> Callable[[int], np.ndarray]:
         def make(seed: int) -> np.ndarray:
-            # As jobs and serving run it. Without, standalone processes ran the network 2-2.5x slower (0.15
-            # against 0.06 CPU s); setting the count sped one up and not another: not understood.
+            # As jobs and serving run it (one thread for small layers, `workers.runtime.threads`).
             with torch_threads(1):
                 return render_frame(
                     artifact.model, artifact.box, artifact.objects, report.tracer, report.cube,

@@ -261,7 +261,8 @@ class PrtConfig(TrainedKindConfig):
     # 21.91 (same networks).
     # The frame as a curve (prt12a; bench_prt's `frame_curve`: report's far view, lighting and 256-spp
     # reference, CPU s of one frame on one thread (under `torch_threads(1)` as in jobs and serving; without
-    # it standalone processes ran the network 2-2.5x slower, not understood), medians of 3 seeds; the
+    # it some processes ran the network on two threads, 2-2.5x the CPU: Numba's first parallel kernel reset
+    # torch's thread count, which the grid encoding now keeps), medians of 3 seeds; the
     # direct light and path tracing now stratified (`workers.render.stratified`) and the cube lookup
     # compiled, which made path tracing ~1.4x faster at 64 spp and +2.9 dB). Three runs on
     # env_lit_objects (the bench's and two of the same models apart), two on glossy_row (spp: s, dB, FLIP):
