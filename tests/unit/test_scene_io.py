@@ -141,6 +141,17 @@ SPHERE = {"name": "ball", "shape": {"type": "sphere"}, "material": "white"}
             "greater than or equal",
         ),
         (lambda d: d.update(environment={"type": "envmap"}), "environment", "exactly one of"),
+        (
+            lambda d: d.update(environment={"builtin": "sunset"}),
+            "environment",
+            "no `type`: give one of 'envmap', 'constant'",
+        ),
+        (lambda d: d.update(environment={"type": "hdr"}), "environment", "type 'hdr' is none of 'envmap'"),
+        (
+            lambda d: d["objects"][0].update(shape={"radius": 1}),
+            "objects[0].shape",
+            "no `type`: give one of 'mesh', 'sphere'",
+        ),
         (lambda d: d.update(objects=[]), "objects", "at least 1"),
         (lambda d: d.update(colour="red"), "colour", "Extra inputs"),
     ],

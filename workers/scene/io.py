@@ -12,6 +12,7 @@ Every failure is a SceneError naming the field (a dotted path such as
 
 from __future__ import annotations
 
+import copy
 import json
 import re
 from pathlib import Path
@@ -112,13 +113,42 @@ def scene_from_dict(data: dict[str, Any]) -> SceneSpec:
 
 def _first_problem(error: ValidationError, data: dict[str, Any]) -> tuple[str, str]:
     """The first error's field and message; within a union, the deepest alternative (the one that matched)."""
-    located = [(dotted_path(e["loc"], data), e["msg"]) for e in error.errors()]
+    located = [(dotted_path(e["loc"], data), _message(e, data)) for e in error.errors()]
     first_field = located[0][0]
     same_field = [
         (f, m) for f, m in located if f == first_field or f.startswith((f"{first_field}.", f"{first_field}["))
     ]
     field, problem = max(same_field, key=lambda item: len(item[0]))
     return field, problem.removeprefix("Value error, ")
+
+
+def _message(error: dict[str, Any], data: dict[str, Any]) -> str:
+    """Pydantic's message, in the scene's words where it speaks of its own machinery: a value of several
+    kinds (a material, a shape, an environment) whose `type` is missing or unknown lists the kinds."""
+    if error["type"] == "union_tag_invalid":
+        return f"type {error['ctx']['tag']!r} is none of {error['ctx']['expected_tags']}"
+    if error["type"] == "union_tag_not_found":
+        return f"no `type`: give one of {_expected_tags(error['loc'], data)}"
+    return error["msg"]
+
+
+def _expected_tags(loc: tuple[str | int, ...], data: dict[str, Any]) -> str:
+    """The `type`s the value at `loc` may have (pydantic lists them only for a wrong one: ask with one)."""
+    probe = copy.deepcopy(data)
+    node: Any = probe
+    for part in loc:
+        if (isinstance(node, dict) and part in node) or (isinstance(part, int) and isinstance(node, list)):
+            node = node[part]  # (a union label in the location is not a key of the value, and is skipped)
+    if not isinstance(node, dict):
+        return "its kinds"
+    node["type"] = ""
+    try:
+        SceneSpec.model_validate(probe)
+    except ValidationError as error:
+        for again in error.errors():
+            if again["type"] == "union_tag_invalid" and again["loc"] == loc:
+                return again["ctx"]["expected_tags"]
+    return "its kinds"
 
 
 def dotted_path(loc: tuple[str | int, ...], data: Any) -> str:
