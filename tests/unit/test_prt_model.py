@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from workers.models.prt import network
 from workers.models.prt.config import PRESETS, CamerasConfig, PrtConfig
 from workers.models.prt.lighting import (
     CubeMapLight,
@@ -112,12 +113,9 @@ def test_training_selection_takes_the_largest_and_distinct_others():
     assert len(set(chosen.indices.tolist())) == 30
 
 
-def test_b_is_linear_in_the_lighting_for_a_fixed_selection():
-    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
-    torch.manual_seed(0)
-    model = PrtNetwork(config).double()
-    n = 16
-    inputs = {
+def _surface_inputs(n: int) -> dict[str, torch.Tensor]:
+    """Random float64 network inputs of `n` pixels."""
+    return {
         "position": torch.rand(n, 3, dtype=torch.float64),
         "normal": torch.nn.functional.normalize(torch.randn(n, 3, dtype=torch.float64), dim=-1),
         "reflected": torch.nn.functional.normalize(torch.randn(n, 3, dtype=torch.float64), dim=-1),
@@ -125,6 +123,13 @@ def test_b_is_linear_in_the_lighting_for_a_fixed_selection():
         "ks": torch.rand(n, 3, dtype=torch.float64),
         "roughness": torch.rand(n, 1, dtype=torch.float64),
     }
+
+
+def test_b_is_linear_in_the_lighting_for_a_fixed_selection():
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(0)
+    model = PrtNetwork(config).double()
+    inputs = _surface_inputs(16)
     wavelets = torch.tensor([0, 3, 17, 40, 95])
     l1, l2 = torch.randn(5, 3, dtype=torch.float64), torch.randn(5, 3, dtype=torch.float64)
     with torch.no_grad():
@@ -160,6 +165,21 @@ def test_the_split_first_layer_equals_f_of_the_cp_features():
     h = model.mix(spatial[:, None, :] * model.wavelet_factors[wavelets][None])  # Eq. 7 as written
     explicit = model.f(torch.cat([h, rest[:, None, :].expand(-1, 3, -1)], dim=-1))
     assert torch.allclose(model.transport(spatial, rest, wavelets), explicit, atol=1e-12)
+
+
+def test_b_in_chunks_of_pixels_equals_eq_3_over_all_pixels_at_once(monkeypatch):
+    monkeypatch.setattr(network, "CPU_PAIRS_PER_CHUNK", 16)  # 3 pixels a chunk: 6 chunks, the last short
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(2)
+    model = PrtNetwork(config).double()
+    torch.nn.init.normal_(model.f.layers[-2].weight)  # not the zero start: T must differ per pixel
+    inputs = _surface_inputs(16)
+    wavelets, coefficients = torch.tensor([2, 9, 33, 60, 77]), torch.randn(5, 3, dtype=torch.float64)
+    with torch.no_grad():
+        spatial, rest = model.pixel_features(inputs)
+        whole = torch.einsum("pkc,kc->pc", model.transport(spatial, rest, wavelets), coefficients)
+        chunked = model(inputs, wavelets, coefficients)
+    assert whole.abs().min() > 0 and torch.allclose(chunked, whole, rtol=1e-12, atol=1e-14)
 
 
 def test_pixels_that_see_the_environment_get_no_indirect_light():

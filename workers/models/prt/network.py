@@ -21,6 +21,7 @@ from workers.models.prt.config import PrtConfig
 PIXEL_INPUTS = ("normal", "kd", "ks")  # with the SH of w_r and the mapped roughness
 WAVELET_INIT_STD = 0.1
 MAX_PAIRS_PER_CHUNK = 1 << 18  # pixel-wavelet pairs through f at once (memory of the MLP's activations)
+CPU_PAIRS_PER_CHUNK = 1 << 12  # on a CPU (`pairs_per_chunk`)
 
 
 def roughness_feature(sigma: Tensor) -> Tensor:
@@ -56,27 +57,43 @@ class PrtNetwork(nn.Module):
         )
         return spatial, rest
 
-    def transport(self, spatial: Tensor, rest: Tensor, wavelets: Tensor) -> Tensor:
-        """T_k [P, K, 3] of pixels (their `pixel_features`) for flat wavelet indices `wavelets` [K].
-
-        f's first layer on [h_k, rest] is split: its rest part is computed once per pixel, and U and W[k]
-        are folded into its h part (W_h U diag(W[k]), one [width, M] matrix per wavelet), so the first layer
-        of all pixel-wavelet pairs is one matrix product S(x) @ [K width, M]^T, without materialising the
-        [P, K, M] CP features (same values as f(cat(U(S * W[k]), rest)); 30% less network time per frame)."""
-        first, m = self.f.layers[0], spatial.shape[-1]
+    def first_layer(self, rest: Tensor, wavelets: Tensor) -> tuple[Tensor, Tensor]:
+        """f's first layer on [h_k, rest], split: its rest part [P, width], computed once per pixel, and its
+        h part with U and W[k] folded in (W_h U diag(W[k]), one [width, M] matrix per wavelet), as one
+        [M, K width] matrix, so the first layer of all pixel-wavelet pairs is the product of S(x) with it,
+        without materialising the [P, K, M] CP features (same values as f(cat(U(S * W[k]), rest)); 30%
+        less network time per frame)."""
+        first, m = self.f.layers[0], self.grid.n_output_dims
         per_pixel = rest @ first.weight[:, m:].T + first.bias  # [P, width]
         folded = first.weight[:, :m] @ self.mix.weight  # W_h U: [width, M]
         per_wavelet = self.wavelet_factors[wavelets][:, None, :] * folded[None]  # [K, width, M] (Eq. 6-7)
-        hidden = spatial @ per_wavelet.reshape(-1, m).T  # [P, K width]
-        hidden = hidden.view(len(spatial), len(wavelets), -1) + per_pixel[:, None, :]
+        return per_pixel, per_wavelet.reshape(-1, m).T
+
+    def transport(self, spatial: Tensor, rest: Tensor, wavelets: Tensor) -> Tensor:
+        """T_k [P, K, 3] of pixels (their `pixel_features`) for flat wavelet indices `wavelets` [K]."""
+        per_pixel, per_wavelet = self.first_layer(rest, wavelets)
+        hidden = (spatial @ per_wavelet).view(len(spatial), len(wavelets), -1) + per_pixel[:, None, :]
         return self.f.layers[1:](hidden)
 
     def forward(self, inputs: dict[str, Tensor], wavelets: Tensor, coefficients: Tensor) -> Tensor:
-        """B [P, 3] = sum_k L_k T_k (Eq. 3) for lighting `coefficients` [K, 3] at `wavelets` [K]."""
+        """B [P, 3] = sum_k L_k T_k (Eq. 3) for lighting `coefficients` [K, 3] at `wavelets` [K], in chunks
+        of pixels: the first layer's factors once, then f's layers a chunk at a time."""
         spatial, rest = self.pixel_features(inputs)
-        chunk = max(1, MAX_PAIRS_PER_CHUNK // max(len(wavelets), 1))
-        out = []
+        per_pixel, per_wavelet = self.first_layer(rest, wavelets)
+        k, coefficients = len(wavelets), coefficients.to(spatial.dtype)
+        chunk = max(1, pairs_per_chunk(spatial.device) // max(k, 1))
+        out = spatial.new_empty(len(spatial), 3)
         for start in range(0, len(spatial), chunk):
-            t = self.transport(spatial[start : start + chunk], rest[start : start + chunk], wavelets)
-            out.append(torch.einsum("pkc,kc->pc", t, coefficients.to(t.dtype)))
-        return torch.cat(out) if out else spatial.new_zeros(0, 3)
+            end = min(start + chunk, len(spatial))
+            hidden = (spatial[start:end] @ per_wavelet).view(end - start, k, -1)
+            hidden = self.f.layers[1:](hidden.add_(per_pixel[start:end, None, :]))
+            out[start:end] = torch.einsum("pkc,kc->pc", hidden, coefficients)
+        return out
+
+
+def pairs_per_chunk(device: torch.device) -> int:
+    """Pixel-wavelet pairs through f at once: on a CPU, few enough that a chunk's activations stay in its
+    L2 cache (default preset's f, 48^2 pixels x K = 64, one thread, CPU ms a frame: 2^18 pairs a chunk
+    96-108, 2^14 49-91, 2^13 96-99 (fresh pages of allocations over glibc's mmap threshold), 2^12 41-42,
+    2^11 43-44, 2^10 48); elsewhere as many as memory allows."""
+    return CPU_PAIRS_PER_CHUNK if device.type == "cpu" else MAX_PAIRS_PER_CHUNK
