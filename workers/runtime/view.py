@@ -30,6 +30,7 @@ class PathTracedView:
     tracer: PathTracer | None = field(default=None, repr=False)  # built on first use when not given
     _frames: dict[int, TimedImage] = field(default_factory=dict, repr=False)
     _reference: np.ndarray | None = field(default=None, repr=False)
+    _warm: bool = field(default=False, repr=False)
 
     def _path_tracer(self) -> PathTracer:
         if self.tracer is None:
@@ -43,6 +44,9 @@ class PathTracedView:
     def frame(self, spp: int) -> TimedImage:
         """The view path-traced at `spp` with the view's seed, timed."""
         if spp not in self._frames:
+            if not self._warm:  # kernels load and threads start on a first render: not the frame's time
+                render(self._path_tracer(), self.at(1))
+                self._warm = True
             result = render(self._path_tracer(), self.at(spp))
             self._frames[spp] = TimedImage(f"{spp} spp", result.image, result.seconds)
         return self._frames[spp]
