@@ -182,6 +182,24 @@ def test_b_in_chunks_of_pixels_equals_eq_3_over_all_pixels_at_once(monkeypatch):
     assert whole.abs().min() > 0 and torch.allclose(chunked, whole, rtol=1e-12, atol=1e-14)
 
 
+@pytest.mark.parametrize("native", [False, True])
+def test_bfloat16_products_stay_within_a_fraction_of_a_percent_and_only_where_native(monkeypatch, native):
+    monkeypatch.setattr(network, "native_bfloat16", lambda device: native)
+    config = resolve_preset(PrtConfig, PRESETS, "default", {})
+    torch.manual_seed(3)
+    model = PrtNetwork(config)
+    torch.nn.init.normal_(model.f.layers[-2].weight, std=0.1)
+    inputs = {name: value.float() for name, value in _surface_inputs(300).items()}
+    wavelets, coefficients = torch.arange(0, 320, 5), torch.randn(64, 3)
+    with torch.no_grad():
+        model.bfloat16 = False
+        exact = model(inputs, wavelets, coefficients)
+        model.bfloat16 = True
+        fast = model(inputs, wavelets, coefficients)
+    error = float((fast - exact).norm() / exact.norm())
+    assert (0 < error < 5e-3) if native else error == 0
+
+
 def test_pixels_that_see_the_environment_get_no_indirect_light():
     from workers.models.prt.frame import predict_indirect
     from workers.models.prt.gbuffer import SurfaceInputs

@@ -297,6 +297,10 @@ class PrtConfig(TrainedKindConfig):
     denoise_direct: bool = Field(
         True, description="filter the direct light with the G-buffer-guided à-trous filter (`frame`)"
     )
+    bfloat16_products: bool = Field(
+        True,
+        description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
+    )
     reference_spp: int = 256
 
     @model_validator(mode="after")

@@ -17,6 +17,7 @@ import torch
 from torch import Tensor, nn
 
 from workers.models.prt.config import PrtConfig
+from workers.nn.precision import native_bfloat16
 
 PIXEL_INPUTS = ("normal", "kd", "ks")  # with the SH of w_r and the mapped roughness
 WAVELET_INIT_STD = 0.1
@@ -43,6 +44,7 @@ class PrtNetwork(nn.Module):
         # wavelets starts far off and, on quick's 768 rows, never recovered (held-out indirect PSNR 9.8 dB
         # against 15.2 with a zero output layer and 15.6 with W ~ N(0, 0.1) as well, 300 steps).
         nn.init.zeros_(self.f.layers[-2].weight)
+        self.bfloat16 = config.bfloat16_products
 
     def pixel_features(self, inputs: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
         """S(x) [P, M] and the rest of f's per-pixel inputs [P, F]."""
@@ -77,17 +79,26 @@ class PrtNetwork(nn.Module):
 
     def forward(self, inputs: dict[str, Tensor], wavelets: Tensor, coefficients: Tensor) -> Tensor:
         """B [P, 3] = sum_k L_k T_k (Eq. 3) for lighting `coefficients` [K, 3] at `wavelets` [K], in chunks
-        of pixels: the first layer's factors once, then f's layers a chunk at a time."""
+        of pixels: the first layer's factors once, then f's layers a chunk at a time. With `bfloat16`, f's
+        first and hidden products run in bfloat16 where the device has it natively (`native_bfloat16`);
+        its output layer and the sum over wavelets stay in the network's dtype."""
         spatial, rest = self.pixel_features(inputs)
         per_pixel, per_wavelet = self.first_layer(rest, wavelets)
         k, coefficients = len(wavelets), coefficients.to(spatial.dtype)
+        low = self.bfloat16 and spatial.dtype == torch.float32 and native_bfloat16(spatial.device)
+        product_dtype = torch.bfloat16 if low else spatial.dtype
+        spatial, per_wavelet = spatial.to(product_dtype), per_wavelet.to(product_dtype)
+        hidden_layers, output_layer = self.f.layers[1:-2], self.f.layers[-2:]
         chunk = max(1, pairs_per_chunk(spatial.device) // max(k, 1))
-        out = spatial.new_empty(len(spatial), 3)
+        out = per_pixel.new_empty(len(spatial), 3)
         for start in range(0, len(spatial), chunk):
             end = min(start + chunk, len(spatial))
             hidden = (spatial[start:end] @ per_wavelet).view(end - start, k, -1)
-            hidden = self.f.layers[1:](hidden.add_(per_pixel[start:end, None, :]))
-            out[start:end] = torch.einsum("pkc,kc->pc", hidden, coefficients)
+            hidden = hidden.add_(per_pixel[start:end, None, :].to(product_dtype))
+            with torch.autocast(spatial.device.type, torch.bfloat16, enabled=low):
+                hidden = hidden_layers(hidden)
+            t = output_layer(hidden.to(out.dtype))
+            out[start:end] = torch.einsum("pkc,kc->pc", t, coefficients)
         return out
 
 
