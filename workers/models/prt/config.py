@@ -297,6 +297,17 @@ class PrtConfig(TrainedKindConfig):
     denoise_direct: bool = Field(
         True, description="filter the direct light with the G-buffer-guided à-trous filter (`frame`)"
     )
+    # prt13, the same curve (`bench_prt.frame_curve`, CPU s a frame on one thread, medians of 3 seeds, path
+    # tracing measured in the same run; fresh default-preset models, seed 0): f in cache-sized chunks
+    # (`network.pairs_per_chunk`) took env_lit_objects' 1-spp frame (the G-buffer and the network) from
+    # 0.063-0.087 s to 0.046; bfloat16 products to 0.029 (glossy_row 0.022). bfloat16 changed the 64-spp
+    # denoised frame from 34.686 to 34.685 dB (FLIP 0.0414 both; indirect within 0.2% of float32's).
+    # Best equal-time ratios, FLIP / PSNR (the default 64 spp denoised in brackets):
+    #   env_lit_objects  chunked float32  1.32 (32 raw) / 0.90 (64 denoised)    [1.45 / 0.90]
+    #                    bfloat16         1.16 / 0.76 (32 denoised)             [1.35 / 0.84]
+    #   glossy_row       bfloat16         1.56 (8 raw) / 0.55 (16 raw)          [4.31 / 1.16]
+    # By PSNR the frame now beats path tracing on both scenes; by FLIP it does not (glossy_row's network
+    # floor, FLIP 0.098, is path tracing's at ~14 spp).
     bfloat16_products: bool = Field(
         True,
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
