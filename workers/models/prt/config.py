@@ -307,7 +307,7 @@ class PrtConfig(TrainedKindConfig):
     #                    bfloat16         1.16 / 0.76 (32 denoised)             [1.35 / 0.84]
     #   glossy_row       bfloat16         1.56 (8 raw) / 0.55 (16 raw)          [4.31 / 1.16]
     # By PSNR the frame now beats path tracing on both scenes; by FLIP it does not (glossy_row's network
-    # floor, FLIP 0.098, is path tracing's at ~14 spp).
+    # floor, FLIP 0.098, is path tracing's at ~11 spp).
     bfloat16_products: bool = Field(
         True,
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
