@@ -52,3 +52,15 @@ def test_torch_loads_with_passive_waiting(module):
 
 def test_a_policy_the_environment_sets_is_kept():
     assert policy_when_torch_loads("workers.driver.jobs", OMP_WAIT_POLICY="ACTIVE") == "ACTIVE"
+
+
+@pytest.mark.parametrize(
+    ("first", "warned"), [("import torch; import workers", True), ("import workers; import torch", False)]
+)
+def test_a_program_that_loads_torch_first_is_warned(first, warned):
+    clean = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    clean["PYTHONPATH"] = str(REPO)
+    done = subprocess.run(
+        [sys.executable, "-c", first], env=clean, capture_output=True, text=True, check=True
+    )
+    assert ("import workers first" in done.stderr) is warned
