@@ -168,7 +168,8 @@ def test_the_split_first_layer_equals_f_of_the_cp_features():
 
 
 def test_b_in_chunks_of_pixels_equals_eq_3_over_all_pixels_at_once(monkeypatch):
-    monkeypatch.setattr(network, "CPU_PAIRS_PER_CHUNK", 16)  # 3 pixels a chunk: 6 chunks, the last short
+    # 16 pairs of quick f's 32 float64s a chunk: 3 pixels, so 6 chunks, the last short
+    monkeypatch.setattr(network, "CPU_CHUNK_BYTES", 16 * 32 * 8)
     config = resolve_preset(PrtConfig, PRESETS, "quick", {})
     torch.manual_seed(2)
     model = PrtNetwork(config).double()

@@ -22,7 +22,7 @@ from workers.nn.precision import native_bfloat16
 PIXEL_INPUTS = ("normal", "kd", "ks")  # with the SH of w_r and the mapped roughness
 WAVELET_INIT_STD = 0.1
 MAX_PAIRS_PER_CHUNK = 1 << 18  # pixel-wavelet pairs through f at once (memory of the MLP's activations)
-CPU_PAIRS_PER_CHUNK = 1 << 12  # on a CPU (`pairs_per_chunk`)
+CPU_CHUNK_BYTES = 1 << 20  # a chunk's hidden activations on a CPU (`pairs_per_chunk`)
 
 
 def roughness_feature(sigma: Tensor) -> Tensor:
@@ -89,7 +89,8 @@ class PrtNetwork(nn.Module):
         product_dtype = torch.bfloat16 if low else spatial.dtype
         spatial, per_wavelet = spatial.to(product_dtype), per_wavelet.to(product_dtype)
         hidden_layers, output_layer = self.f.layers[1:-2], self.f.layers[-2:]
-        chunk = max(1, pairs_per_chunk(spatial.device) // max(k, 1))
+        pairs = pairs_per_chunk(spatial.device, per_pixel.shape[-1], product_dtype.itemsize)
+        chunk = max(1, pairs // max(k, 1))
         out = per_pixel.new_empty(len(spatial), 3)
         for start in range(0, len(spatial), chunk):
             end = min(start + chunk, len(spatial))
@@ -102,9 +103,12 @@ class PrtNetwork(nn.Module):
         return out
 
 
-def pairs_per_chunk(device: torch.device) -> int:
+def pairs_per_chunk(device: torch.device, width: int, itemsize: int) -> int:
     """Pixel-wavelet pairs through f at once: on a CPU, few enough that a chunk's activations stay in its
-    L2 cache (default preset's f, 48^2 pixels x K = 64, one thread, CPU ms a frame: 2^18 pairs a chunk
-    96-108, 2^14 49-91, 2^13 96-99 (fresh pages of allocations over glibc's mmap threshold), 2^12 41-42,
-    2^11 43-44, 2^10 48); elsewhere as many as memory allows."""
-    return CPU_PAIRS_PER_CHUNK if device.type == "cpu" else MAX_PAIRS_PER_CHUNK
+    L2 cache (default preset's f, 64 wide, 48^2 pixels x K = 64, one thread, CPU ms a frame; float32: 2^18
+    pairs a chunk 97-104, 2^14 58-68, 2^13 46-52, 2^12 (1 MiB) 41-42, 2^11 40-42, 2^10 45-48; bfloat16:
+    2^18 42-51, 2^14 19-20, 2^13 (1 MiB) 20-22, 2^12 21-22, 2^11 25-26); elsewhere as many as memory
+    allows."""
+    if device.type != "cpu":
+        return MAX_PAIRS_PER_CHUNK
+    return max(1, CPU_CHUNK_BYTES // (width * itemsize))
