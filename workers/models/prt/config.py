@@ -257,8 +257,16 @@ class PrtConfig(TrainedKindConfig):
     #                    4000:         23.62 (27.04) / 23.60 (27.51)   159-163 s
     # Rerunning 2000 steps the same way as 4000 (env_lit_objects seed 1): 27.08 (30.51), 88 s. At 4000
     # steps, glossy_row seed 0: lr 0.006 23.64 (27.18), 169 s: kept 0.003.
+    # 8000 steps with the leave-one-out targets (prt13b, `row_neighbours`; /tmp harness, far views against a
+    # 1024-spp truth as above, seeds 0 / 1, CPU s of training on a less loaded machine than prt12b's):
+    #   glossy_row       4000: 24.27 (28.13) / 23.64 (27.79)   92-106 s
+    #                    8000: 24.78 (28.60) / 24.67 (29.01)   172-180 s
+    #   env_lit_objects  4000: 28.80 (32.36) / 28.26 (32.39)   94-95 s
+    #                    8000: 29.21 (32.57) / 29.16 (32.47)   176-179 s
+    # With the old targets (16 rows, w 0.03), glossy_row seed 0 at 8000: 24.38 (28.12), 177 s (at 4000: 23.55
+    # (27.17)): the steps give +0.5-1.0 dB, the targets +0.4 on top (at 4000: +0.7).
     train: TrainConfig = TrainConfig(
-        steps=4000,
+        steps=8000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
         checkpoint_every=500,
         progress_every=20,
