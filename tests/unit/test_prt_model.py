@@ -249,36 +249,62 @@ def _points_on_a_line(n: int):
     return inputs, np.array([[0.0, -1.0, -1.0], [0.1 * n, 1.0, 1.0]])
 
 
-def test_row_neighbours_are_the_nearest_rows_on_the_row_s_own_object():
-    from workers.models.prt.neighbours import row_neighbours
+def test_nearest_rows_are_on_the_row_s_own_object():
+    from workers.models.prt.neighbours import nearest_rows
 
     inputs, box = _points_on_a_line(12)  # two objects, alternating along the line
-    neighbours = row_neighbours(inputs, box, 3)
-    assert neighbours.shape == (12, 3)
-    for i in range(2, 10):  # away from the ends: the row and the next ones of its object on either side
-        assert set(neighbours[i]) == {i - 2, i, i + 2}
-    assert (inputs.object_id[neighbours] == inputs.object_id[:, None]).all()
-    # an object with fewer rows than k: every row of it, the farthest repeated
-    lonely = row_neighbours(inputs, box, 8)
-    assert all(set(lonely[i]) == set(range(i % 2, 12, 2)) for i in range(12))
+    found = nearest_rows(inputs, inputs, box, np.array([0, 1]), 3)
+    assert [len(pixels) for pixels, _ in found] == [6, 6]
+    for pixels, nearest in found:
+        assert nearest.shape == (6, 3)
+        assert (inputs.object_id[nearest] == inputs.object_id[pixels, None]).all()
+        for i, row in zip(pixels, nearest, strict=True):
+            if 2 <= i < 10:  # away from the ends: the row and the next ones of its object on either side
+                assert set(row) == {i - 2, i, i + 2}
+    # an object with fewer rows than k: every row of it
+    lonely = nearest_rows(inputs, inputs, box, np.array([0]), 8)
+    assert [set(row) for row in lonely[0][1]] == [set(range(0, 12, 2))] * 6
 
 
-def test_training_targets_are_the_mean_of_the_neighbours_rows():
+def test_training_targets_are_the_mean_of_each_object_s_chosen_nearest_rows():
     from workers.models.prt.data import TrainingSet
-    from workers.models.prt.neighbours import row_neighbours
+    from workers.models.prt.neighbours import smoothed_rows
 
     inputs, box = _points_on_a_line(12)
     rows = np.random.default_rng(4).random((12, 6 * 2 * 2, 3)).astype(np.float32)
     maps = {"uniform": np.ones(12)}
     picked = np.array([3, 3, 8, 11])
-    smoothed = TrainingSet(inputs, rows, box, maps, row_neighbours(inputs, box, 3))
-    targets = smoothed.targets(picked)
+    choices = {0: (3, 0.03), 1: (3, 0.03)}
+    targets = TrainingSet(
+        inputs, rows, box, maps, smoothed_rows(inputs, rows, box, choices), choices
+    ).targets(picked)
     assert targets.shape == (4, 24, 3) and targets.dtype == np.float64
     nearest = {3: [1, 3, 5], 8: [6, 8, 10], 11: [7, 9, 11]}  # on the row's object, along the line
     for target, i in zip(targets, picked, strict=True):
         np.testing.assert_allclose(target, rows[nearest[i]].mean(0), rtol=1e-6)
-    itself = TrainingSet(inputs, rows, box, maps, row_neighbours(inputs, box, 1))
-    assert (itself.targets(picked) == rows[picked]).all()  # k = 1: the traced rows, unchanged
+    mixed = smoothed_rows(inputs, rows, box, {0: (1, 0.03), 1: (3, 0.03)})  # object 0 (even rows): itself
+    assert (mixed[8] == rows[8]).all()
+    np.testing.assert_allclose(mixed[3], rows[[1, 3, 5]].mean(0), rtol=1e-6)
+    assert smoothed_rows(inputs, rows, box, {0: (1, 0.0), 1: (1, 0.0)}) is rows  # k = 1: the traced rows
+
+
+def test_leave_one_out_averages_noise_widely_and_sharp_transport_narrowly():
+    """Object 0's rows are one transport plus noise (no blur bias: the most rows win); object 1's change
+    quickly along the line without noise (any blur is error: the fewest rows win)."""
+    from workers.models.prt.neighbours import CANDIDATE_NEIGHBOURS, smoothing_choices
+
+    inputs, box = _points_on_a_line(400)
+    rng = np.random.default_rng(6)
+    x = inputs.position[:, :1, None]
+    rows = np.where(
+        (inputs.object_id == 0)[:, None, None],
+        0.02 + 0.01 * rng.standard_normal((400, 24, 3)),
+        0.02 * (1 + np.sin(2.0 * x)) * np.ones((1, 24, 3)),
+    ).astype(np.float32)
+    cubes = rng.uniform(0.2, 1.0, (4, 24, 3))
+    choices = smoothing_choices(inputs, rows, box, 128, cubes, rng)
+    assert choices[0][0] == 128 and choices[1][0] == CANDIDATE_NEIGHBOURS[0]
+    assert smoothing_choices(inputs, rows, box, 32, cubes, rng)[0][0] == 32  # at most `most` rows
 
 
 def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wavelets():

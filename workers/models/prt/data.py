@@ -2,7 +2,8 @@
 
 - The training set: for each training view, `rows_per_view` pixels that see geometry, their G-buffer
   inputs and their indirect transport rows (`transport`), plus the pixel maps training samples from and
-  each row's nearest rows, whose mean is its training target (`neighbours`).
+  each row's training target, the mean of as many of its nearest rows as its object's rows call for
+  (`neighbours`).
 - The test set: the near and far held-out views and their G-buffers (their ground truth depends on the
   lighting: `evaluate.truth` path-traces it importance-sampled per held-out lighting).
 - The box of the hash grid: what the camera sees from every view, padded.
@@ -20,8 +21,14 @@ import torch
 
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
-from workers.models.prt.lighting import relit_tracer, uniform_cube
-from workers.models.prt.neighbours import mean_rows, row_neighbours
+from workers.models.prt.lighting import (
+    lighting_cube,
+    relit_tracer,
+    training_lighting,
+    uniform_cube,
+    unit_mean,
+)
+from workers.models.prt.neighbours import smoothed_rows, smoothing_choices
 from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays, trajectory_cameras
 from workers.nn.haar import cubemap_wavelets
@@ -33,6 +40,8 @@ BOX_PADDING = 0.02  # of the box's diagonal, around every point a view sees
 PIXEL_MAPS = ("uniform", "glossy", "transport_detail")
 CACHE_SIZE = 8  # traced sets and tracers kept per process (a job needs four)
 MAP_CHUNK = 4096  # rows per Haar transform of the pixel maps (float64 temporaries of ~100 MB, not GBs)
+JUDGE_LIGHTINGS = 16  # training lightings the targets' smoothing is chosen under (`smoothing_choices`)
+JUDGE_STREAM = 16  # their random stream (the rows draw from [seed, 15])
 
 
 @dataclass
@@ -41,7 +50,9 @@ class TrainingSet:
     rows: np.ndarray  # (P, 6 R^2, 3) float32 indirect transport
     box: np.ndarray  # (2, 3)
     map_weights: dict[str, np.ndarray]  # pixel map -> (P,) sampling weights
-    neighbours: np.ndarray  # (P, k) the rows whose mean is each row's training target (k = 1: itself)
+    # (P, 6 R^2, 3) float32: each row's training target, averaged once (`rows` itself without smoothing)
+    smoothed: np.ndarray
+    smoothing: dict[int, tuple[int, float]]  # object -> (rows averaged, direction weight) of its targets
     # pixel map -> (P,) normalised cumulative weights, None if the map is zero everywhere (built once: a
     # `rng.choice(p=...)` per draw is O(P), which made a step's cost grow with the rows)
     map_cdfs: dict[str, np.ndarray | None] = field(init=False)
@@ -51,8 +62,8 @@ class TrainingSet:
 
     def targets(self, picked: np.ndarray) -> np.ndarray:
         """(N, 6 R^2, 3) float64: the transport training takes for pixels `picked`, the mean of each one's
-        `neighbours`' rows (`PrtConfig.row_neighbours`)."""
-        return mean_rows(self.rows, self.neighbours[picked])
+        nearest rows (`PrtConfig.row_neighbours`)."""
+        return self.smoothed[picked].astype(np.float64)
 
 
 def _cdf(weights: np.ndarray) -> np.ndarray | None:
@@ -98,6 +109,7 @@ TRACING_FIELDS = {
     "probe_spp",
     "cameras",
     "row_neighbours",
+    "lighting",  # the targets' smoothing is chosen under training lightings
 }
 
 
@@ -171,13 +183,24 @@ def _build_training_set(
     )
     all_rows = np.concatenate(rows)
     box = scene_box(scene, config)
-    return TrainingSet(
-        merged,
-        all_rows,
-        box,
-        _pixel_maps(merged, all_rows, config.cube_size),
-        row_neighbours(merged, box, config.row_neighbours),
-    )
+    smoothing = _smoothing(merged, all_rows, box, config, seed)
+    maps = _pixel_maps(merged, all_rows, config.cube_size)
+    smoothed = smoothed_rows(merged, all_rows, box, smoothing)
+    return TrainingSet(merged, all_rows, box, maps, smoothed, smoothing)
+
+
+def _smoothing(
+    inputs: SurfaceInputs, rows: np.ndarray, box: np.ndarray, config: PrtConfig, seed: int
+) -> dict[int, tuple[int, float]]:
+    """Per object, how many nearest rows its targets average and under which direction weight: chosen by
+    leave-one-out under `JUDGE_LIGHTINGS` training lightings (`smoothing_choices`); none for k = 1."""
+    if config.row_neighbours == 1:
+        return {int(o): (1, 0.0) for o in np.unique(inputs.object_id)}
+    rng = np.random.default_rng([seed, JUDGE_STREAM])
+    lightings = [training_lighting(config.lighting, rng) for _ in range(JUDGE_LIGHTINGS)]
+    size, width = config.cube_size, config.lighting.map_width
+    cubes = np.stack([unit_mean(lighting_cube(env, size, width)) for env in lightings])
+    return smoothing_choices(inputs, rows, box, config.row_neighbours, cubes, rng)
 
 
 def _pixel_maps(inputs: SurfaceInputs, rows: np.ndarray, size: int) -> dict[str, np.ndarray]:

@@ -116,6 +116,13 @@ def training_lighting(config: LightingConfig, rng: np.random.Generator) -> spec.
 HELD_OUT_STREAM = 2**40  # procedural test maps come from seeds training never draws
 
 
+def unit_mean(cube: np.ndarray) -> np.ndarray:
+    """The cube map scaled to mean luminance 1 (a black map stays black): B is linear in L, so this only
+    balances lightings against each other (in the loss, and where the targets' smoothing is judged)."""
+    mean = float(luminance(cube.reshape(-1, 3)).mean())
+    return cube / mean if mean > 0 else cube
+
+
 def held_out_lightings(config: LightingConfig, seed: int) -> dict[str, spec.EnvironmentMap]:
     """The test lightings by name: each held-out HDRI, then procedural maps alternating sky and studio."""
     out = {name: spec.EnvironmentMap(builtin=name) for name in config.test_hdris}

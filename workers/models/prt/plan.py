@@ -71,10 +71,12 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         ),
         PlanItem(
             name="ground truth",
-            choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB)",
+            choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB"
+            f"{', twice with their averages' if config.row_neighbours > 1 else ''})",
             reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
             f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting; training "
-            f"targets the mean of each row's {config.row_neighbours} nearest rows",
+            f"targets the mean of each row's nearest rows, up to {config.row_neighbours}, as many as "
+            "leave-one-out chooses per object",
         ),
     ]
     test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2

@@ -35,6 +35,9 @@ class PrtMethod:
         spec = SourceSpec(PrtSource, PrtSourceConfig(ctx.scene, config), ctx.seed)
         source = spec.build()
         ctx.log(f"{len(source.data.rows)} transport rows traced at {config.row_spp} spp")
+        names = [o.name for o in ctx.scene.spec.objects]
+        targets = (f"{names[o]} {k} (w_r weight {w:g})" for o, (k, w) in source.data.smoothing.items())
+        ctx.log(f"training targets, rows averaged (leave-one-out): {', '.join(targets)}")
         torch.manual_seed(ctx.seed)
         model = PrtNetwork(config)
         phases = [Phase("main", partial(prt_loss, mu=config.mu, transport_weight=config.transport_weight))]

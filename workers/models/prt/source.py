@@ -3,8 +3,8 @@ distribution (the paper one, here `lightings_per_step`: one lighting's gradient 
 towards a single sun or sky, and which lightings came first decided the result), takes each one's Haar
 transform and picks its wavelets (largest + uniform), then samples an equal share of the pixels for each
 from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L,
-the row being the mean of the pixel's `row_neighbours` nearest traced rows (`neighbours`).
-Lightings are scaled to unit mean radiance (B is linear in L, so this only balances the loss). With
+the row being the mean of the pixel's nearest traced rows, as many as its object's rows choose (`data`,
+`neighbours`). Lightings are scaled to unit mean radiance (`lighting.unit_mean`). With
 `lighting_pool` > 0 the lightings are drawn from a pool built once per job (cube, Haar transform and
 ranking precomputed), so many lightings per step cost little; the wavelets and pixels stay fresh per draw.
 Batch i is a pure function of (seed, i)."""
@@ -18,11 +18,10 @@ import torch
 
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.data import PIXEL_MAPS, TrainingSet, cached, training_set
-from workers.models.prt.lighting import lighting_cube, training_lighting
+from workers.models.prt.lighting import lighting_cube, training_lighting, unit_mean
 from workers.models.prt.probe import modelled_objects
 from workers.models.prt.selection import RankedWavelets, ranked_wavelets, training_selection
 from workers.nn.haar import cubemap_wavelets
-from workers.render.sampling import luminance
 from workers.runtime.sources import Batch, batch_rng
 from workers.runtime.threads import torch_threads
 from workers.scene.reference import SceneRef
@@ -34,12 +33,6 @@ POOL_STREAM = 2**41  # the pool's random stream; batch indices never reach it
 class PrtSourceConfig:
     scene: SceneRef
     prt: PrtConfig
-
-
-def unit_mean(cube: np.ndarray) -> np.ndarray:
-    """The cube map scaled to mean luminance 1 (a black map stays black)."""
-    mean = float(luminance(cube.reshape(-1, 3)).mean())
-    return cube / mean if mean > 0 else cube
 
 
 @dataclass(frozen=True)
