@@ -37,10 +37,9 @@ from workers.models.prt.data import TrainingSet, test_views, training_set, trans
 from workers.models.prt.evaluate import report_view, truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
-from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer, unit_mean
 from workers.models.prt.neighbours import mean_rows, nearest_rows
 from workers.models.prt.probe import modelled_objects
-from workers.models.prt.source import unit_mean
 from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.nn.metrics import flip, psnr

@@ -17,9 +17,8 @@ import numpy as np
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.data import TestView, cameras, test_views
 from workers.models.prt.frame import DIRECT_DEPTH, SAMPLER, Frame, render_frame
-from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer
+from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer, unit_mean
 from workers.models.prt.network import PrtNetwork
-from workers.models.prt.source import unit_mean
 from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays
 from workers.nn.metrics import flip, psnr, ssim
