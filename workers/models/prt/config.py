@@ -264,7 +264,9 @@ class PrtConfig(TrainedKindConfig):
     #   env_lit_objects  4000: 28.80 (32.36) / 28.26 (32.39)   94-95 s
     #                    8000: 29.21 (32.57) / 29.16 (32.47)   176-179 s
     # With the old targets (16 rows, w 0.03), glossy_row seed 0 at 8000: 24.38 (28.12), 177 s (at 4000: 23.55
-    # (27.17)): the steps give +0.5-1.0 dB, the targets +0.4 on top (at 4000: +0.7).
+    # (27.17)): the steps give +0.5-1.0 dB, the targets +0.4 on top (at 4000: +0.7). 16000 steps: glossy_row
+    # 25.52 (29.27) / 25.55 (29.74), env_lit_objects 29.60 (32.69) / - for 362-375 CPU s: still gaining,
+    # not taken (twice the training time again).
     train: TrainConfig = TrainConfig(
         steps=8000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
