@@ -48,6 +48,12 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
     r = config.cube_size
     row_bytes = 6 * r * r * 3 * 4
     rows = config.cameras.train_views * config.rows_per_view
+    targets = (
+        "training targets are the rows themselves"
+        if config.row_neighbours == 1
+        else f"training targets average each row's nearest rows, up to {config.row_neighbours}, as many "
+        "as leave-one-out chooses per object"
+    )
     items = [
         PlanItem(name=c.name, choice="modelled" if c.modelled else "direct only", reason=c.reason)
         for c in choices
@@ -74,9 +80,7 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
             choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB"
             f"{', twice with their averages' if config.row_neighbours > 1 else ''})",
             reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
-            f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting; training "
-            f"targets the mean of each row's nearest rows, up to {config.row_neighbours}, as many as "
-            "leave-one-out chooses per object",
+            f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting; {targets}",
         ),
     ]
     test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2
