@@ -1,16 +1,22 @@
 """The scene an artifact keeps (`workers.scene.portable`) and the parameters of a path-traced `:render`
-(`workers.runtime.view_render`): stand-ins keep their objects' placements and enclose their bounds, a
-scene that reads files is refused with the fields at fault, and a camera's given fields override the
-view's own."""
+(`workers.runtime.view_render`): stand-ins keep their objects' placements and enclose their bounds, the
+files a scene reads travel with it (verified) and outlive the job's folder and the download, a scene whose
+files cannot be kept is refused with the reason, and a camera's given fields override the view's own."""
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
+import trimesh
 
 from tests.unit.test_lsnif_model import instanced_scene
+from workers.render.integrator import PathTracer
+from workers.render.render import RenderSettings, render
 from workers.runtime.view_render import MAX_SAMPLES, CameraParams, ViewRender
 from workers.scene.compile import compile_scene
+from workers.scene.image_io import write_exr, write_png
 from workers.scene.portable import (
     NEUTRAL_RADIANCE,
     StoredScene,
@@ -29,6 +35,7 @@ from workers.scene.spec import (
     SceneObject,
     SphereShape,
 )
+from workers.scene.stored import CACHE_ENV
 
 BALL_BOUNDS = np.array([[-0.3, -0.3, -0.3], [0.3, 0.3, 0.3]])
 
@@ -79,6 +86,70 @@ def test_a_scene_that_reads_files_is_refused_with_the_fields_at_fault():
     with_mesh = scene.model_copy(update={"objects": [*scene.objects[:-1], mesh_ball]})
     assert portable_scene(with_mesh, {}).spec is None
     assert portable_scene(with_mesh, {"ball": BALL_BOUNDS}).spec is not None
+
+
+def scene_with_files(folder):
+    """`instanced_scene` reading files from `folder` as an upload does: the floor from an OBJ in a
+    subfolder, a box from a glTF with external buffers, a texture, an EXR sky; and a file it never reads."""
+    (folder / "meshes").mkdir(parents=True)
+    floor = trimesh.Trimesh([[-1, -1, -1], [1, -1, -1], [1, -1, 1], [-1, -1, 1]], [[0, 2, 1], [0, 3, 2]])
+    (folder / "meshes" / "floor.obj").write_text(floor.export(file_type="obj"))
+    (folder / "props").mkdir()
+    box = trimesh.Scene(trimesh.creation.box(extents=(0.3, 0.3, 0.3))).export(file_type="gltf")
+    for name, data in box.items():
+        (folder / "props" / name).write_bytes(data)
+    write_png(folder / "red.png", np.full((4, 4, 3), 0.4, np.float32))
+    write_exr(folder / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))
+    (folder / "notes.txt").write_text("not part of the scene")
+    scene = instanced_scene()
+    objects = [
+        scene.objects[0].model_copy(update={"shape": MeshShape(path="meshes/floor.obj")}),
+        *scene.objects[1:],
+        SceneObject(name="box", shape=MeshShape(path="props/model.gltf"), material="red"),
+    ]
+    materials = scene.materials | {"red": Diffuse(reflectance=ImageTexture(path="red.png"))}
+    update = {"objects": objects, "materials": materials, "environment": EnvironmentMap(path="sky.exr")}
+    return scene.model_copy(update=update)
+
+
+KEPT = {"meshes/floor.obj", "props/model.gltf", "props/gltf_buffer_0.bin", "props/gltf_buffer_1.bin"}
+KEPT |= {"red.png", "sky.exr"}
+
+
+def test_an_artifact_keeps_the_files_its_scene_reads_and_renders_without_the_jobs_folder(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "node-cache"))
+    job, artifact = tmp_path / "job", tmp_path / "artifact"
+    spec = scene_with_files(job)
+    before = compile_scene(spec, job)
+    stored = portable_scene(spec, {}, job)
+    assert stored.spec is not None and set(stored.files) == KEPT and stored.base == "."
+    assert set(save_scene(artifact, stored)) == {"scene.json", *(f"scene/{name}" for name in KEPT)}
+    shutil.rmtree(job)
+    loaded = load_scene(artifact)
+    shutil.rmtree(artifact)  # the inference service's download folder goes once the model is loaded
+    after = loaded.compiled()
+    np.testing.assert_array_equal(after.positions, before.positions)
+    image = render(PathTracer(after), RenderSettings(spp=1, width=8, height=6, threads=1)).image
+    assert np.isfinite(image).all() and image.mean() > 0  # the texture and the sky load at render time
+    # an object the model replaces does not need its files
+    assert not {name for name in portable_scene(spec, {"box": BALL_BOUNDS}, job).files if "props" in name}
+
+
+def test_kept_files_are_verified_and_a_file_that_cannot_be_kept_is_the_reason(tmp_path, monkeypatch):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "node-cache"))
+    job, artifact = tmp_path / "job", tmp_path / "artifact"
+    spec = scene_with_files(job)
+    save_scene(artifact, portable_scene(spec, {}, job))
+    (artifact / "scene" / "red.png").write_bytes(b"tampered")
+    with pytest.raises(OSError, match="not the scene's sha256:"):
+        load_scene(artifact)
+    absolute = spec.model_copy(update={"environment": EnvironmentMap(path=str(job / "sky.exr"))})
+    assert "environment.path names an absolute path" in portable_scene(absolute, {}, job).reason
+    missing = spec.model_copy(update={"environment": EnvironmentMap(path="gone.exr")})
+    assert "gone.exr, which is not in the job's folder" in portable_scene(missing, {}, job).reason
+    assert portable_scene(missing, {}, job).spec is None
 
 
 def test_stored_scenes_round_trip_and_old_artifacts_have_none(tmp_path):

@@ -1,25 +1,35 @@
 """The scene an artifact carries, so the inference service can render the model in it without the job's
 uploaded folder.
 
-An artifact keeps the scene as JSON, never its files. Objects a model replaces become stand-ins: their
-shape is a coarse sphere around their local bounds, with their name, material, transform and instances
-unchanged. Their triangles are never traced, but their placements are kept, and so are the scene bounds
-that lights depend on. The stand-ins' materials lose their image textures, because the model predicts
-their base colour. Anything else that reads a file from the job's folder makes the scene unportable: a
-mesh, an image texture or an EXR environment. The artifact then keeps the reason in place of the scene,
-and renders fall back to a neutral background only when asked to.
+An artifact keeps the scene as JSON (`scene.json`) and the files it reads under `scene/`, named as in the
+job's folder, so the spec's relative paths resolve unchanged: meshes, glTF buffers and USD layers, image
+textures, an EXR environment, the folder of an artifact a material draws. The store keeps each file once
+by its digest, so artifacts of one scene share them. Serving puts them in the node's scene cache, keyed by
+their digests (`workers.scene.stored`), where they outlive the download folder.
+
+Objects a model replaces become stand-ins: their shape is a coarse sphere around their local bounds, with
+their name, material, transform and instances unchanged. Their triangles are never traced, but their
+placements are kept, and so are the scene bounds that lights depend on. The stand-ins' materials lose their
+image textures, because the model predicts their base colour; their files are not kept. A scene whose files
+cannot be kept (a job without its folder, an absolute path, a missing file) keeps the reason in place of
+the scene, and renders fall back to a neutral background only when asked to.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import os
+import shutil
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
+from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.spec import (
     AggregateMaterial,
     Camera,
@@ -35,8 +45,11 @@ from workers.scene.spec import (
     SphereShape,
     UsdShape,
 )
+from workers.scene.stored import StoredFile, artifact_folder
+from workers.scene.stored import StoredScene as StoredFiles
 
 SCENE_FILE = "scene.json"
+SCENE_FILES = "scene"  # the folder of the files the scene reads, in an artifact
 JSON = "application/json"
 NEUTRAL_RADIANCE = 0.5  # a grey sky lighting the model from every direction
 # and a sun from above, front left, so that the shape reads under the sky's flat light
@@ -49,11 +62,32 @@ FRAMING_DIRECTION = np.array([0.45, 0.35, 1.0])  # from the model's centre towar
 
 @dataclass(frozen=True)
 class StoredScene:
-    """The artifact's scene, or `None` and `reason` saying why it could not be kept."""
+    """The artifact's scene, or `None` and `reason` saying why it could not be kept.
+
+    `files` are the files the spec reads, named relative to `root`, and `base` is the folder (relative to
+    `root`) that the spec's relative paths resolve from: the job's folder when saved, the node's scene
+    cache when loaded."""
 
     spec: SceneSpec | None
     standins: tuple[str, ...] = ()  # objects whose shape is a stand-in for the model
     reason: str = ""
+    files: tuple[str, ...] = ()
+    root: Path | None = None
+    base: str = "."
+
+    @property
+    def base_dir(self) -> Path | None:
+        return None if self.root is None else self.root / self.base
+
+    def compiled(self) -> CompiledScene:
+        """The kept scene's triangles, its files read from `base_dir`."""
+        if self.spec is None:
+            raise ValueError(f"the artifact keeps no scene: {self.reason}")
+        return compile_scene(self.spec, self.base_dir)
+
+
+class UnkeptFile(Exception):
+    """A file the scene reads that an artifact cannot keep; the message says which and why."""
 
 
 def standin_shape(local_bounds: np.ndarray) -> SphereShape:
@@ -80,25 +114,71 @@ def reads_file(obj: SceneObject) -> bool:
     return isinstance(obj.shape, MeshShape | GltfShape | UsdShape)
 
 
-def file_references(spec: SceneSpec) -> list[str]:
-    """The fields of `spec` that name a file, which only the job's folder holds (a stored artifact a
-    material names included: the job fetched it into its folder)."""
-    fields = [f"objects[{i}].shape.path" for i, obj in enumerate(spec.objects) if reads_file(obj)]
+def file_references(spec: SceneSpec) -> dict[str, str]:
+    """The fields of `spec` that name a file or folder, which only the job's folder holds (a stored
+    artifact a material names included: the job fetched it into its folder) -> the path they name."""
+    fields = {
+        f"objects[{i}].shape.path": obj.shape.path for i, obj in enumerate(spec.objects) if reads_file(obj)
+    }
     for name, material in spec.materials.items():
         if isinstance(material, AggregateMaterial):
-            fields.append(f"materials.{name}.{'path' if material.path is not None else 'artifact'}")
+            if material.path is not None:
+                fields[f"materials.{name}.path"] = material.path
+            else:
+                fields[f"materials.{name}.artifact"] = str(artifact_folder(material.artifact))
             material, name = material.base, f"{name}.base"
-        fields += [
-            f"materials.{name}.{field}.path" for field, value in material if isinstance(value, ImageTexture)
-        ]
+        fields |= {
+            f"materials.{name}.{field}.path": value.path
+            for field, value in material
+            if isinstance(value, ImageTexture)
+        }
     if isinstance(spec.environment, EnvironmentMap) and spec.environment.path is not None:
-        fields.append("environment.path")
+        fields["environment.path"] = spec.environment.path
     return fields
 
 
-def portable_scene(spec: SceneSpec, standins: Mapping[str, np.ndarray]) -> StoredScene:
-    """`spec` with the objects named in `standins` (name -> local bounds) replaced by stand-ins, and
-    only the materials some object uses; None, with the reason, when the rest reads files."""
+def dependencies(path: Path) -> list[Path]:
+    """Files that the mesh file at `path` reads besides itself: a .gltf's external buffers and images, a
+    USD stage's other layers (the readers confine them to the file's folder)."""
+    suffix = path.suffix.lower()
+    if suffix == ".gltf":
+        document = json.loads(path.read_text())
+        uris = [item.get("uri") for key in ("buffers", "images") for item in document.get(key, [])]
+        return [path.parent / unquote(uri) for uri in uris if uri and not uri.startswith("data:")]
+    if suffix in (".usd", ".usda", ".usdc"):
+        from workers.scene.usd import read_stage
+
+        layers = {Path(layer.realPath) for layer in read_stage(path).GetUsedLayers() if layer.realPath}
+        return sorted(layers - {path.resolve()})
+    return []
+
+
+def kept_files(references: Mapping[str, str], folder: Path) -> tuple[Path, tuple[str, ...], str]:
+    """(root, names relative to it, the folder relative to it) of every file the `references` (field ->
+    path relative to `folder`) read, or UnkeptFile."""
+    folder = folder.resolve()
+    paths: set[Path] = set()
+    for field, reference in references.items():
+        if Path(reference).is_absolute():
+            raise UnkeptFile(f"{field} names an absolute path ({reference})")
+        target = (folder / reference).resolve()
+        if target.is_dir():
+            paths |= {p for p in target.rglob("*") if p.is_file()}
+        elif target.is_file():
+            paths |= {target, *(p.resolve() for p in dependencies(target))}
+        else:
+            raise UnkeptFile(f"{field} names {reference}, which is not in the job's folder")
+    root = Path(os.path.commonpath([folder, *paths]))
+    names = tuple(sorted(p.relative_to(root).as_posix() for p in paths))
+    return root, names, folder.relative_to(root).as_posix()
+
+
+def portable_scene(
+    spec: SceneSpec, standins: Mapping[str, np.ndarray], folder: Path | None = None
+) -> StoredScene:
+    """`spec` with the objects named in `standins` (name -> local bounds) replaced by stand-ins, only the
+    materials some object uses, and the files the rest reads from `folder` (the job's); None, with the
+    reason, when they cannot be kept."""
     objects = [
         obj.model_copy(update={"shape": standin_shape(standins[obj.name])}) if obj.name in standins else obj
         for obj in spec.objects
@@ -109,15 +189,21 @@ def portable_scene(spec: SceneSpec, standins: Mapping[str, np.ndarray]) -> Store
         for name, material in spec.materials.items()
         if name in {obj.material for obj in objects}
     }
-    portable = spec.model_copy(update={"objects": objects, "materials": materials})
+    portable = SceneSpec.model_validate(
+        spec.model_copy(update={"objects": objects, "materials": materials}).model_dump()
+    )
     references = file_references(portable)
-    if references:
-        reason = (
-            f"the scene reads files from the job's folder ({', '.join(references)}), which the artifact "
-            "does not keep"
-        )
+    if not references:
+        return StoredScene(portable, tuple(sorted(standins)))
+    fields = ", ".join(references)
+    if folder is None:
+        reason = f"the scene reads files ({fields}) and the job has no folder they come from"
         return StoredScene(None, reason=reason)
-    return StoredScene(SceneSpec.model_validate(portable.model_dump()), tuple(sorted(standins)))
+    try:
+        root, names, base = kept_files(references, Path(folder))
+    except UnkeptFile as error:
+        return StoredScene(None, reason=f"the artifact cannot keep the files the scene reads: {error}")
+    return StoredScene(portable, tuple(sorted(standins)), files=names, root=root, base=base)
 
 
 def neutral_scene(objects: list[SceneObject], materials: Mapping[str, Material]) -> SceneSpec:
@@ -142,21 +228,48 @@ def framing_camera(bounds: np.ndarray, fov: float = 40.0) -> Camera:
 
 
 def save_scene(folder: Path, stored: StoredScene) -> dict[str, tuple[str, str]]:
-    """Write `scene.json` (the spec, or the reason there is none); artifact name -> (path, media type)."""
+    """Write `scene.json` (the spec, or the reason there is none) and link or copy the files it reads under
+    `scene/`; artifact name -> (path, media type: empty for the store to infer it from the name)."""
+    folder = Path(folder)
+    outputs = {}
+    digests = {}
+    for name in stored.files:
+        target = folder / SCENE_FILES / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.unlink(missing_ok=True)  # a job run again writes its artifact again
+        try:
+            os.link(stored.root / name, target)
+        except OSError:  # another file system
+            shutil.copyfile(stored.root / name, target)
+        with open(target, "rb") as file:
+            digests[name] = f"sha256:{hashlib.file_digest(file, 'sha256').hexdigest()}"
+        outputs[f"{SCENE_FILES}/{name}"] = (str(target), "")
     document = {
         "spec": None if stored.spec is None else stored.spec.model_dump(mode="json"),
         "standins": list(stored.standins),
         "reason": stored.reason,
+        "files": digests,
+        "base": stored.base,
     }
-    path = Path(folder) / SCENE_FILE
+    path = folder / SCENE_FILE
     path.write_text(json.dumps(document, indent=2))
-    return {SCENE_FILE: (str(path), JSON)}
+    return {SCENE_FILE: (str(path), JSON), **outputs}
 
 
 def load_scene(folder: Path) -> StoredScene:
-    path = Path(folder) / SCENE_FILE
+    """The artifact's scene in `folder`, its files verified into the node's scene cache (`folder` may be a
+    download that is removed once the model is loaded)."""
+    folder = Path(folder)
+    path = folder / SCENE_FILE
     if not path.exists():
         return StoredScene(None, reason="the artifact was made before artifacts kept their scene")
     document = json.loads(path.read_text())
     spec = None if document["spec"] is None else SceneSpec.model_validate(document["spec"])
-    return StoredScene(spec, tuple(document["standins"]), document["reason"])
+    stored = StoredScene(spec, tuple(document["standins"]), document["reason"])
+    digests: dict[str, str] = document.get("files", {})
+    if not digests:
+        return stored
+    key = hashlib.sha256(json.dumps(digests, sort_keys=True).encode()).hexdigest()
+    files = {name: StoredFile(url=str(folder / SCENE_FILES / name), digest=d) for name, d in digests.items()}
+    root = StoredFiles(key=key, files=files).local_folder()
+    return replace(stored, files=tuple(digests), root=root, base=document["base"])

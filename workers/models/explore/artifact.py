@@ -27,7 +27,12 @@ STORAGE_DTYPE = torch.float16
 
 
 def save(
-    folder: Path, config: ExploreConfig, model: PixelGenerator, scene: SceneSpec, box: np.ndarray
+    folder: Path,
+    config: ExploreConfig,
+    model: PixelGenerator,
+    scene: SceneSpec,
+    box: np.ndarray,
+    scene_folder: Path | None = None,
 ) -> dict:
     """Write the weights, the manifest and the scene; artifact name -> (path, media type)."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -40,7 +45,7 @@ def save(
     }
     (folder / MANIFEST).write_text(json.dumps(manifest, indent=2))
     files = {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON)}
-    stored = portable_scene(scene, {})
+    stored = portable_scene(scene, {}, scene_folder)
     if stored.spec is None:
         raise ValueError(f"scene: {stored.reason}; an explore artifact renders its scene, so it must keep it")
     files.update(save_scene(folder, stored))
@@ -54,18 +59,24 @@ class ExploreArtifact:
     scene: SceneSpec
     box: np.ndarray
     dimensions: list[str]
+    scene_dir: Path | None  # where the scene's relative file paths resolve
 
 
 def load(folder: Path | str, device: str = "cpu") -> ExploreArtifact:
     folder = Path(folder)
     manifest = json.loads((folder / MANIFEST).read_text())
     config = ExploreConfig.model_validate(manifest["config"])
-    scene = load_scene(folder).spec
-    if scene is None:
+    stored = load_scene(folder)
+    if stored.spec is None:
         raise ValueError("the artifact keeps no scene")
     model = PixelGenerator.of(config, len(manifest["dimensions"]))
     weights = safetensors.torch.load_file(str(folder / WEIGHTS))
     model.load_state_dict({k: v.float() for k, v in weights.items()})
     return ExploreArtifact(
-        config, model.to(device).eval(), scene, np.asarray(manifest["box"]), manifest["dimensions"]
+        config,
+        model.to(device).eval(),
+        stored.spec,
+        np.asarray(manifest["box"]),
+        manifest["dimensions"],
+        stored.base_dir,
     )

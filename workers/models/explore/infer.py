@@ -60,7 +60,7 @@ class PixelQuery(BaseModel):
 class ExploreModel:
     def __init__(self, folder: Path, device: str) -> None:
         self.artifact = load(folder, device)
-        self.scene = CompiledVariableScene(self.artifact.scene)
+        self.scene = CompiledVariableScene(self.artifact.scene, self.artifact.scene_dir)
         self.tracer = VariableTracer(self.scene)
         weights = sum(p.numel() * p.element_size() for p in self.artifact.model.parameters())
         self.nbytes = weights + scene_bytes(self.scene.base)

@@ -59,7 +59,9 @@ class ExploreMethod:
     def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
         config: ExploreConfig = ctx.config
         source, model = self.source, self.explorer.average  # the trained weights' average (`Explorer`)
-        files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec, source.box)
+        files = artifact.save(
+            ctx.output_dir, config, model, ctx.scene.spec, source.box, ctx.scene.local_folder()
+        )
         ctx.raise_if_cancelled()
         vectors = configurations(source.dimensions, config.evaluation_configurations, ctx.seed)
         states = [source.scene.at(v) for v in vectors]

@@ -70,7 +70,7 @@ def save(folder: Path, asset: LodAsset, scene: CompiledScene) -> dict[str, tuple
         for g in scene.objects
         if g.name in asset.objects
     }
-    files = save_scene(folder, portable_scene(scene.spec, local_bounds))
+    files = save_scene(folder, portable_scene(scene.spec, local_bounds, scene.base_dir))
     return {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON), **files}
 
 

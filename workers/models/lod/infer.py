@@ -94,7 +94,7 @@ class LodModel:
         )
         self.views = {NEUTRAL: _view(compile_scene(neutral), [STANDIN], framing_camera(self.bounds))}
         if stored.spec is not None:
-            self.views[SCENE] = _view(compile_scene(stored.spec), list(stored.standins), stored.spec.camera)
+            self.views[SCENE] = _view(stored.compiled(), list(stored.standins), stored.spec.camera)
         scenes = sum(scene_bytes(v.scene) for v in self.views.values())
         self.nbytes = asset.network_bytes() + grid.storage_bytes() + scenes
 

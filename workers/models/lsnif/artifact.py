@@ -64,7 +64,12 @@ def import_object(tensors: dict[str, np.ndarray], resolution: int, n_materials: 
 
 
 def save(
-    folder: Path, config: LsnifConfig, models: dict[str, LsnifObject], placements: dict, scene: SceneSpec
+    folder: Path,
+    config: LsnifConfig,
+    models: dict[str, LsnifObject],
+    placements: dict,
+    scene: SceneSpec,
+    scene_folder: Path | None = None,
 ) -> dict:
     """Write `objects/<name>.safetensors`, the manifest and the scene; returns artifact name -> (path,
     media type).
@@ -90,7 +95,7 @@ def save(
     from_files = {
         o.name: models[o.name].grid.bounds for o in scene.objects if o.name in models and reads_file(o)
     }
-    files.update(save_scene(folder, portable_scene(scene, from_files)))
+    files.update(save_scene(folder, portable_scene(scene, from_files, scene_folder)))
     return files
 
 

@@ -114,7 +114,7 @@ class LsnifModel:
         self.stored = stored
         self.views = {NEUTRAL: self._neutral_view(artifact)}
         if stored.spec is not None:
-            scene = compile_scene(stored.spec)
+            scene = stored.compiled()
             own = not set(stored.standins) & set(artifact.models)
             triangles = RayScene(scene.positions) if own else None
             self.views[SCENE] = _View(scene, artifact.intersector(scene), triangles, stored.spec.camera)

@@ -65,7 +65,9 @@ class LsnifMethod:
             method_metrics.update(
                 {f"{name}.{k}": float(v) for k, v in _object_figures(model, source, geometry, done).items()}
             )
-        files = artifact.save(ctx.output_dir, config, models, placements, ctx.scene.spec)
+        files = artifact.save(
+            ctx.output_dir, config, models, placements, ctx.scene.spec, ctx.scene.local_folder()
+        )
 
         ctx.raise_if_cancelled()
         view = PathTracedView(

@@ -24,7 +24,9 @@ STORAGE_DTYPE = torch.float16
 SHIPPED = ("mapping.", "synthesis.", "decoder.")
 
 
-def save(folder: Path, config: MesoganConfig, model: MesoGAN, spec: SceneSpec) -> dict[str, tuple[str, str]]:
+def save(
+    folder: Path, config: MesoganConfig, model: MesoGAN, spec: SceneSpec, scene_folder: Path | None = None
+) -> dict[str, tuple[str, str]]:
     folder.mkdir(parents=True, exist_ok=True)
     tensors = {
         k: v.detach().to(STORAGE_DTYPE).cpu().contiguous()
@@ -34,7 +36,7 @@ def save(folder: Path, config: MesoganConfig, model: MesoGAN, spec: SceneSpec) -
     safetensors.torch.save_file(tensors, str(folder / WEIGHTS))
     (folder / MANIFEST).write_text(json.dumps({"config": config.model_dump(mode="json")}, indent=1))
     files = {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON)}
-    files.update(save_scene(folder, portable_scene(spec, {})))
+    files.update(save_scene(folder, portable_scene(spec, {}, scene_folder)))
     return files
 
 

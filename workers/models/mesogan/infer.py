@@ -174,7 +174,7 @@ class MesoganModel:
                 raise ValueError(f"params.scene: {error.problem}") from None
             return compile_scene(spec), params.surfaces or self.config.surfaces
         refuse_missing_scene(self.stored)
-        return compile_scene(self.stored.spec), params.surfaces or self.config.surfaces
+        return self.stored.compiled(), params.surfaces or self.config.surfaces
 
 
 def uploaded_mesh(corners: np.ndarray, folder: Path) -> tuple[MeshShape, Camera]:

@@ -58,7 +58,7 @@ class MesoganMethod:
     def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
         config: MesoganConfig = ctx.config
         model: MesoGAN = trained[0].model
-        files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec)
+        files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec, ctx.scene.local_folder())
         scene = ctx.scene.compiled()
         cover = covering(scene, config.surfaces, config.shell_height, config.texel)
         shell = build_shell(scene, cover, config.shell_height)

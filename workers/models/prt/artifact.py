@@ -1,6 +1,6 @@
 """A `prt` artifact: the network (S, W, U, f) in safetensors at float16, a JSON manifest with the config
-and the hash grid's box, and the scene (`workers.scene.portable`): relighting needs the scene's geometry
-for the G-buffer and the direct light, so a scene that reads files cannot be served (the reason is kept)."""
+and the hash grid's box, and the scene with the files it reads (`workers.scene.portable`): relighting
+needs the scene's geometry for the G-buffer and the direct light."""
 
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ def save(
     box: np.ndarray,
     objects: tuple[int, ...],
     scene: SceneSpec,
+    scene_folder: Path | None = None,
 ) -> dict:
     folder.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().to(STORAGE_DTYPE).cpu().contiguous() for k, v in model.state_dict().items()}
@@ -42,7 +43,7 @@ def save(
     }
     (folder / MANIFEST).write_text(json.dumps(manifest, indent=2))
     files = {WEIGHTS: (str(folder / WEIGHTS), SAFETENSORS), MANIFEST: (str(folder / MANIFEST), JSON)}
-    files.update(save_scene(folder, portable_scene(scene, {})))
+    files.update(save_scene(folder, portable_scene(scene, {}, scene_folder)))
     return files
 
 

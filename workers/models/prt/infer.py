@@ -39,7 +39,6 @@ from workers.runtime.view_render import (
     refuse_missing_scene,
     scene_bytes,
 )
-from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.spec import EnvironmentMap
 
@@ -85,7 +84,7 @@ class PrtModel:
         self.config = artifact.config
         self.model: PrtNetwork = artifact.model
         self.stored = artifact.scene
-        self.scene = compile_scene(self.stored.spec) if self.stored.spec is not None else None
+        self.scene = self.stored.compiled() if self.stored.spec is not None else None
         self.rays = RayScene(self.scene.positions) if self.scene is not None else None
         parameters = sum(t.numel() * t.element_size() for t in self.model.state_dict().values())
         self.nbytes = parameters + (scene_bytes(self.scene) if self.scene is not None else 0)

@@ -49,7 +49,10 @@ class PrtMethod:
         model: PrtNetwork = done.model
         source: PrtSource = done.trainable.source.build()
         objects = np.asarray(source.objects, np.int64)
-        files = artifact.save(ctx.output_dir, config, model, source.data.box, source.objects, ctx.scene.spec)
+        files = artifact.save(
+            ctx.output_dir, config, model, source.data.box, source.objects, ctx.scene.spec,
+            ctx.scene.local_folder(),
+        )  # fmt: skip
 
         ctx.log("measuring on held-out lightings and views")
         cases = held_out_cases(model, source.data.box, objects, ctx.scene, config, ctx.seed)
