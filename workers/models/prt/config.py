@@ -270,6 +270,7 @@ class PrtConfig(TrainedKindConfig):
     train: TrainConfig = TrainConfig(
         steps=8000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
+        fused=True,
         checkpoint_every=500,
         progress_every=20,
     )
