@@ -272,13 +272,16 @@ class PrtConfig(TrainedKindConfig):
     # (`PrtNetwork.transport`), fused Adam (`fused`). CPU ms a step (default preset, glossy_row rows, one
     # thread; runs alternating old / new on a machine loaded by other jobs, 300 steps each; /tmp harness):
     # before 65.6-78.3 (batch 14.1-16.2, update 51.5-62.0), after 34.8-40.8 (batch 3.9-4.6, update
-    # 30.9-36.2): 0.51-0.59 times. So 16000 steps now cost about what 8000 did (1.0-1.15 times). 16000 steps
-    # (far views against the 1024-spp truth as above, lightings of the job's seed; CPU s of training on the
-    # loaded machine, where the old step took 2-3x its time on prt13b's):
-    #   glossy_row       16000 (prt14): 25.69 (29.29) / 25.13 (29.24)   589 s (seed 1)
-    #   env_lit_objects  16000 (prt14): ENV
-    # glossy_row seed 1's held-out sky is the hardest lighting yet (17.7-18.3 dB indirect); under seed 0's
-    # lightings that model scores 25.64 (29.46). Within the runs' spread of prt13b's 16000 steps.
+    # 30.9-36.2): 0.51-0.59 times. So 16000 steps now cost about what 8000 did (1.0-1.15 times). The same
+    # 2500 steps from the same start and batches, old / new (rounding apart): training loss per 500 steps
+    # 0.970 / 0.970, 0.437 / 0.436, 0.388 / 0.388, 0.363 / 0.362, 0.355 / 0.355. 16000 steps (far views
+    # against the 1024-spp truth as above, lightings of the job's seed; CPU s of training on the loaded
+    # machine, where the old step took ~3x its time in prt13b's jobs):
+    #   glossy_row       16000 (prt14): 25.69 (29.29) / 25.13 (29.24)   - / 589 s
+    #   env_lit_objects  16000 (prt14): 29.02 (32.67) / -               609 s
+    # Against prt13b's 16000 steps: glossy_row +0.17 / -0.42 dB indirect (seed 1's own held-out sky is the
+    # hardest lighting yet, 17.7-18.3 dB; under seed 0's lightings that model scores 25.64 (29.46)),
+    # env_lit_objects -0.58 indirect, full frame equal (-0.02): single runs, the losses above agree.
     train: TrainConfig = TrainConfig(
         steps=16000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
