@@ -167,6 +167,23 @@ def test_the_split_first_layer_equals_f_of_the_cp_features():
     assert torch.allclose(model.transport(spatial, rest, wavelets), explicit, atol=1e-12)
 
 
+def test_training_transport_of_pixel_groups_in_chunks_is_each_pixel_s_cp_features_through_f(monkeypatch):
+    """Groups of 3 and 2 pixels, each with its own wavelets, through f 2 pixels at a time (a chunk never
+    spans two groups): each pixel's T equals Eq. 7 as written through its group's wavelets."""
+    monkeypatch.setattr(network, "CPU_CHUNK_BYTES", 2 * 3 * 32 * 8)  # 2 pixels x 3 wavelets of quick's f
+    config = resolve_preset(PrtConfig, PRESETS, "quick", {})
+    torch.manual_seed(4)
+    model = PrtNetwork(config).double()
+    torch.nn.init.normal_(model.f.layers[-2].weight)
+    spatial, rest = torch.randn(5, 8, dtype=torch.float64), torch.randn(5, 19, dtype=torch.float64)
+    groups = torch.tensor([[1, 7, 30], [0, 2, 50]])
+    transport = model.transport(spatial, rest, groups, [3, 2])
+    for p, group in enumerate([0, 0, 0, 1, 1]):
+        h = model.mix(spatial[p] * model.wavelet_factors[groups[group]])
+        explicit = model.f(torch.cat([h, rest[p].expand(3, -1)], dim=-1))
+        assert torch.allclose(transport[p], explicit, atol=1e-12)
+
+
 def test_b_in_chunks_of_pixels_equals_eq_3_over_all_pixels_at_once(monkeypatch):
     # 16 pairs of quick f's 32 float64s a chunk: 3 pixels, so 6 chunks, the last short
     monkeypatch.setattr(network, "CPU_CHUNK_BYTES", 16 * 32 * 8)
@@ -222,18 +239,29 @@ def test_pixels_that_see_the_environment_get_no_indirect_light():
     assert (out[[0, 2, 5]] != 0).any(axis=1).all()
 
 
-def test_per_wavelet_transport_targets_sum_to_the_row_dotted_with_the_lighting():
-    from workers.models.prt.source import wavelet_transport
+def test_the_targets_haar_coefficients_dotted_with_the_lighting_s_equal_the_rows_dotted_with_it(monkeypatch):
+    """Training reads targets and per-wavelet transport off the rows' Haar coefficients, computed once a
+    chunk at a time (3 rows here, the last chunk short) in float64 and kept in float32."""
+    from workers.models.prt import data
 
+    monkeypatch.setattr(data, "MAP_CHUNK", 3)
     rng = np.random.default_rng(3)
-    rows, cube = rng.random((5, 6 * 4 * 4, 3)), rng.random((6, 4, 4, 3)) ** 3
-    everything = torch.arange(6 * 4 * 4)
-    per_wavelet = wavelet_transport(rows, everything, 4).double()
-    lighting = wavelets_of(cube).reshape(-1, 3)
-    by_wavelet = torch.einsum("pkc,kc->pc", per_wavelet, lighting)  # Eq. 3 with every wavelet
-    np.testing.assert_allclose(
-        by_wavelet.numpy(), np.einsum("pjc,jc->pc", rows, cube.reshape(-1, 3)), rtol=1e-6
+    rows, cube = rng.random((7, 6 * 4 * 4, 3)).astype(np.float32), rng.random((6, 4, 4, 3)) ** 3
+    per_wavelet = data._row_wavelets(rows, 4, out=None)
+    assert per_wavelet.dtype == np.float32 and per_wavelet.shape == rows.shape
+    lighting = wavelets_of(cube).reshape(-1, 3).numpy()
+    np.testing.assert_allclose(  # Eq. 3 with every wavelet against the row's dot product in texels
+        np.einsum("pkc,kc->pc", per_wavelet.astype(np.float64), lighting),
+        np.einsum("pjc,jc->pc", rows.astype(np.float64), cube.reshape(-1, 3)),
+        rtol=1e-6,
     )
+    for row, coefficients in zip(rows, per_wavelet, strict=True):  # each row's own transform, face by face
+        np.testing.assert_allclose(
+            coefficients, wavelets_of(row.reshape(6, 4, 4, 3)).reshape(-1, 3), rtol=1e-6, atol=1e-7
+        )
+    in_place = rows.copy()
+    assert data._row_wavelets(in_place, 4, out=in_place) is in_place
+    assert np.array_equal(in_place, per_wavelet)
 
 
 def _points_on_a_line(n: int):
@@ -267,7 +295,7 @@ def test_nearest_rows_are_on_the_row_s_own_object():
 
 
 def test_training_targets_are_the_mean_of_each_object_s_chosen_nearest_rows():
-    from workers.models.prt.data import TrainingSet
+    from workers.models.prt.data import TrainingSet, _row_wavelets
     from workers.models.prt.neighbours import smoothed_rows
 
     inputs, box = _points_on_a_line(12)
@@ -275,13 +303,13 @@ def test_training_targets_are_the_mean_of_each_object_s_chosen_nearest_rows():
     maps = {"uniform": np.ones(12)}
     picked = np.array([3, 3, 8, 11])
     choices = {0: (3, 0.03), 1: (3, 0.03)}
-    targets = TrainingSet(
-        inputs, rows, box, maps, smoothed_rows(inputs, rows, box, choices), choices
-    ).targets(picked)
+    smoothed = smoothed_rows(inputs, rows, box, choices)
+    targets = TrainingSet(inputs, rows, box, maps, _row_wavelets(smoothed, 2, None), choices).targets(picked)
     assert targets.shape == (4, 24, 3) and targets.dtype == np.float64
     nearest = {3: [1, 3, 5], 8: [6, 8, 10], 11: [7, 9, 11]}  # on the row's object, along the line
-    for target, i in zip(targets, picked, strict=True):
-        np.testing.assert_allclose(target, rows[nearest[i]].mean(0), rtol=1e-6)
+    for target, i in zip(targets, picked, strict=True):  # as Haar coefficients
+        mean = wavelets_of(rows[nearest[i]].mean(0).reshape(6, 2, 2, 3)).reshape(-1, 3).numpy()
+        np.testing.assert_allclose(target, mean, rtol=1e-6, atol=1e-7)
     mixed = smoothed_rows(inputs, rows, box, {0: (1, 0.03), 1: (3, 0.03)})  # object 0 (even rows): itself
     assert (mixed[8] == rows[8]).all()
     np.testing.assert_allclose(mixed[3], rows[[1, 3, 5]].mean(0), rtol=1e-6)
@@ -348,10 +376,9 @@ def test_a_pooled_batch_lights_each_group_by_one_lighting_of_a_pool_built_once()
     config = resolve_preset(PrtConfig, PRESETS, "quick", {"lighting_pool": 3, "lightings_per_step": 4})
     source = PrtSource(PrtSourceConfig(SceneRef(get_builtin("env_lit_objects")), config), seed=0)
     assert lighting_pool(config, 0) is source.pool  # built once per process
-    pooled = [wavelets_of(lighting.cube.reshape(6, 4, 4, 3)).reshape(-1, 3) for lighting in source.pool]
     batch = source.batch(5)
     for wavelets, coefficients in zip(batch["wavelets"], batch["coefficients"], strict=True):
-        assert any(torch.allclose(c[wavelets].float(), coefficients) for c in pooled)
+        assert any(torch.allclose(p.coefficients[wavelets].float(), coefficients) for p in source.pool)
 
 
 @pytest.mark.parametrize(("sampler", "most"), [("independent", 0.5), ("stratified", 0.95)])

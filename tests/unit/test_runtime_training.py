@@ -70,20 +70,22 @@ def test_schedules():
     assert cosine.at(100, 100) == pytest.approx(0.2)
 
 
-def test_resume_equals_an_uninterrupted_run_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("fused", [False, True])
+def test_resume_equals_an_uninterrupted_run_bit_for_bit(tmp_path, fused):
+    config = CONFIG.model_copy(update={"fused": fused})
     reference = small_mlp()
     reference_store = CheckpointStore(str(tmp_path / "reference"), keep=10)
     losses = []
-    train(reference, mse, InProcessBatches(SPEC), CONFIG, reference_store, lambda e: losses.append(e.loss))
+    train(reference, mse, InProcessBatches(SPEC), config, reference_store, lambda e: losses.append(e.loss))
 
     resumed = small_mlp()
     store = CheckpointStore(str(tmp_path / "resumed"), keep=2)
     with pytest.raises(Interrupted):  # a crash at step 10: the latest checkpoint is step 8
-        train(resumed, mse, InProcessBatches(SPEC), CONFIG, store, interrupt_at(10))
+        train(resumed, mse, InProcessBatches(SPEC), config, store, interrupt_at(10))
     assert store.latest() == 8
     resumed = small_mlp(seed=99)  # a fresh process would build the model from scratch
     resumed_losses = []
-    train(resumed, mse, InProcessBatches(SPEC), CONFIG, store, lambda e: resumed_losses.append(e.loss))
+    train(resumed, mse, InProcessBatches(SPEC), config, store, lambda e: resumed_losses.append(e.loss))
 
     assert resumed_losses == losses[8:]
     assert_same_weights(reference, resumed)

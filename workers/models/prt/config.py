@@ -267,9 +267,25 @@ class PrtConfig(TrainedKindConfig):
     # (27.17)): the steps give +0.5-1.0 dB, the targets +0.4 on top (at 4000: +0.7). 16000 steps: glossy_row
     # 25.52 (29.27) / 25.55 (29.74), env_lit_objects 29.60 (32.69) / - for 362-375 CPU s: still gaining,
     # not taken (twice the training time again).
+    # prt14 made a step cheaper with the same updates up to rounding: targets kept as Haar coefficients (no
+    # transform per step, `TrainingSet.target_wavelets`), the CP features through f a lighting at a time
+    # (`PrtNetwork.transport`), fused Adam (`fused`). CPU ms a step (default preset, glossy_row rows, one
+    # thread; runs alternating old / new on a machine loaded by other jobs, 300 steps each; /tmp harness):
+    # before 65.6-78.3 (batch 14.1-16.2, update 51.5-62.0), after 34.8-40.8 (batch 3.9-4.6, update
+    # 30.9-36.2): 0.51-0.59 times. So 16000 steps now cost about what 8000 did (1.0-1.15 times). The same
+    # 2500 steps from the same start and batches, old / new (rounding apart): training loss per 500 steps
+    # 0.970 / 0.970, 0.437 / 0.436, 0.388 / 0.388, 0.363 / 0.362, 0.355 / 0.355. 16000 steps (far views
+    # against the 1024-spp truth as above, lightings of the job's seed; CPU s of training on the loaded
+    # machine, where the old step took ~3x its time in prt13b's jobs):
+    #   glossy_row       16000 (prt14): 25.69 (29.29) / 25.13 (29.24)   - / 589 s
+    #   env_lit_objects  16000 (prt14): 29.02 (32.67) / -               609 s
+    # Against prt13b's 16000 steps: glossy_row +0.17 / -0.42 dB indirect (seed 1's own held-out sky is the
+    # hardest lighting yet, 17.7-18.3 dB; under seed 0's lightings that model scores 25.64 (29.46)),
+    # env_lit_objects -0.58 indirect, full frame equal (-0.02): single runs, the losses above agree.
     train: TrainConfig = TrainConfig(
-        steps=8000,
+        steps=16000,
         schedule=Schedule(lr=0.003, kind="cosine", final_lr_fraction=0.05),
+        fused=True,
         checkpoint_every=500,
         progress_every=20,
     )

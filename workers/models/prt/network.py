@@ -71,11 +71,29 @@ class PrtNetwork(nn.Module):
         per_wavelet = self.wavelet_factors[wavelets][:, None, :] * folded[None]  # [K, width, M] (Eq. 6-7)
         return per_pixel, per_wavelet.reshape(-1, m).T
 
-    def transport(self, spatial: Tensor, rest: Tensor, wavelets: Tensor) -> Tensor:
-        """T_k [P, K, 3] of pixels (their `pixel_features`) for flat wavelet indices `wavelets` [K]."""
-        per_pixel, per_wavelet = self.first_layer(rest, wavelets)
-        hidden = (spatial @ per_wavelet).view(len(spatial), len(wavelets), -1) + per_pixel[:, None, :]
-        return self.f.layers[1:](hidden)
+    def transport(
+        self, spatial: Tensor, rest: Tensor, wavelets: Tensor, shares: list[int] | None = None
+    ) -> Tensor:
+        """T_k [P, K, 3] of pixels (their `pixel_features`) for flat wavelet indices `wavelets` [K], or [G, K]
+        for G groups of consecutive pixels of sizes `shares` (a training batch's lightings), each through its
+        own wavelets. Training's form: with few pixels per wavelet set (16 a lighting by default) the CP
+        features [p, K, M] are smaller than `first_layer`'s folded [K, width, M]; they go through f in
+        cache-sized chunks of pixels (`pairs_per_chunk`; default preset, one thread, CPU ms of f's forward
+        and backward: all lightings as one product 34-37, a lighting a chunk 28-30)."""
+        groups = wavelets.view(-1, wavelets.shape[-1])
+        k, shares = groups.shape[-1], [len(spatial)] if shares is None else shares
+        first, m = self.f.layers[0], self.grid.n_output_dims
+        folded = first.weight[:, :m] @ self.mix.weight  # W_h U: [width, M]
+        per_pixel = rest @ first.weight[:, m:].T + first.bias  # [P, width]
+        chunk = max(1, pairs_per_chunk(spatial.device, first.out_features, spatial.dtype.itemsize) // k)
+        out, start = [], 0
+        for share, factors in zip(shares, self.wavelet_factors[groups], strict=True):  # W[k] (Eq. 6)
+            for a in range(start, start + share, chunk):
+                b = min(a + chunk, start + share)
+                cp = spatial[a:b, None, :] * factors  # S(x) * W[k]: [p, K, M]
+                out.append(self.f.layers[1:](cp @ folded.T + per_pixel[a:b, None, :]))
+            start += share
+        return torch.cat(out)
 
     def forward(self, inputs: dict[str, Tensor], wavelets: Tensor, coefficients: Tensor) -> Tensor:
         """B [P, 3] = sum_k L_k T_k (Eq. 3) for lighting `coefficients` [K, 3] at `wavelets` [K], in chunks

@@ -4,10 +4,12 @@ towards a single sun or sky, and which lightings came first decided the result),
 transform and picks its wavelets (largest + uniform), then samples an equal share of the pixels for each
 from the pixel maps (an equal share each) and computes their full-lighting indirect ground truth as row . L,
 the row being the mean of the pixel's nearest traced rows, as many as its object's rows choose (`data`,
-`neighbours`). Lightings are scaled to unit mean radiance (`lighting.unit_mean`). With
-`lighting_pool` > 0 the lightings are drawn from a pool built once per job (cube, Haar transform and
-ranking precomputed), so many lightings per step cost little; the wavelets and pixels stay fresh per draw.
-Batch i is a pure function of (seed, i)."""
+`neighbours`). Rows are kept as their Haar coefficients (`TrainingSet.target_wavelets`): row . L is the dot
+product of the two coefficient vectors (the transform is orthonormal), and a wavelet's transport, which
+`transport_weight` supervises, is read off the row. Lightings are scaled to unit mean radiance
+(`lighting.unit_mean`). With `lighting_pool` > 0 the lightings are drawn from a pool built once per job
+(cube, Haar transform and ranking precomputed), so many lightings per step cost little; the wavelets and
+pixels stay fresh per draw. Batch i is a pure function of (seed, i)."""
 
 from __future__ import annotations
 
@@ -21,7 +23,6 @@ from workers.models.prt.data import PIXEL_MAPS, TrainingSet, cached, training_se
 from workers.models.prt.lighting import lighting_cube, training_lighting, unit_mean
 from workers.models.prt.probe import modelled_objects
 from workers.models.prt.selection import RankedWavelets, ranked_wavelets, training_selection
-from workers.nn.haar import cubemap_wavelets
 from workers.runtime.sources import Batch, batch_rng
 from workers.runtime.threads import torch_threads
 from workers.scene.reference import SceneRef
@@ -35,39 +36,23 @@ class PrtSourceConfig:
     prt: PrtConfig
 
 
-@dataclass(frozen=True)
-class TrainingLighting:
-    cube: np.ndarray  # [6 R^2, 3] float64, unit mean
-    wavelets: RankedWavelets
-
-
-def draw_lighting(config: PrtConfig, rng: np.random.Generator) -> TrainingLighting:
-    """A fresh lighting of the training distribution, as its cube map and ranked wavelets."""
+def draw_lighting(config: PrtConfig, rng: np.random.Generator) -> RankedWavelets:
+    """A fresh lighting of the training distribution, as its ranked Haar coefficients."""
     env = training_lighting(config.lighting, rng)
     with torch_threads(1):  # tiny tensors: more threads busy-wait on a loaded CPU (10-100x slower)
-        cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
-        return TrainingLighting(cube.reshape(-1, 3), ranked_wavelets(cube))
+        return ranked_wavelets(unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width)))
 
 
-def lighting_pool(config: PrtConfig, seed: int) -> list[TrainingLighting]:
+def lighting_pool(config: PrtConfig, seed: int) -> list[RankedWavelets]:
     """`config.lighting_pool` training lightings, a function of (lighting config, cube size, seed), built
     once per process."""
     key = ("pool", config.lighting.model_dump_json(), config.cube_size, config.lighting_pool, seed)
 
-    def build() -> list[TrainingLighting]:
+    def build() -> list[RankedWavelets]:
         rng = np.random.default_rng([seed, POOL_STREAM])
         return [draw_lighting(config, rng) for _ in range(config.lighting_pool)]
 
     return cached(key, build)
-
-
-def wavelet_transport(rows: np.ndarray, wavelets: torch.Tensor, size: int) -> torch.Tensor:
-    """Each pixel's transport of the selected wavelets [P, K, 3]: the Haar transform of its row (exact per
-    wavelet, as noisy as the row; what the paper could not afford to supervise)."""
-    faces = torch.from_numpy(rows.reshape(len(rows) * 6, size, size, 3)).double()
-    with torch_threads(1):
-        coefficients = cubemap_wavelets(faces).reshape(len(rows), 6 * size * size, 3)
-    return coefficients[:, wavelets].float()
 
 
 def sample_pixels(data: TrainingSet, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -93,7 +78,7 @@ class PrtSource:
         self.data = training_set(config.scene, config.prt, seed, self.objects)
         self.pool = lighting_pool(config.prt, seed) if config.prt.lighting_pool else []
 
-    def lighting(self, rng: np.random.Generator) -> TrainingLighting:
+    def lighting(self, rng: np.random.Generator) -> RankedWavelets:
         """A training lighting: from the pool when there is one, else a fresh one."""
         if self.pool:
             return self.pool[int(rng.integers(len(self.pool)))]
@@ -107,17 +92,15 @@ class PrtSource:
         wavelets, values, pixels, targets, transports = [], [], [], [], []
         for share in lighting_shares(c.pixels_per_step, c.lightings_per_step):
             lighting = self.lighting(rng)
-            chosen = training_selection(
-                lighting.wavelets, c.train_top_wavelets, c.train_uniform_wavelets, rng
-            )
+            chosen = training_selection(lighting, c.train_top_wavelets, c.train_uniform_wavelets, rng)
             picked = sample_pixels(self.data, share, rng)
-            rows = self.data.targets(picked)
-            targets.append(np.einsum("pjc,jc->pc", rows, lighting.cube))
+            rows = self.data.targets(picked)  # Haar coefficients
+            targets.append(np.einsum("pkc,kc->pc", rows, lighting.coefficients.numpy()))
             wavelets.append(chosen.indices.long())
             values.append(chosen.values.float())
             pixels.append(picked)
             if c.transport_weight > 0:
-                transports.append(wavelet_transport(rows, wavelets[-1], c.cube_size))
+                transports.append(torch.from_numpy(rows[:, chosen.indices.numpy()]).float())
         picked = np.concatenate(pixels)
         batch = self.data.inputs.take(picked).tensors(self.data.box)
         batch.update(

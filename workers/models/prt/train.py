@@ -7,7 +7,6 @@ mean squared target so the weight does not depend on the scene's brightness."""
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -22,17 +21,13 @@ def prt_loss(model: PrtNetwork, batch: Batch, mu: float = 10.0, transport_weight
     group lit by its own lighting through its own wavelets."""
     spatial, rest = model.pixel_features(batch)
     wavelets, coefficients = batch["wavelets"], batch["coefficients"]
-    bounds = np.cumsum([0, *lighting_shares(len(spatial), len(wavelets))])
-    transports = [
-        model.transport(spatial[a:b], rest[a:b], w)
-        for a, b, w in zip(bounds[:-1], bounds[1:], wavelets, strict=True)
-    ]
-    prediction = torch.cat(
-        [torch.einsum("pkc,kc->pc", t, c) for t, c in zip(transports, coefficients, strict=True)]
-    )  # Eq. 3
+    shares = lighting_shares(len(spatial), len(wavelets))
+    transport = model.transport(spatial, rest, wavelets, shares)
+    lighting = coefficients.repeat_interleave(torch.tensor(shares), dim=0)  # each pixel's group's [K, 3]
+    prediction = (transport * lighting).sum(1)  # Eq. 3
     loss = mu_law_l2(prediction, batch["target"], mu)
     if transport_weight > 0:
-        transport, target = torch.cat(transports), batch["transport"]
+        target = batch["transport"]
         loss = loss + transport_weight * ((transport - target) ** 2).mean() / target.square().mean().clamp(
             min=1e-12
         )
