@@ -19,7 +19,10 @@ from workers.scene.reference import SceneRef
 # Measured on the default preset's env_lit_objects job, 2-core CPU under a load of ~15 (bench_prt): 2.2M
 # binned paths in ~55 s; 2000 steps of 128 pixels x 96 wavelets in 481 s.
 PATHS_PER_SECOND = 40_000.0
-STEP_PAIRS_PER_SECOND = 50_000.0  # pixel-wavelet pairs through f per second at M = 16, forward and backward
+# Pixel-wavelet pairs through f per second at M = 16, forward and backward: 50_000 measured as above, then
+# x1.8 when a step came to cost 0.51-0.59 of what it did (prt14: targets as Haar coefficients, CP features
+# a lighting at a time, fused Adam; old and new code alternating on one machine).
+STEP_PAIRS_PER_SECOND = 90_000.0
 # A pair's cost grows with M (U is M x M, h_k of width M feeds f): 2000 default steps took 52-54 CPU s at
 # M = 16 and 96-105 s at M = 64 (prt11, loaded machine), 1.85x: a pair costs 1 + (M - 16) / 56 times
 # what it costs at M = 16 (`_pair_cost`).
@@ -78,7 +81,7 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         PlanItem(
             name="ground truth",
             choice=f"{rows} transport rows of {row_bytes / 1024:.1f} kB ({rows * row_bytes / 2**20:.0f} MiB"
-            f"{', twice with their averages' if config.row_neighbours > 1 else ''})",
+            ", twice with their targets' Haar coefficients)",
             reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
             f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting; {targets}",
         ),
