@@ -9,14 +9,6 @@ cache, compiled once per machine, and older code can never be loaded. Kernel mod
 here, so the folder is set before their first decoration.
 
 The folder is `$NBAKE_KERNEL_CACHE` (or `$NUMBA_CACHE_DIR`, or `~/.cache/neuralbake/kernels`) / digest.
-
-Kernels are compiled (or loaded from the cache) on first call, and render threads and request threads call
-them at once: one thread's kernel is linked into memory while another thread runs kernels linked before.
-With LLVM's default memory manager on x86-64 that crashed (segmentation fault, bus error or abort in a
-running kernel's thread): 3 of 3 runs of `tests/integration/test_inference_server.py` from a fresh clone
-(its first job renders on two threads with an empty kernel cache; numba 0.68.0 and 0.68.1, llvmlite
-0.50), and CI's suite from a fresh clone. With llvmlite's own memory manager (Numba's default on 64-bit
-ARM only) 3 of 3 passed. So it is chosen here, before the first kernel is compiled.
 """
 
 from __future__ import annotations
@@ -51,4 +43,3 @@ def _cache_root() -> Path:
 
 
 numba.config.CACHE_DIR = str(_cache_root() / kernel_sources_digest())
-numba.config.USE_LLVMLITE_MEMORY_MANAGER = True
