@@ -43,7 +43,12 @@ class RenderSettings(BaseModel):
     rr_depth: int = Field(5, ge=1)
     seed: int = Field(0, ge=0)
     tile_size: int = Field(64, ge=8, le=1024)
-    threads: int = Field(2, ge=1, le=256)
+    # One by default: renders on two threads inside a job or an evaluation crashed this stop (abort, bus
+    # error, segmentation fault or glibc's "malloc(): unaligned tcache chunk detected", with two render
+    # threads in kernels), in CI's suite twice and in 3 of 3 fresh-clone runs of test_inference_server;
+    # the cause is not found (see the stop's note). Ask for more threads explicitly (`nbake render
+    # --threads`); Ray's sampler actors parallelise a job's tiles across processes.
+    threads: int = Field(1, ge=1, le=256)
     aovs: bool = False
     window: tuple[int, int, int, int] | None = Field(
         None, description="render only pixels x0 <= x < x1, y0 <= y < y1 of the image (a crop window)"

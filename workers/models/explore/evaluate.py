@@ -100,7 +100,7 @@ def reference_images(
     tracers: list[PathTracer], size: int, spp: int, max_depth: int, seed: int
 ) -> list[np.ndarray]:
     """Path tracing of each configuration's view at `spp` (the converged images errors are taken against)."""
-    settings = RenderSettings(spp=spp, width=size, height=size, max_depth=max_depth, seed=seed, threads=2)
+    settings = RenderSettings(spp=spp, width=size, height=size, max_depth=max_depth, seed=seed)
     return [render(t, settings).image for t in tracers]
 
 
