@@ -113,6 +113,7 @@ def smoothing_choices(
             choices[int(obj)] = (1, DIRECTION_WEIGHT)
             continue
         judged = rng.choice(own, min(JUDGED_ROWS, len(own)), replace=False)
+        truths = seen(rows[judged].astype(np.float64))  # the left-out rows' radiance, for every candidate
         errors = {}
         for weight in CANDIDATE_WEIGHTS:
             tree = cKDTree(_features(inputs.take(own), diagonal, weight))
@@ -122,7 +123,7 @@ def smoothing_choices(
             others = np.array([n[n != j][: ks[-1]] for n, j in zip(nearest, judged, strict=True)])
             for start in range(0, len(judged), JUDGE_CHUNK):
                 chunk = slice(start, start + JUDGE_CHUNK)
-                truth = seen(rows[judged[chunk]].astype(np.float64))
+                truth = truths[chunk]
                 total, counted = np.zeros((len(truth), *rows.shape[1:])), 0
                 for k in ks:
                     total += rows[others[chunk, counted:k]].sum(axis=1, dtype=np.float64)
