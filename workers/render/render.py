@@ -43,12 +43,12 @@ class RenderSettings(BaseModel):
     rr_depth: int = Field(5, ge=1)
     seed: int = Field(0, ge=0)
     tile_size: int = Field(64, ge=8, le=1024)
-    # One by default: renders on two threads inside a job or an evaluation crashed this stop (abort, bus
-    # error, segmentation fault or glibc's "malloc(): unaligned tcache chunk detected", with two render
-    # threads in kernels), in CI's suite twice and in 3 of 3 fresh-clone runs of test_inference_server;
-    # the cause is not found (see the stop's note). Ask for more threads explicitly (`nbake render
-    # --threads`); Ray's sampler actors parallelise a job's tiles across processes.
-    threads: int = Field(1, ge=1, le=256)
+    # Two (1.9x the rays of one on this idle 2-core machine). One stop (2026-12-01, early) saw renders on
+    # two threads crash inside jobs (abort, bus error, "malloc(): unaligned tcache chunk detected") in CI
+    # twice and in 3 of 3 fresh-clone runs of test_inference_server, and made one the default; on the next
+    # stop's fresh machine the same test passed 6 of 6 times with cold kernel caches and the whole suite
+    # once (14 min, against 32 on one thread), so two are back. Cause not found: see both stops' notes.
+    threads: int = Field(2, ge=1, le=256)
     aovs: bool = False
     window: tuple[int, int, int, int] | None = Field(
         None, description="render only pixels x0 <= x < x1, y0 <= y < y1 of the image (a crop window)"
