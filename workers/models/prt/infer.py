@@ -130,7 +130,7 @@ class PrtModel:
         with torch_threads(1):
             frame = render_frame(
                 self.model, self.artifact.box, self.artifact.objects, tracer, cube, camera,
-                k=k, weighting=self.config.selection, spp=params.spp, seed=params.seed,
+                k=k, weighting=self.config.selection, spp=params.spp, seed=params.seed, threads=2,
                 denoise=self.config.denoise_direct if params.denoise is None else params.denoise,
             )  # fmt: skip
         meta = {
