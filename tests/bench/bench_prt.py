@@ -15,11 +15,13 @@ the PSNR with that noise taken out), the network beside the model-free nearest-r
 training rows (what the rows alone give: the network should beat it) and no indirect light. Then frame
 time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
 `ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
-`PRT_BENCH_SCENES` (comma-separated) narrows the scenes.
+`PRT_BENCH_SCENES` (comma-separated) narrows the scenes; `PRT_BENCH_OVERRIDES` (JSON) overrides the preset's
+config for every job but the ablation's, e.g. '{"mlp": {"width": 128}}'.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import tempfile
@@ -50,6 +52,7 @@ from workers.scene.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
+OVERRIDES = json.loads(os.environ.get("PRT_BENCH_OVERRIDES", "{}"))
 SCENES = tuple(os.environ.get("PRT_BENCH_SCENES", "env_lit_objects,glossy_row").split(","))
 SEED = 0
 K_SWEEP = (8, 16, 32, 64, 128)
@@ -143,12 +146,13 @@ def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
     """Network, nearest rows and no indirect on every held-out (view, lighting) against a `TRUTH_SPP`
     truth made of two independent halves h1, h2. The truth's noise variance (tonemapped) is about
     mse(h1, h2) / 4, so `ceiling` = the PSNR of a perfect model and `denoised` = the PSNR with the truth's
-    noise subtracted from the MSE (unbiased to first order; means over cases)."""
+    noise subtracted from the MSE (unbiased to first order; means over cases), over all views and over the
+    far ones (the issue's targets)."""
     artifact = load(folder)
     config, model, box, objects = artifact.config, artifact.model, artifact.box, artifact.objects
     ref = SceneRef(get_builtin(scene))
     data = training_set(ref, config, SEED, tuple(int(o) for o in objects))
-    figures: dict[str, list[dict[str, float]]] = {"network": [], "nearest_rows": [], "no_indirect": []}
+    figures: dict[tuple[str, bool], list[dict[str, float]]] = {}
     for env in held_out_lightings(config.lighting, SEED).values():
         cube = unit_mean(lighting_cube(env, config.cube_size, config.lighting.map_width))
         tracer = relit_tracer(ref.compiled(), cube)
@@ -177,9 +181,15 @@ def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
                     row[key] = scores[key]
                     row[f"{key}_denoised"] = -10 * np.log10(max(mse_of(scores[key]) - noise[i], 1e-10))
                     row[f"{key}_ceiling"] = -10 * np.log10(noise[i])
-                figures[method].append(row)
-    for method, rows in figures.items():
-        section.add(scene=scene, method=method, **{k: float(np.mean([r[k] for r in rows])) for k in rows[0]})
+                figures.setdefault((method, view.name.startswith("far")), []).append(row)
+    for method in ("network", "nearest_rows", "no_indirect"):
+        for views, rows in (
+            ("all", figures.get((method, False), []) + figures.get((method, True), [])),
+            ("far", figures.get((method, True), [])),
+        ):
+            if rows:
+                mean = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+                section.add(scene=scene, method=method, views=views, **mean)
 
 
 def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
@@ -316,7 +326,7 @@ def run() -> list[BenchSection]:
         for scene in SCENES:
             target_noise(scene, noise)
             folder = Path(tmp) / scene
-            _, outcome = run_kind_job("prt", get_builtin(scene), folder, preset=PRESET, seed=SEED)
+            _, outcome = run_kind_job("prt", get_builtin(scene), folder, OVERRIDES, preset=PRESET, seed=SEED)
             if outcome.state != "succeeded":
                 raise RuntimeError(f"{scene}: {outcome.error}")
             report = Report.read(str(folder / "out"))
@@ -372,4 +382,4 @@ def run() -> list[BenchSection]:
 def get_kind_config(preset: str):
     from workers.models.registry import get_kind
 
-    return get_kind("prt").resolve_config(preset, {})
+    return get_kind("prt").resolve_config(preset, OVERRIDES)
