@@ -35,3 +35,15 @@ def test_the_estimate_charges_wider_grid_features():
         for features in (2, 8)
     }
     assert estimate[8] > estimate[2]
+
+
+def test_the_estimate_charges_a_wider_f():
+    """Training's share of the estimate grows with f's width (a step 2.2x from 64 to 128, as measured)."""
+    kind = get_kind("prt")
+    estimate = {
+        width: kind.plan(
+            SceneRef(convex_box()), kind.resolve_config("quick", {"mlp": {"width": width, "depth": 1}})
+        ).estimated_seconds
+        for width in (32, 128)
+    }
+    assert estimate[128] > estimate[32]

@@ -7,6 +7,7 @@ The probe (`probe`) decides which objects' indirect light is modelled.
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
@@ -25,7 +26,8 @@ PATHS_PER_SECOND = 40_000.0
 STEP_PAIRS_PER_SECOND = 90_000.0
 # A pair's cost grows with M (U is M x M, h_k of width M feeds f): 2000 default steps took 52-54 CPU s at
 # M = 16 and 96-105 s at M = 64 (prt11, loaded machine), 1.85x: a pair costs 1 + (M - 16) / 56 times
-# what it costs at M = 16 (`_pair_cost`).
+# what it costs at M = 16 (`_pair_cost`). f 128 wide instead of 64 took a step 2.2x the CPU (prt15, one
+# thread, default batches of random inputs, 16.8 against 37.1 ms): a power law through the two widths.
 BYTES_PER_PARAMETER = 2  # float16 as stored
 
 
@@ -101,6 +103,6 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
 
 
 def _pair_cost(config: PrtConfig) -> float:
-    """A pixel-wavelet pair's cost relative to M = 16 (see STEP_PAIRS_PER_SECOND)."""
+    """A pixel-wavelet pair's cost relative to M = 16 and f 64 wide (see STEP_PAIRS_PER_SECOND)."""
     m = config.grid.levels * config.grid.features_per_level
-    return 1.0 + (m - 16) / 56
+    return (1.0 + (m - 16) / 56) * (config.mlp.width / 64) ** math.log2(2.2)
