@@ -140,8 +140,21 @@ class PrtConfig(TrainedKindConfig):
     # prt7, env_lit_objects, held-out indirect against the 1024-spp truth (all / far views): SH degree 2
     # instead of 4, seeds 0 / 1: 22.76 (21.48) / 22.64 (21.51) -> 22.88 (22.13) / 22.36 (21.08) dB; MLP
     # width 128, seed 0: 22.52 (21.62); degree 0 (no view dependence), seed 0: 22.26 (21.57). Neither the
-    # view encoding nor f's width is what holds the network under nearest rows (26.13).
+    # view encoding nor f's width is what holds the network under nearest rows (26.13); see `mlp` for
+    # the width at 16000 steps.
     directions: SphericalHarmonicsConfig = SphericalHarmonicsConfig(degree=4)
+    # f 128 wide, the paper's, measured again at 16000 steps (prt15; a default job of the seed, its far views
+    # under held-out lightings as bench_prt's far rows against the 1024-spp truth, indirect (full frame), in
+    # brackets the _denoised figure, the error against the converged image; CPU s of training; for seed 0:
+    # PRT_BENCH_OVERRIDES='{"mlp": {"width": 128}}' python -m tests.bench bench_prt):
+    #   glossy_row seed 0       64: 25.50 (29.27) [26.91 (30.28)]  284 s   128: 26.05 (29.76) [27.70 (30.93)]
+    #   glossy_row seed 1                                                   128: 25.93 (30.14) [27.51 (31.16)]
+    #   env_lit_objects seed 0  64: 29.79 (32.68) [32.71 (34.13)]  292 s   128: 29.81 (32.68) [32.75 (34.13)]
+    # At 128 wide, SH degree 6 gave glossy_row 25.99 (29.73) and 32000 steps 26.02 (29.95): neither pays.
+    # A step costs 2.2x (16.8 against 37.1 CPU ms, one thread) and so does the frame's network: bench_prt's
+    # frame curve (report view, CPU s on one thread, same run) at 1 spp 0.036 -> 0.080 s (glossy_row),
+    # best equal-time ratio by FLIP / PSNR glossy_row 1.13 / 0.38 -> 1.71 / 0.52, env_lit_objects 1.05 /
+    # 0.83 -> 1.50 / 1.19. Kept 64: +0.55 dB on glossy_row's indirect light does not buy a 2.2x network.
     mlp: MLPConfig = MLPConfig(width=64, depth=2, activation="relu")
     # Small networks: a quick-preset step took 0.027 s with 1 thread and 0.28 s with 2 (busy-waiting workers
     # on the loaded 2-core machine).
