@@ -18,6 +18,7 @@ import numpy as np
 from workers.models.prt.lighting import texels_of
 from workers.render.integrator import PathTracer
 from workers.render.observer import PathObserver
+from workers.render.stratified import StratifiedUniforms
 
 BACKGROUND, DIRECT, INDIRECT = 0, 1, 2  # surfaces met before the escape: 0, 1, 2 or more
 MAX_PATHS_PER_TRACE = 1 << 15  # paths traced at once (rows of the chunk are dense: bound the memory)
@@ -76,9 +77,12 @@ def trace_rows(
     rng: np.random.Generator,
     max_depth: int,
     categories: tuple[int, ...] = (INDIRECT,),
+    stratified: bool = True,
 ) -> TransportRows:
     """Trace `spp` paths along each camera ray and bin their escapes into rows of a 6 x `size`^2 cube.
-    `tracer` should light the scene with `lighting.uniform_cube` (any positive sampler is unbiased)."""
+    `tracer` should light the scene with `lighting.uniform_cube` (any positive sampler is unbiased).
+    `stratified`: a pixel's paths take strata of their first vertex's uniforms (`workers.render.stratified`),
+    so that the bounces an indirect row integrates over cover the hemisphere evenly."""
     n = len(origins)
     out = {c: np.zeros((n, 6 * size**2, 3)) for c in categories}
     per_chunk = max(1, MAX_PATHS_PER_TRACE // spp)
@@ -86,8 +90,9 @@ def trace_rows(
         stop = min(start + per_chunk, n)
         pixels = np.repeat(np.arange(stop - start), spp)
         binner = EscapeBinner(pixels, size)
+        stream = StratifiedUniforms(rng, stop - start, spp) if stratified else rng
         tracer.trace(
-            origins[start:stop][pixels], directions[start:stop][pixels], rng, max_depth, observer=binner
+            origins[start:stop][pixels], directions[start:stop][pixels], stream, max_depth, observer=binner
         )
         for c in categories:
             out[c][start:stop] = binner.rows(stop - start, c) / spp
