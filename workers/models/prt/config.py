@@ -386,9 +386,10 @@ class PrtConfig(TrainedKindConfig):
     # By PSNR the frame now beats path tracing on both scenes; by FLIP it does not (glossy_row's network
     # floor, FLIP 0.098, is path tracing's at ~11 spp).
     # On an AMD EPYC with AVX512_BF16 and no AMX (prt16's machine), the default network at K = 64 over 2276
-    # pixels takes 41 CPU ms in bfloat16 and 59 in float32 (one thread, quiet machine): 1.4x, not prt13's
-    # 1.6x, and 16-spp path tracing of the 48^2 view takes 64 ms, so the best equal-time ratio by FLIP is
-    # 1.2 (glossy_row) and 1.05 (env_lit_objects) there, by PSNR 0.39 and 0.75 (bench_prt, same run).
+    # pixels takes 41 CPU ms in bfloat16 and 59 in float32, and 16-spp path tracing of glossy_row's 48^2
+    # report view 64 ms (one thread, quiet machine): bfloat16 gains 1.4x, not prt13's 1.6x. The best
+    # equal-time ratio there by FLIP is 1.2 (glossy_row) and 1.05 (env_lit_objects), by PSNR 0.39 and 0.75
+    # (bench_prt, one run beside another job).
     bfloat16_products: bool = Field(
         True,
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
