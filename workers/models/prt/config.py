@@ -229,7 +229,16 @@ class PrtConfig(TrainedKindConfig):
     # (30.34)] -> 25.91 (29.48) [27.11 (30.41)], at the same tracing cost. Light-sampling the rows by the
     # training lightings' mean (80%, plus 20% uniform: more samples where suns and bright sky lie) took the
     # sun's raw rows +0.6-1.0 dB but the model to 25.80 (29.42) [26.98 (30.36)]: dropped.
-    row_spp: int = Field(128, ge=1, le=1 << 16, description="paths per stored pixel")
+    # 256 paths a row instead of 128 (prt17; default jobs, far views against the 1024-spp truth, indirect
+    # (full) [_denoised], /tmp harness: `tests.support.jobs.run_kind_job` + `bench_prt.against_fine_truth`):
+    #   glossy_row seed 0       128: 25.91 (29.48) [27.11 (30.41)]  256: 26.39 (29.97) [27.71 (30.99)]
+    #                           512: 26.37 (29.88) [27.70 (30.88)]
+    #   glossy_row seed 1       128: 25.75 (29.48) [26.89 (30.39)]  256: 25.99 (30.04) [27.11 (30.86)]
+    #   env_lit_objects seed 0  128: 30.10 (32.79) [32.00 (33.97)]  256: 30.57 (33.03) [32.71 (34.30)]
+    # Tracing 96 views x 1536 rows costs 0.62 -> 1.27 CPU s a view (glossy_row, 0.54 -> 1.12 on
+    # env_lit_objects): +60 CPU s a job, about a sixth of its training. The rows' memory is the same (one
+    # cube of texels each). 512 gains nothing more for another +120 s.
+    row_spp: int = Field(256, ge=1, le=1 << 16, description="paths per stored pixel")
     # Training targets are the mean of each row's nearest rows (prt11, `neighbours`: position in box
     # diagonals and 0.03 w_r, on the row's object). The network did not memorise the rows' noise: on 2048
     # training pixels its indirect PSNR against their own rows and against an independent re-trace of them
