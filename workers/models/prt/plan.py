@@ -17,13 +17,15 @@ from workers.models.prt.probe import probe_objects
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.reference import SceneRef
 
-# Measured on the default preset's env_lit_objects job, 2-core CPU under a load of ~15 (bench_prt): 2.2M
-# binned paths in ~55 s; 2000 steps of 128 pixels x 96 wavelets in 481 s.
-PATHS_PER_SECOND = 40_000.0
-# Pixel-wavelet pairs through f per second at M = 16, forward and backward: 50_000 measured as above, then
-# x1.8 when a step came to cost 0.51-0.59 of what it did (prt14: targets as Haar coefficients, CP features
-# a lighting at a time, fused Adam; old and new code alternating on one machine).
-STEP_PAIRS_PER_SECOND = 90_000.0
+# Measured on this 2-core CPU (prt17, one thread a process, two jobs side by side): a default job's 147k
+# rows at 128 spp took 0.54-0.62 CPU s a view, 96 views, ~320k binned paths a second. (The figures before,
+# 40k paths and 90k pairs a second, were taken under a load of ~15 with older code: a default job's plan
+# said 5000 s for a job of ~600.)
+PATHS_PER_SECOND = 300_000.0
+# Pixel-wavelet pairs through f per second at M = 16, forward and backward: a default step (128 pixels x
+# 96 wavelets, each pair at M = 64 costing 1.86 of one at M = 16, `_pair_cost`) took 16.8 CPU ms on one
+# thread (prt15), 1.36M pairs of M = 16 a second; 16000 steps took 284-292 s of a default job.
+STEP_PAIRS_PER_SECOND = 1_300_000.0
 # A pair's cost grows with M (U is M x M, h_k of width M feeds f): 2000 default steps took 52-54 CPU s at
 # M = 16 and 96-105 s at M = 64 (prt11, loaded machine), 1.85x: a pair costs 1 + (M - 16) / 56 times
 # what it costs at M = 16 (`_pair_cost`). f 128 wide instead of 64 took a step 2.2x the CPU (prt15, one
