@@ -407,7 +407,11 @@ class PrtConfig(TrainedKindConfig):
     # pixels takes 41 CPU ms in bfloat16 and 59 in float32, and 16-spp path tracing of glossy_row's 48^2
     # report view 64 ms (one thread, quiet machine): bfloat16 gains 1.4x, not prt13's 1.6x. The best
     # equal-time ratio there by FLIP is 1.2 (glossy_row) and 1.05 (env_lit_objects), by PSNR 0.39 and 0.75
-    # (bench_prt, one run beside another job).
+    # (bench_prt, one run beside another job). With 256-spp rows (prt17, `row_spp`;
+    # `PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`, two runs: quiet / beside the test
+    # suite), by FLIP env_lit_objects 0.78 (64 raw) / 1.03 (32 denoised), glossy_row 1.01 (8 raw) / 0.93
+    # (16 raw); by PSNR 0.61 / 0.89 and 0.47 / 0.33. glossy_row's report frame at 64 spp denoised: FLIP
+    # 0.069, 33.1 dB.
     bfloat16_products: bool = Field(
         True,
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
