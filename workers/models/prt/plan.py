@@ -17,7 +17,7 @@ from workers.models.prt.probe import probe_objects
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.reference import SceneRef
 
-# Measured on this 2-core CPU (prt17, one thread a process, two jobs side by side): a default job's 147k
+# Measured on this 2-core CPU (prt17, one thread, beside two default jobs): a default job's 147k
 # rows at 128 spp took 0.54-0.62 CPU s a view, 96 views, ~320k binned paths a second. (The figures before,
 # 40k paths and 90k pairs a second, were taken under a load of ~15 with older code: a default job's plan
 # said 5000 s for a job of ~600.) Fixed costs are not counted (loading the scene, the probe, a step's own
