@@ -7,8 +7,9 @@ driver: PSNR / SSIM of the full frame and of indirect light, FLIP, on near and f
 held-out lightings (HDRIs and procedural maps never trained on), against the trivial baseline of no
 indirect light; per lighting; the model's frame time and the path-tracing time that reaches the same FLIP
 (log-log interpolation of the report's curve, same view, same run): their ratio is the equal-time ratio.
-Then the model's frame as a curve (`frame_curve`: its direct light's spp, raw and denoised, beside path
-tracing with either sampler, in CPU s), with the equal-time ratio of every setting.
+Then the model's frame as a curve (`frame_curve`: its direct light's spp, raw and denoised, its indirect
+light at every pixel or on a checkerboard, beside path tracing with either sampler, in CPU s), with the
+equal-time ratio of every setting.
 Then the same held-out views and lightings against a truth at `TRUTH_SPP` (two independent halves: their
 difference estimates the truth's own noise, so the section states the PSNR a perfect model would score and
 the PSNR with that noise taken out), the network beside the model-free nearest-rows baseline on the same
@@ -63,8 +64,11 @@ CURVE_SEEDS = (0, 11, 23)  # not the reference's seed (2): its first pass would 
 # _denoised figures take out: a default model's far views (seed 0, indirect (full)) scored 25.50 (29.27) raw
 # and 26.91 (30.28) denoised against 1024 spp, 26.50 (30.10) raw and 26.94 (30.40) denoised against 4096.
 # Since the truth's paths take strata of their first bounce (`transport.trace_rows`) its far-view ceiling at
-# 1024 spp is 32.4 dB indirect (37.1 full) on glossy_row, 34.8 (39.1) on env_lit_objects.
-TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "1024"))
+# 1024 spp is 32.4 dB indirect (37.1 full) on glossy_row, 34.8 (39.1) on env_lit_objects; at 4096, 38.4
+# (43.1) on glossy_row, where a default model (seed 0, prt18) scored 27.44 (30.80) raw and 27.84 (31.10)
+# denoised against 26.39 (29.97) and 27.71 (30.99) at 1024. The 4096-spp truth took 367 s for glossy_row's
+# held-out views and lightings, beside another job.
+TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "4096"))
 NEAREST_ROWS = 16  # training rows averaged per held-out pixel by the model-free baseline
 ABLATION_STEPS = int(os.environ.get("PRT_BENCH_ABLATION_STEPS", "600"))
 ABLATION = (
@@ -237,8 +241,9 @@ def cpu_timed(make: Callable[[int], np.ndarray]) -> tuple[float, list[np.ndarray
 
 
 def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
-    """The model's frame as a curve: its direct light at each of `DIRECT_SPP`, raw and denoised, beside path
-    tracing at `CURVE_SPP` with either sampler (`RenderSettings.sampler`), on the report's view, lighting and
+    """The model's frame as a curve: its direct light at each of `DIRECT_SPP`, raw and denoised, its indirect
+    light at every pixel and on a checkerboard (`PrtConfig.checkerboard`), beside path tracing at
+    `CURVE_SPP` with either sampler (`RenderSettings.sampler`), on the report's view, lighting and
     reference, timed in the same window (CPU s, one thread, medians over `CURVE_SEEDS`). Each setting's
     equal-time ratio by FLIP and by PSNR is its time over the faster path tracer's at its error
     (`seconds_at_error` over these curves); the notes name the best setting per metric."""
@@ -259,14 +264,14 @@ def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
         settings = report.view.at(spp).model_copy(update={"sampler": sampler})
         return lambda seed: render(report.tracer, settings.model_copy(update={"seed": seed})).image
 
-    def model_frame(spp: int, denoise: bool) -> Callable[[int], np.ndarray]:
+    def model_frame(spp: int, denoise: bool, checkerboard: bool) -> Callable[[int], np.ndarray]:
         def make(seed: int) -> np.ndarray:
             # As jobs and serving run it (one thread for small layers, `workers.runtime.threads`).
             with torch_threads(1):
                 return render_frame(
                     artifact.model, artifact.box, artifact.objects, report.tracer, report.cube,
                     report.camera, k=config.wavelets, weighting=config.selection, spp=spp, seed=seed,
-                    denoise=denoise,
+                    denoise=denoise, checkerboard=checkerboard,
                 ).image  # fmt: skip
 
         return make
@@ -288,14 +293,20 @@ def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
         )
 
     best: dict[str, tuple[float | str, str]] = {}
-    settings = [(spp, denoise) for denoise in (False, True) for spp in DIRECT_SPP if spp > 1 or not denoise]
-    for spp, denoise in settings:
-        point = measured(model_frame(spp, denoise))
+    settings = [
+        (spp, denoise, checkerboard)
+        for checkerboard in (False, True)
+        for denoise in (False, True)
+        for spp in DIRECT_SPP
+        if spp > 1 or not denoise
+    ]
+    for spp, denoise, checkerboard in settings:
+        point = measured(model_frame(spp, denoise, checkerboard))
         ratios = {
             "flip": equal_time_ratio(point["cpu_s"], pt_seconds("flip", point["flip"]), longest),
             "psnr": equal_time_ratio(point["cpu_s"], pt_seconds("psnr", -point["psnr"]), longest),
         }
-        label = f"direct {spp} spp{' denoised' if denoise else ''}"
+        label = f"direct {spp} spp{' denoised' if denoise else ''}{' checkerboard' if checkerboard else ''}"
         section.add(
             scene=scene, method=label, spp=spp, **point, **{f"ratio_{m}": r for m, r in ratios.items()}
         )

@@ -66,6 +66,15 @@ def test_render_relights_under_a_new_map_linearly_in_its_scale(served):
     assert once.meta["wavelets"] == 8 and once.meta["network_seconds"] > 0
 
 
+def test_a_checkerboard_render_is_close_to_the_every_pixel_one(served):
+    camera = {"width": 16, "height": 16}
+    every = served.answer(RENDER, PrtRender(camera=camera, spp=4, denoise=False), {}).arrays["image"]
+    half = PrtRender(camera=camera, spp=4, denoise=False, checkerboard=True)
+    image = served.answer(RENDER, half, {}).arrays["image"]
+    assert np.isfinite(image).all() and not np.array_equal(image, every)
+    assert np.abs(image - every).mean() < 0.1 * every.mean()  # the same direct light, the indirect filled
+
+
 def test_render_takes_an_uploaded_map_and_refuses_nan_naming_the_field(served):
     upload = np.ones((16, 32, 3), np.float32)
     params = PrtRender(camera={"width": 8, "height": 8}, lighting={"path": "mine.exr"}, spp=1)

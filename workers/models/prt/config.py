@@ -412,6 +412,16 @@ class PrtConfig(TrainedKindConfig):
     # suite), by FLIP env_lit_objects 0.78 (64 raw) / 1.03 (32 denoised), glossy_row 1.01 (8 raw) / 0.93
     # (16 raw); by PSNR 0.61 / 0.89 and 0.47 / 0.33. glossy_row's report frame at 64 spp denoised: FLIP
     # 0.069, 33.1 dB.
+    # Checkerboard shading (`checkerboard`; prt18, glossy_row's report view, a default model of seed 0,
+    # direct light 16 spp raw, CPU ms on one thread, medians of 5, beside another job): frame 48 -> 40,
+    # network 18 -> 11 (half the pairs; the rest is per-frame), FLIP 0.0827 -> 0.0846, PSNR 30.57 ->
+    # 30.04 dB; the filled indirect is 33.6 dB from the every-pixel one. Filling from the 3 x 3
+    # neighbours of a 2 x 2 grid (a quarter of the pixels) lost 5 dB there (28.6) and FLIP +12%. Off by
+    # default, so the held-out figures are the network's at every pixel; `bench_prt.frame_curve` measures
+    # both.
+    checkerboard: bool = Field(
+        False, description="frames: the network shades half the pixels, the rest filled from neighbours"
+    )
     bfloat16_products: bool = Field(
         True,
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",

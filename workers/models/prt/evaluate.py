@@ -89,7 +89,7 @@ def held_out_cases(
             frame = render_frame(
                 model, box, objects, tracer, cube, view.camera,
                 k=k or config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=seed,
-                denoise=config.denoise_direct,
+                denoise=config.denoise_direct, checkerboard=config.checkerboard,
             )  # fmt: skip
             cases.append(Case(view.name, name, full, indirect, frame))
     return cases

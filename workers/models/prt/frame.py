@@ -4,7 +4,8 @@ largest area-weighted magnitude, B = sum_k L_k T_k from the network at every pix
 path-traced at the first hit (next-event estimation and BSDF-sampled escapes: `max_depth` 2), which also
 draws the environment where camera rays escape. With `denoise`, the direct light is rendered as two
 independent halves of `spp` (their difference estimates its variance) and filtered by the G-buffer-guided
-à-trous filter (`workers.render.denoise`): the paper denoises its direct light too (Sec. 6)."""
+à-trous filter (`workers.render.denoise`): the paper denoises its direct light too (Sec. 6). With
+`checkerboard`, the network runs at half the pixels (`checkerboard`)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from workers.models.prt.checkerboard import fill, shaded_pixels
 from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.selection import run_time_selection
@@ -45,11 +47,15 @@ def predict_indirect(
     cube: np.ndarray,
     k: int,
     weighting: str,
+    checkerboard: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """Indirect radiance (N, 3) float32 of every pixel under `cube`: 0 where the camera ray escapes and on
-    objects not modelled."""
+    objects not modelled. With `checkerboard` the frame's (height, width), the network shades half of the
+    pixels and the rest are filled from their neighbours (`checkerboard`)."""
     out = np.zeros((len(inputs.hit), 3), np.float32)
-    seen = np.flatnonzero(inputs.modelled(objects))
+    modelled = inputs.modelled(objects)
+    shaded = modelled if checkerboard is None else shaded_pixels(inputs, modelled, *checkerboard)
+    seen = np.flatnonzero(shaded)
     if len(seen) == 0:
         return out
     chosen = run_time_selection(cube, k, weighting)
@@ -58,6 +64,8 @@ def predict_indirect(
     with torch.inference_mode():
         b = model(tensors, chosen.indices.to(device), chosen.values.float().to(device))
     out[seen] = b.float().cpu().numpy()
+    if checkerboard is not None:
+        out = fill(out, shaded, modelled, inputs, *checkerboard)
     return out
 
 
@@ -117,17 +125,20 @@ def render_frame(
     seed: int = 0,
     threads: int = 1,
     denoise: bool = False,
+    checkerboard: bool = False,
 ) -> Frame:
     """The frame through `camera`: `tracer` lights the scene for the direct light (its environment is the
     lighting, at whatever resolution) and `cube` is the same lighting as the network's cube map. `spp` is the
-    direct light's paths per pixel (before denoising)."""
+    direct light's paths per pixel (before denoising); `checkerboard` shades the indirect light at half the
+    pixels."""
     start = time.perf_counter()
     origins, directions = pixel_rays(camera)
     inputs = surface_inputs(tracer, origins, directions)
     network_start = time.perf_counter()
-    indirect = predict_indirect(model, inputs, box, objects, cube, k, weighting).reshape(
-        camera.height, camera.width, 3
-    )
+    shape = (camera.height, camera.width)
+    indirect = predict_indirect(
+        model, inputs, box, objects, cube, k, weighting, shape if checkerboard else None
+    ).reshape(*shape, 3)
     network_seconds = time.perf_counter() - network_start
     direct = direct_light(tracer, camera, inputs, spp, seed, threads, denoise)
     return Frame(direct + indirect, direct, indirect, time.perf_counter() - start, network_seconds)

@@ -5,8 +5,8 @@
 lat-long map uploaded as the `environment` array; with `rotate` and `scale`) in, the frame out: G-buffer,
 the K (`params.wavelets`) wavelets of the lighting, the network's indirect light and path-traced direct
 light at `params.spp` under the map itself (full resolution, importance-sampled), denoised unless
-`params.denoise` is false. The service adds the
-frame time as `Server-Timing`.
+`params.denoise` is false; `params.checkerboard` runs the network at half the pixels. The service adds
+the frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
 viewer, kd, ks, roughness) under a lighting: what a rasteriser needs to add the network's light itself.
@@ -76,6 +76,11 @@ class PrtRender(ViewRender, Relighting):
         None,
         description="filter the direct light guided by the G-buffer; default: the artifact's denoise_direct",
     )
+    checkerboard: bool | None = Field(
+        None,
+        description="the network shades half the pixels, the rest filled from same-surface neighbours; "
+        "default: the artifact's checkerboard",
+    )
 
 
 class PrtModel:
@@ -132,6 +137,7 @@ class PrtModel:
                 self.model, self.artifact.box, self.artifact.objects, tracer, cube, camera,
                 k=k, weighting=self.config.selection, spp=params.spp, seed=params.seed, threads=2,
                 denoise=self.config.denoise_direct if params.denoise is None else params.denoise,
+                checkerboard=self.config.checkerboard if params.checkerboard is None else params.checkerboard,
             )  # fmt: skip
         meta = {
             "wavelets": k,

@@ -73,10 +73,11 @@ class PrtMethod:
         frame = render_frame(
             model, source.data.box, objects, report.tracer, report.cube, camera,
             k=config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
-            denoise=config.denoise_direct,
+            denoise=config.denoise_direct, checkerboard=config.checkerboard,
         )  # fmt: skip
         denoised = " denoised" if config.denoise_direct else ""
-        label = f"direct {config.evaluation_spp} spp{denoised} + K={config.wavelets}"
+        shading = " checkerboard" if config.checkerboard else ""
+        label = f"direct {config.evaluation_spp} spp{denoised} + K={config.wavelets}{shading}"
         timed = TimedImage(label, frame.image, frame.seconds)
         method_metrics["report_view.network_seconds"] = frame.network_seconds
         preview = [frame.direct, frame.indirect]
