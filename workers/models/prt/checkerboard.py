@@ -24,12 +24,16 @@ def _shifted(array: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
     return out
 
 
+def _checkerboard(height: int, width: int) -> np.ndarray:
+    """(H, W) bool: the pixels with x + y even."""
+    y, x = np.mgrid[0:height, 0:width]
+    return (y + x) % 2 == 0
+
+
 def _fill_weights(inputs: SurfaceInputs, modelled: np.ndarray, height: int, width: int) -> np.ndarray:
     """(4, H, W) bool: whether pixel (y, x) may take its 4-neighbour's value (the neighbour is shaded by
     the checkerboard, modelled, and on the same surface)."""
-    y, x = np.mgrid[0:height, 0:width]
-    even = (y + x) % 2 == 0
-    on = modelled.reshape(height, width) & even
+    on = modelled.reshape(height, width) & _checkerboard(height, width)
     object_id = inputs.object_id.reshape(height, width)
     normal = inputs.normal.reshape(height, width, 3)
     weights = []
@@ -43,10 +47,8 @@ def _fill_weights(inputs: SurfaceInputs, modelled: np.ndarray, height: int, widt
 def shaded_pixels(inputs: SurfaceInputs, modelled: np.ndarray, height: int, width: int) -> np.ndarray:
     """(N,) bool: the modelled pixels the network evaluates, the checkerboard's and those with no
     neighbour to take a value from."""
-    y, x = np.mgrid[0:height, 0:width]
-    even = ((y + x) % 2 == 0).ravel()
-    orphan = ~_fill_weights(inputs, modelled, height, width).any(axis=0).ravel()
-    return modelled & (even | orphan)
+    orphan = ~_fill_weights(inputs, modelled, height, width).any(axis=0)
+    return modelled & (_checkerboard(height, width) | orphan).ravel()
 
 
 def fill(
