@@ -417,11 +417,11 @@ class PrtConfig(TrainedKindConfig):
     # network 18 -> 11 (half the pairs; the rest is per-frame), FLIP 0.0827 -> 0.0846, PSNR 30.57 ->
     # 30.04 dB; the filled indirect is 33.6 dB from the every-pixel one. Filling from the 3 x 3
     # neighbours of a 2 x 2 grid (a quarter of the pixels) lost 5 dB there (28.6) and FLIP +12%. In
-    # `bench_prt.frame_curve` (`PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`, seed 0, part
-    # of it beside the test suite) the best equal-time ratio by FLIP went from 1.01 (8 spp) to 0.84 (8 spp
-    # checkerboard) on glossy_row and from 0.91 (32 spp) to 0.88 (32 spp checkerboard) on env_lit_objects;
-    # by PSNR 0.33 -> 0.31 and 0.75 -> 0.72. Off by default, so the held-out figures are the network's at
-    # every pixel.
+    # `bench_prt.frame_curve` (`python -m tests.bench bench_prt`, seed 0, two runs: partly beside the test
+    # suite / quiet) the best equal-time ratio by FLIP went from 1.01 / 1.00 (8 spp) to 0.84 / 0.86 (8 spp
+    # checkerboard) on glossy_row and from 0.91 / 0.99 (32 spp) to 0.88 / 0.91 (32 spp checkerboard) on
+    # env_lit_objects; by PSNR glossy_row 0.33 -> 0.31 / 0.33 either way, env_lit_objects 0.75 / 0.81 ->
+    # 0.72 / 0.73. Off by default, so the held-out figures are the network's at every pixel.
     checkerboard: bool = Field(
         False, description="frames: the network shades half the pixels, the rest filled from neighbours"
     )
