@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from workers.models.prt.checkerboard import fill, shaded_pixels
+from workers.models.prt.checkerboard import checkerboard
 from workers.models.prt.gbuffer import SurfaceInputs
 
 H, W = 6, 7
@@ -32,11 +32,12 @@ def _even() -> np.ndarray:
 def test_one_surface_is_shaded_on_the_checkerboard_and_a_linear_ramp_is_filled_exactly():
     inputs = _plane()
     modelled = inputs.modelled(np.array([0]))
-    shaded = shaded_pixels(inputs, modelled, H, W)
+    board = checkerboard(inputs, modelled, H, W)
+    shaded = board.shaded
     np.testing.assert_array_equal(shaded, _even())
     y, x = np.mgrid[0:H, 0:W]
     ramp = np.stack([x, y, x + 2 * y], axis=-1).reshape(-1, 3).astype(np.float32)
-    filled = fill(np.where(shaded[:, None], ramp, np.nan), shaded, modelled, inputs, H, W)
+    filled = board.fill(np.where(shaded[:, None], ramp, np.nan))
     interior = ((x > 0) & (x < W - 1) & (y > 0) & (y < H - 1)).ravel()
     np.testing.assert_allclose(filled[interior], ramp[interior], atol=1e-6)  # the mean of 4 neighbours
     assert np.isfinite(filled).all()  # border pixels take the neighbours they have
@@ -50,11 +51,12 @@ def test_a_pixel_takes_no_value_from_another_object_or_a_turned_surface_and_an_o
     normal[4:, :4] = [0.0, 1.0, 0.0]  # a floor below the wall, the same object
     inputs = _plane(object_id, normal)
     modelled = inputs.modelled(np.array([0, 1, 2]))
-    shaded = shaded_pixels(inputs, modelled, H, W)
+    board = checkerboard(inputs, modelled, H, W)
+    shaded = board.shaded
     assert shaded.reshape(H, W)[2, 3] and not _even().reshape(H, W)[2, 3]  # no neighbour: shaded itself
     surface = (object_id + 10 * (normal[..., 1] > 0)).ravel().astype(np.float32)  # a value per surface
     values = np.repeat(np.where(shaded, surface, np.nan)[:, None], 3, axis=1)  # unshaded: never read
-    filled = fill(values, shaded, modelled, inputs, H, W)[:, 0]
+    filled = board.fill(values)[:, 0]
     np.testing.assert_array_equal(filled, surface)  # each pixel only ever averages its own surface
 
 
@@ -64,10 +66,11 @@ def test_pixels_not_modelled_are_neither_shaded_nor_filled():
     object_id[:, 5:] = 1  # an object left to direct light
     inputs = _plane(object_id)
     modelled = inputs.modelled(np.array([0]))
-    shaded = shaded_pixels(inputs, modelled, H, W)
+    board = checkerboard(inputs, modelled, H, W)
+    shaded = board.shaded
     assert not shaded[~modelled].any()
     values = np.where(shaded[:, None], 1.0, 0.0).astype(np.float32)
-    filled = fill(values, shaded, modelled, inputs, H, W)
+    filled = board.fill(values)
     assert (filled[~modelled] == 0).all() and (filled[modelled] == 1).all()
 
 
@@ -88,7 +91,7 @@ def test_a_checkerboard_frame_is_the_network_at_its_shaded_pixels_and_their_mean
     half = predict_indirect(model, inputs, box, objects, cube, 8, "area", (H, W))
     shaded = _even()
     np.testing.assert_allclose(half[shaded], every[shaded], rtol=1e-5, atol=1e-7)
-    modelled = inputs.modelled(objects)
-    expected = fill(np.where(shaded[:, None], every, 0), shaded, modelled, inputs, H, W)
+    board = checkerboard(inputs, inputs.modelled(objects), H, W)
+    expected = board.fill(np.where(shaded[:, None], every, 0))
     np.testing.assert_allclose(half, expected, rtol=1e-5, atol=1e-7)
     assert not np.allclose(half[~shaded], every[~shaded])  # filled, not evaluated

@@ -6,6 +6,8 @@ frame's largest cost on a CPU, for a small error (measured in `PrtConfig.checker
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from workers.models.prt.gbuffer import SurfaceInputs
@@ -14,9 +16,9 @@ SAME_SURFACE_COS = 0.9  # neighbours whose normals differ by more than ~25 degre
 _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))
 
 
-def _shifted(array: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
-    """array[y + dy, x + dx] at (y, x) over the image's first two axes, `fill` outside it."""
-    out = np.full_like(array, fill)
+def _shifted(array: np.ndarray, dy: int, dx: int, outside) -> np.ndarray:
+    """array[y + dy, x + dx] at (y, x) over the image's first two axes, `outside` beyond its edges."""
+    out = np.full_like(array, outside)
     h, w = array.shape[:2]
     out[max(-dy, 0) : h - max(dy, 0), max(-dx, 0) : w - max(dx, 0)] = array[
         max(dy, 0) : h - max(-dy, 0), max(dx, 0) : w - max(-dx, 0)
@@ -24,16 +26,40 @@ def _shifted(array: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
     return out
 
 
-def _checkerboard(height: int, width: int) -> np.ndarray:
-    """(H, W) bool: the pixels with x + y even."""
+@dataclass
+class Checkerboard:
+    """A frame's checkerboard: `shaded` (N,) the modelled pixels the network evaluates (the checkerboard's
+    and those with no neighbour to take a value from); `weights` (4, H, W) whether a pixel may take each
+    4-neighbour's value (the neighbour is on the checkerboard, modelled, and on the same surface)."""
+
+    shaded: np.ndarray
+    weights: np.ndarray
+    modelled: np.ndarray
+
+    def fill(self, values: np.ndarray) -> np.ndarray:
+        """`values` (N, 3), set at the `shaded` pixels, with every other modelled pixel the mean of its
+        same-surface neighbours on the checkerboard."""
+        weights = self.weights.astype(values.dtype)
+        height, width = weights.shape[1:]
+        image = values.reshape(height, width, -1)
+        total = sum(
+            w[..., None] * _shifted(image, dy, dx, 0)
+            for w, (dy, dx) in zip(weights, _NEIGHBOURS, strict=True)
+        )
+        count = weights.sum(axis=0)[..., None]
+        filled = (total / np.maximum(count, 1)).reshape(values.shape)
+        out = values.copy()
+        rest = self.modelled & ~self.shaded
+        out[rest] = filled[rest]
+        return out
+
+
+def checkerboard(inputs: SurfaceInputs, modelled: np.ndarray, height: int, width: int) -> Checkerboard:
+    """The checkerboard of a frame's G-buffer `inputs` (N = height x width pixels) over its `modelled`
+    pixels."""
     y, x = np.mgrid[0:height, 0:width]
-    return (y + x) % 2 == 0
-
-
-def _fill_weights(inputs: SurfaceInputs, modelled: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(4, H, W) bool: whether pixel (y, x) may take its 4-neighbour's value (the neighbour is shaded by
-    the checkerboard, modelled, and on the same surface)."""
-    on = modelled.reshape(height, width) & _checkerboard(height, width)
+    even = (y + x) % 2 == 0
+    on = modelled.reshape(height, width) & even
     object_id = inputs.object_id.reshape(height, width)
     normal = inputs.normal.reshape(height, width, 3)
     weights = []
@@ -41,34 +67,6 @@ def _fill_weights(inputs: SurfaceInputs, modelled: np.ndarray, height: int, widt
         same_object = _shifted(object_id, dy, dx, -1) == object_id
         aligned = np.sum(_shifted(normal, dy, dx, 0.0) * normal, axis=-1) > SAME_SURFACE_COS
         weights.append(_shifted(on, dy, dx, False) & same_object & aligned)
-    return np.stack(weights)
-
-
-def shaded_pixels(inputs: SurfaceInputs, modelled: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(N,) bool: the modelled pixels the network evaluates, the checkerboard's and those with no
-    neighbour to take a value from."""
-    orphan = ~_fill_weights(inputs, modelled, height, width).any(axis=0)
-    return modelled & (_checkerboard(height, width) | orphan).ravel()
-
-
-def fill(
-    values: np.ndarray,
-    shaded: np.ndarray,
-    modelled: np.ndarray,
-    inputs: SurfaceInputs,
-    height: int,
-    width: int,
-) -> np.ndarray:
-    """`values` (N, 3), set at the `shaded` pixels, with every other modelled pixel the mean of its
-    shaded same-surface 4-neighbours."""
-    weights = _fill_weights(inputs, modelled, height, width).astype(values.dtype)
-    image = values.reshape(height, width, -1)
-    total = sum(
-        w[..., None] * _shifted(image, dy, dx, 0) for w, (dy, dx) in zip(weights, _NEIGHBOURS, strict=True)
-    )
-    count = weights.sum(axis=0)[..., None]
-    filled = (total / np.maximum(count, 1)).reshape(values.shape)
-    out = values.copy()
-    rest = modelled & ~shaded
-    out[rest] = filled[rest]
-    return out
+    weights = np.stack(weights)
+    orphan = ~weights.any(axis=0)
+    return Checkerboard(modelled & (even | orphan).ravel(), weights, modelled)

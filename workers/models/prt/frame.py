@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from workers.models.prt.checkerboard import fill, shaded_pixels
+from workers.models.prt.checkerboard import checkerboard as checkerboard_of
 from workers.models.prt.gbuffer import SurfaceInputs, surface_inputs
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.selection import run_time_selection
@@ -54,8 +54,8 @@ def predict_indirect(
     pixels and the rest are filled from their neighbours (`checkerboard`)."""
     out = np.zeros((len(inputs.hit), 3), np.float32)
     modelled = inputs.modelled(objects)
-    shaded = modelled if checkerboard is None else shaded_pixels(inputs, modelled, *checkerboard)
-    seen = np.flatnonzero(shaded)
+    board = None if checkerboard is None else checkerboard_of(inputs, modelled, *checkerboard)
+    seen = np.flatnonzero(modelled if board is None else board.shaded)
     if len(seen) == 0:
         return out
     chosen = run_time_selection(cube, k, weighting)
@@ -64,9 +64,7 @@ def predict_indirect(
     with torch.inference_mode():
         b = model(tensors, chosen.indices.to(device), chosen.values.float().to(device))
     out[seen] = b.float().cpu().numpy()
-    if checkerboard is not None:
-        out = fill(out, shaded, modelled, inputs, *checkerboard)
-    return out
+    return out if board is None else board.fill(out)
 
 
 def guides_of(inputs: SurfaceInputs, camera: Camera) -> Guides:
