@@ -13,9 +13,9 @@ equal-time ratio of every setting.
 Then the same held-out views and lightings against a truth at `TRUTH_SPP` (two independent halves: their
 difference estimates the truth's own noise, so the section states the PSNR a perfect model would score and
 the PSNR with that noise taken out), the network beside the model-free nearest-rows baseline on the same
-training rows (what the rows alone give: the network should beat it) and no indirect light. Then frame
-time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects` with
-`ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
+training rows (what the rows alone give: the network should beat it) and no indirect light. Then the
+artifact's frame's time and error for K in `K_SWEEP` on one far view, and the ablation on `env_lit_objects`
+with `ABLATION_STEPS` steps each (the traced data is shared: only the network changes; 0 skips it).
 `PRT_BENCH_SCENES` (comma-separated) narrows the scenes; `PRT_BENCH_OVERRIDES` (JSON) overrides the preset's
 config for every job but the ablation's, e.g. '{"mlp": {"width": 128}}'.
 """
@@ -37,7 +37,7 @@ from tests.bench.common import BenchSection, seconds_at_error
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
 from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
-from workers.models.prt.evaluate import report_view, truth
+from workers.models.prt.evaluate import held_out_frame, report_view, truth
 from workers.models.prt.frame import render_frame
 from workers.models.prt.gbuffer import SurfaceInputs
 from workers.models.prt.lighting import held_out_lightings, lighting_cube, relit_tracer, unit_mean
@@ -166,11 +166,7 @@ def against_fine_truth(folder: Path, scene: str, section: BenchSection) -> None:
             halves = [truth(view, cube, tracer, TRUTH_SPP // 2, SEED + h, config.max_depth) for h in (0, 1)]
             full, indirect = ((a + b) / 2 for a, b in zip(*halves, strict=True))
             noise = {i: mse_of(psnr(halves[0][i], halves[1][i])) / 4 for i in (0, 1)}
-            frame = render_frame(
-                model, box, objects, tracer, cube, view.camera, k=config.wavelets,
-                weighting=config.selection, spp=config.evaluation_spp, seed=SEED,
-                denoise=config.denoise_direct,
-            )  # fmt: skip
+            frame = held_out_frame(model, box, objects, tracer, cube, view.camera, config, SEED)
             shape = indirect.shape
             predictions = {
                 "network": frame.indirect.reshape(shape),
@@ -215,7 +211,7 @@ def k_sweep(folder: Path, scene: str, section: BenchSection) -> None:
             render_frame(
                 artifact.model, artifact.box, artifact.objects, tracer, cube, view.camera, k=k,
                 weighting=config.selection, spp=config.evaluation_spp, seed=SEED + r,
-                denoise=config.denoise_direct,
+                denoise=config.denoise_direct, checkerboard=config.checkerboard,
             )
             for r in range(3)
         ]  # fmt: skip
@@ -325,8 +321,8 @@ def ratio_bound(ratio: float | str) -> float:
 
 def run() -> list[BenchSection]:
     quality = BenchSection(
-        f"prt held-out quality ({PRESET} preset; Table 1 layout; direct light as `denoise_direct`, "
-        "indirect not denoised)"
+        f"prt held-out quality ({PRESET} preset; Table 1 layout; direct light at `held_out_spp` denoised, "
+        "indirect at every pixel, not denoised)"
     )
     lightings = BenchSection("prt per held-out lighting (never trained on)")
     timing = BenchSection("prt equal-time comparison with path tracing of the report's far view")

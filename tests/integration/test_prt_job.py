@@ -66,9 +66,21 @@ def test_render_relights_under_a_new_map_linearly_in_its_scale(served):
     assert once.meta["wavelets"] == 8 and once.meta["network_seconds"] > 0
 
 
+def test_render_defaults_to_the_artifact_frame_its_report_timed(served):
+    camera = {"width": 16, "height": 16}
+    config = served.config
+    frame = {"spp": config.evaluation_spp, "denoise": config.denoise_direct}
+    image = served.answer(RENDER, PrtRender(camera=camera), {}).arrays["image"]
+    explicit = PrtRender(camera=camera, checkerboard=config.checkerboard, **frame)
+    np.testing.assert_array_equal(image, served.answer(RENDER, explicit, {}).arrays["image"])
+    other = PrtRender(camera=camera, checkerboard=not config.checkerboard, **frame)
+    assert not np.array_equal(image, served.answer(RENDER, other, {}).arrays["image"])
+
+
 def test_a_checkerboard_render_is_close_to_the_every_pixel_one(served):
     camera = {"width": 16, "height": 16}
-    every = served.answer(RENDER, PrtRender(camera=camera, spp=4, denoise=False), {}).arrays["image"]
+    every = PrtRender(camera=camera, spp=4, denoise=False, checkerboard=False)
+    every = served.answer(RENDER, every, {}).arrays["image"]
     half = PrtRender(camera=camera, spp=4, denoise=False, checkerboard=True)
     image = served.answer(RENDER, half, {}).arrays["image"]
     assert np.isfinite(image).all() and not np.array_equal(image, every)

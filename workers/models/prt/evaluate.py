@@ -5,8 +5,8 @@ lighting: indirect as binned transport (`transport`, traced under the lighting's
 it, direct as a render. Rows traced once with the lighting-independent sampler would serve every lighting,
 but under a sun they are far noisier: at 64 spp their indirect was 15-25 dB PSNR from a 1024-spp reference
 on env_lit_objects, which capped what a perfect model could score. The model's frame is its own
-path-traced direct light at `evaluation_spp` plus predicted indirect (`frame`). The trivial baseline is
-the same direct light with no indirect at all."""
+path-traced direct light at `held_out_spp`, denoised, plus predicted indirect at every pixel (`frame`). The
+trivial baseline is the same direct light with no indirect at all."""
 
 from __future__ import annotations
 
@@ -86,13 +86,29 @@ def held_out_cases(
         tracer = relit_tracer(scene.compiled(), cube)
         for view in views:
             full, indirect = truth(view, cube, tracer, config.test_spp, seed, config.max_depth)
-            frame = render_frame(
-                model, box, objects, tracer, cube, view.camera,
-                k=k or config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=seed,
-                denoise=config.denoise_direct, checkerboard=config.checkerboard,
-            )  # fmt: skip
+            frame = held_out_frame(model, box, objects, tracer, cube, view.camera, config, seed, k)
             cases.append(Case(view.name, name, full, indirect, frame))
     return cases
+
+
+def held_out_frame(
+    model: PrtNetwork,
+    box: np.ndarray,
+    objects: np.ndarray,
+    tracer: PathTracer,
+    cube: np.ndarray,
+    camera: Camera,
+    config: PrtConfig,
+    seed: int,
+    k: int | None = None,
+) -> Frame:
+    """The frame the held-out figures measure: the direct light at `held_out_spp`, denoised, and the
+    network at every pixel, so that the full frame's error is mostly the network's (not the artifact's
+    frame, which trades error for time: `evaluation_spp`, `checkerboard`)."""
+    return render_frame(
+        model, box, objects, tracer, cube, camera, k=k or config.wavelets, weighting=config.selection,
+        spp=config.held_out_spp, seed=seed, denoise=True,
+    )  # fmt: skip
 
 
 @dataclass

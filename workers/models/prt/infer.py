@@ -4,9 +4,10 @@
 (`params.lighting`: a built-in HDRI, a procedural `sky` or `studio` map, or, with `path` set to any name, the
 lat-long map uploaded as the `environment` array; with `rotate` and `scale`) in, the frame out: G-buffer,
 the K (`params.wavelets`) wavelets of the lighting, the network's indirect light and path-traced direct
-light at `params.spp` under the map itself (full resolution, importance-sampled), denoised unless
-`params.denoise` is false; `params.checkerboard` runs the network at half the pixels. The service adds
-the frame time as `Server-Timing`.
+light at `params.spp` under the map itself (full resolution, importance-sampled), denoised if
+`params.denoise`; `params.checkerboard` runs the network at half the pixels. Each defaults to the
+artifact's frame (`evaluation_spp`, `denoise_direct`, `checkerboard`: the frame its report times against
+path tracing). The service adds the frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
 viewer, kd, ks, roughness) under a lighting: what a rasteriser needs to add the network's light itself.
@@ -71,6 +72,12 @@ class PrtRender(ViewRender, Relighting):
     (direct light is two path segments, the network gives the rest); `background` can only be `scene`
     (relighting needs it)."""
 
+    spp: int | None = Field(
+        None,
+        ge=1,
+        le=4096,
+        description="the direct light's paths per pixel; default: the artifact's evaluation_spp",
+    )
     background: Literal["scene"] = SCENE
     denoise: bool | None = Field(
         None,
@@ -127,6 +134,7 @@ class PrtModel:
         refuse_missing_scene(self.stored)
         k = self._k(params)
         camera = params.camera.over(self.stored.spec.camera)
+        params = params.model_copy(update={"spp": params.spp or self.config.evaluation_spp})
         params.settings(camera)  # refuses requests over the sample budget, naming params.spp
         latlong, rotation, cube = self._lighting(params, upload)
         lit = replace(self.scene, environment_image=latlong.astype(np.float32), environment_rotation=rotation)
