@@ -138,6 +138,12 @@ class PrtConfig(TrainedKindConfig):
     # Rerunning rows 16, M 64 with the rows averaged once beforehand (float32) gave 27.62 / 27.06: runs
     # differ by ~0.25 dB. M 16 at 4000 steps comes as far, 28.01 (30.85) / 26.19 (30.22), for 135-144 s.
     # Quick and paper keep 2 features (the paper: 32 levels x 2 = 64).
+    # At 16000 steps (prt19; default jobs, far views against bench_prt's 4096-spp truth, indirect (full);
+    # /tmp harness, one run each): 10 levels (M = 80, finest resolution 307 instead of 137) gave glossy_row
+    # seed 0 27.08 (30.39) against 27.44 (30.80), seed 1 26.92 (30.79) against 26.64 (30.35),
+    # env_lit_objects seed 0 31.97 (33.82) against 32.40 (33.92); a 2^16 table, glossy_row seed 1, 25.46
+    # (29.18): it learns the targets' noise. An exponential average of the weights (decay 0.999, saved in
+    # place of the last step's) gave glossy_row seed 1 26.86 (30.61), within a run's spread. None taken.
     grid: HashGridConfig = HashGridConfig(
         levels=8, features_per_level=8, log2_table_size=14, base_resolution=8, per_level_scale=1.5
     )
