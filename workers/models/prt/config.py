@@ -428,14 +428,21 @@ class PrtConfig(TrainedKindConfig):
     # env_lit_objects; by PSNR glossy_row 0.33 -> 0.31 / 0.33 either way, env_lit_objects 0.75 / 0.81 ->
     # 0.72 / 0.73.
     # The artifact's frame (prt19): the report times it against path tracing and `:render` gives it unless
-    # told otherwise. It was the held-out figures' 64 spp denoised at every pixel, which path tracing
-    # beats at equal time (`bench_prt.frame_curve`, glossy_row's report view, a default model of seed 1
-    # with 10 grid levels, CPU s on one thread, medians of 3, beside two jobs: s, FLIP, dB): 64 denoised
-    # 0.325 0.0713 32.8 (equal-time ratio by FLIP 2.6); 8 raw checkerboard 0.074 0.098 27.6 (1.10); 16
-    # raw checkerboard 0.098 0.085 30.0 (1.14); 4 denoised checkerboard 0.078 0.116 26.3 (1.5); path
-    # tracing 8 spp 0.053 0.114 23.1, 16 spp 0.092 0.081 26.2.
+    # told otherwise. It was the held-out figures' 64 spp denoised at every pixel. bench_prt's frame curve
+    # (`PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`, seed 0, quiet machine; an Intel Xeon
+    # whose float32 products run at 37 GFLOP/s on a thread, bfloat16 at 46, so the network costs ~1.7x what
+    # it did on prt16's EPYC), equal-time ratio by FLIP / PSNR, env_lit_objects and glossy_row:
+    #   64 denoised, every pixel (before)   1.38 / 1.17   2.60 / 0.55
+    #   8 raw, checkerboard                 1.87 / 1.89   1.07 / 0.54   (glossy_row's best by FLIP)
+    #   16 raw, checkerboard                1.45 / 1.26   1.18 / 0.44
+    #   32 raw, checkerboard                0.92 / 0.82   1.72 / 0.54   (env_lit_objects' best)
+    #   16 denoised, checkerboard           1.58 / 1.00   1.27 / 0.41
+    # 32 raw on a checkerboard is the one setting under 1 by PSNR on both scenes and by FLIP on one, with
+    # the lowest geometric mean by FLIP (1.25; 8 raw 1.42), and its frames are the cleanest of these (32.0
+    # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs: a job could choose its own by
+    # timing a few frames, but then an artifact would depend on the machine's load, not only its seed.
     evaluation_spp: int = Field(
-        8, ge=1, le=65536, description="the artifact's frame: its direct light's spp (before any filter)"
+        32, ge=1, le=65536, description="the artifact's frame: its direct light's spp (before any filter)"
     )
     denoise_direct: bool = Field(
         False, description="the artifact's frame: filter its direct light (G-buffer-guided à-trous, `frame`)"
