@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tests.bench.common import BenchSection, seconds_at_error
+from tests.bench.common import BenchSection
 from workers.models.explore import KIND
 from workers.models.explore.evaluate import (
     ANTIALIASING,
@@ -68,6 +68,7 @@ from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchSource, PatchSourceConfig
 from workers.nn.metrics import dssim
 from workers.render.render import RenderSettings, render
+from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import Progress, train_phases

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from tests.bench.common import BenchSection, median_seconds, seconds_at_error
+from tests.bench.common import BenchSection, median_seconds
 from tests.support.jobs import run_kind_job
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.aggregate import ShellAggregate
@@ -46,6 +46,7 @@ from workers.models.mesogan.train import phases
 from workers.nn.metrics import flip
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
+from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train_phases

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.bench.common import BenchSection, seconds_at_error
+from tests.bench.common import BenchSection
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
 from workers.models.prt.data import TrainingSet, test_views, training_set, transport_tracer
@@ -47,6 +47,7 @@ from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.nn.metrics import flip, psnr
 from workers.render.render import render
+from workers.runtime.equal_time import equal_time_ratio, seconds_at_error
 from workers.runtime.report import Report
 from workers.runtime.threads import torch_threads
 from workers.scene.builtin import get_builtin
@@ -80,18 +81,7 @@ FIGURES = ("psnr_full", "psnr_indirect", "ssim_full", "ssim_indirect", "flip_ful
            "baseline_psnr_indirect", "baseline_flip_full", "seconds_per_frame")  # fmt: skip
 
 
-def equal_error_seconds(report: Report, metric: str = "flip") -> float:
-    """Path-tracing seconds at the model's error (`seconds_at_error`): log-log for FLIP, log seconds
-    against negated PSNR (dB is already a log)."""
-    seconds = [p.seconds_per_frame for p in report.path_tracing]
-    if metric == "flip":
-        errors = [p.error.flip for p in report.path_tracing]
-        return seconds_at_error(seconds, errors, report.model.error.flip)
-    errors = [-p.error.psnr for p in report.path_tracing]
-    return seconds_at_error(seconds, errors, -report.model.error.psnr, log_error=False)
-
-
-def equal_time_ratio(model_seconds: float, pt_seconds: float, longest: float) -> float | str:
+def bounded_ratio(model_seconds: float, pt_seconds: float, longest: float) -> float | str:
     """The model's frame time over path tracing's at the model's error; where path tracing never reaches
     it on the curve, the bound its `longest` render gives ("<")."""
     if math.isfinite(pt_seconds):
@@ -299,8 +289,8 @@ def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
     for spp, denoise, checkerboard in settings:
         point = measured(model_frame(spp, denoise, checkerboard))
         ratios = {
-            "flip": equal_time_ratio(point["cpu_s"], pt_seconds("flip", point["flip"]), longest),
-            "psnr": equal_time_ratio(point["cpu_s"], pt_seconds("psnr", -point["psnr"]), longest),
+            "flip": bounded_ratio(point["cpu_s"], pt_seconds("flip", point["flip"]), longest),
+            "psnr": bounded_ratio(point["cpu_s"], pt_seconds("psnr", -point["psnr"]), longest),
         }
         label = f"direct {spp} spp{' denoised' if denoise else ''}{' checkerboard' if checkerboard else ''}"
         section.add(
@@ -315,7 +305,7 @@ def frame_curve(folder: Path, scene: str, section: BenchSection) -> None:
 
 
 def ratio_bound(ratio: float | str) -> float:
-    """An `equal_time_ratio` as a number (a "<" bound as its bound)."""
+    """A `bounded_ratio` as a number (a "<" bound as its bound)."""
     return float(str(ratio).lstrip("<"))
 
 
@@ -347,15 +337,12 @@ def run() -> list[BenchSection]:
             config = get_kind_config(PRESET)
             for name in held_out_lightings(config.lighting, SEED):
                 lightings.add(scene=scene, lighting=name, **{k: m[f"{name}.{k}"] for k in FIGURES[:5]})
-            pt_seconds = equal_error_seconds(report)
-            longest = max(p.seconds_per_frame for p in report.path_tracing)
-            ratio = partial(equal_time_ratio, report.model.seconds_per_frame, longest=longest)
+            ratio = partial(equal_time_ratio, report.model, report.path_tracing)
             timing.add(
                 scene=scene, model=report.model.label, model_s=report.model.seconds_per_frame,
                 model_flip=report.model.error.flip, equal_time_pt=report.path_tracing_equal_time.label,
-                equal_time_pt_flip=report.path_tracing_equal_time.error.flip, pt_s_at_model_flip=pt_seconds,
-                equal_time_ratio=ratio(pt_seconds), model_psnr=report.model.error.psnr,
-                equal_time_ratio_psnr=ratio(equal_error_seconds(report, "psnr")),
+                equal_time_pt_flip=report.path_tracing_equal_time.error.flip, equal_time_ratio=ratio("flip"),
+                model_psnr=report.model.error.psnr, equal_time_ratio_psnr=ratio("psnr"),
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
             frame_curve(folder / "out", scene, curve)
@@ -371,7 +358,8 @@ def run() -> list[BenchSection]:
             size = sum(m[f"parameters.{p}"] for p in "SWUf") * 2
             ablation.add(variant=label, stored_bytes=size, **{k: m[k] for k in FIGURES[:5]})
     timing.notes.append(
-        "equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP (_psnr: its PSNR)"
+        "equal_time_ratio = model frame time / path-tracing time reaching the model's FLIP (_psnr: its "
+        "PSNR); where the curve never gets there, over its longest render (a bound)"
     )
     sweep.notes.append("frame_s: G-buffer + network + direct light; network_s: selection and network only")
     noise.notes.append(

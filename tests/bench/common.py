@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import math
 import statistics
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import numpy as np
 
 
 def median_seconds(
@@ -28,24 +25,6 @@ def median_seconds(
         fn()
         times.append(clock() - t0)
     return statistics.median(times)
-
-
-def seconds_at_error(
-    seconds: Sequence[float], errors: Sequence[float], target: float, log_error: bool = True
-) -> float:
-    """The time a peer's curve of (seconds, error) points needs to reach error `target`: log seconds
-    interpolated against log error (against the error itself with `log_error` False, for a log already,
-    such as negated dB). The peer's cheapest time where `target` is above all its errors; inf where it is
-    below all of them (the peer never gets there)."""
-    log_seconds = np.log(np.asarray(seconds, np.float64))
-    e = np.log(np.asarray(errors, np.float64)) if log_error else np.asarray(errors, np.float64)
-    t = math.log(target) if log_error else float(target)
-    if t < e.min():
-        return math.inf
-    if t >= e.max():
-        return float(min(seconds))
-    order = np.argsort(e)
-    return float(np.exp(np.interp(t, e[order], log_seconds[order])))
 
 
 @dataclass

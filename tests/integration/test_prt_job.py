@@ -21,6 +21,7 @@ from services.inference.wire import OCTET_STREAM, encode_binary
 from tests.integration.test_api_server import TOKENS
 from tests.integration.test_inference_server import install_tokens, publish, start_server
 from tests.support.jobs import run_kind_job
+from workers.models.prt.frame_spp import FRAME_SPP
 from workers.models.prt.infer import INFERENCE, PrtQuery, PrtRender
 from workers.models.registry import QUERY, RENDER
 from workers.runtime.report import Report
@@ -35,7 +36,8 @@ MIN_INDIRECT_GAIN_DB = 1.0  # held-out indirect PSNR over predicting no indirect
 @pytest.fixture(scope="module")
 def job(tmp_path_factory):
     folder = tmp_path_factory.mktemp("prt")
-    spec, outcome = run_kind_job("prt", get_builtin(SCENE), folder, seed=SEED)
+    # The job times its frame's spp (`frame_spp`; quick fixes 4)
+    spec, outcome = run_kind_job("prt", get_builtin(SCENE), folder, {"evaluation_spp": None}, seed=SEED)
     assert outcome.state == "succeeded", outcome.error
     return folder / "out", outcome, spec
 
@@ -75,6 +77,20 @@ def test_render_defaults_to_the_artifact_frame_its_report_timed(served):
     np.testing.assert_array_equal(image, served.answer(RENDER, explicit, {}).arrays["image"])
     other = PrtRender(camera=camera, checkerboard=not config.checkerboard, **frame)
     assert not np.array_equal(image, served.answer(RENDER, other, {}).arrays["image"])
+
+
+def test_the_job_times_its_frame_and_keeps_the_count_that_beats_path_tracing_most(job, served):
+    report = Report.read(str(job[0]))
+    figures = report.method_metrics
+    timed = {
+        spp: max(figures[f"frame_spp.{spp}.ratio_flip"], figures[f"frame_spp.{spp}.ratio_psnr"])
+        for spp in FRAME_SPP
+        if f"frame_spp.{spp}.ratio_flip" in figures
+    }
+    assert set(timed) == {4, 8, 16}, figures  # the counts under quick's 32-spp reference
+    chosen = min(timed, key=lambda spp: (timed[spp], spp))
+    assert served.config.evaluation_spp == figures["frame_spp"] == chosen
+    assert report.model.label.startswith(f"direct {chosen} spp")
 
 
 def test_a_checkerboard_render_is_close_to_the_every_pixel_one(served):

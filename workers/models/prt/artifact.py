@@ -33,6 +33,8 @@ def save(
     scene: SceneSpec,
     scene_folder: Path | None = None,
 ) -> dict:
+    if config.evaluation_spp is None:
+        raise ValueError("evaluation_spp: choose the artifact's frame (`frame_spp`) before saving it")
     folder.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().to(STORAGE_DTYPE).cpu().contiguous() for k, v in model.state_dict().items()}
     safetensors.torch.save_file(tensors, str(folder / WEIGHTS))

@@ -439,10 +439,14 @@ class PrtConfig(TrainedKindConfig):
     #   16 denoised, checkerboard           1.58 / 1.00   1.27 / 0.41
     # 32 raw on a checkerboard is the one setting under 1 by PSNR on both scenes and by FLIP on one, with
     # the lowest geometric mean by FLIP (1.25; 8 raw 1.42), and its frames are the cleanest of these (32.0
-    # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs: a job could choose its own by
-    # timing a few frames, but then an artifact would depend on the machine's load, not only its seed.
-    evaluation_spp: int = Field(
-        32, ge=1, le=65536, description="the artifact's frame: its direct light's spp (before any filter)"
+    # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs, so since prt20 the job times its
+    # own (None, `frame_spp`): the weights stay the seed's alone, the frame's count is the machine's choice.
+    evaluation_spp: int | None = Field(
+        None,
+        ge=1,
+        le=65536,
+        description="the artifact's frame: its direct light's spp (before any filter); None: the job times "
+        "4 to 64 on the report's view and takes the one that beats path tracing by most (`frame_spp`)",
     )
     denoise_direct: bool = Field(
         False, description="the artifact's frame: filter its direct light (G-buffer-guided à-trous, `frame`)"
@@ -455,6 +459,14 @@ class PrtConfig(TrainedKindConfig):
         description="relighting: f's first and hidden products in bfloat16 where the device has it natively",
     )
     reference_spp: int = 256
+
+    @model_validator(mode="after")
+    def _reference_converges_further(self) -> PrtConfig:
+        """As every trained kind's, once the frame's spp is fixed (None: the job keeps to counts under the
+        reference's)."""
+        if self.evaluation_spp is None:
+            return self
+        return super()._reference_converges_further()
 
     @model_validator(mode="after")
     def _sizes(self) -> PrtConfig:

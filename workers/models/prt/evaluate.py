@@ -132,9 +132,9 @@ def report_view(scene: SceneRef, config: PrtConfig, seed: int) -> ReportView:
     compiled = scene.compiled()
     at_view = replace(compiled, spec=compiled.spec.model_copy(update={"camera": camera}))
     tracer = relit_tracer(at_view, cube)
-    settings = RenderSettings(
-        spp=config.evaluation_spp, width=camera.width, height=camera.height, max_depth=config.max_depth,
-        seed=seed, threads=1, sampler=SAMPLER,
+    settings = RenderSettings(  # spp 1: the curve and the reference set their own
+        spp=1, width=camera.width, height=camera.height, max_depth=config.max_depth, seed=seed, threads=1,
+        sampler=SAMPLER,
     )  # fmt: skip
     view = PathTracedView(at_view, settings, config.reference_spp, tracer)
     return ReportView(camera, name, cube, tracer, view)

@@ -11,8 +11,9 @@ import torch
 
 from workers.models.prt import artifact
 from workers.models.prt.config import PrtConfig
-from workers.models.prt.evaluate import held_out_cases, report_view, summarise
-from workers.models.prt.frame import render_frame
+from workers.models.prt.evaluate import ReportView, held_out_cases, report_view, summarise
+from workers.models.prt.frame import Frame, render_frame
+from workers.models.prt.frame_spp import best, frame_candidates
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.plan import parameter_counts
 from workers.models.prt.probe import probe_objects
@@ -49,13 +50,10 @@ class PrtMethod:
         model: PrtNetwork = done.model
         source: PrtSource = done.trainable.source.build()
         objects = np.asarray(source.objects, np.int64)
-        files = artifact.save(
-            ctx.output_dir, config, model, source.data.box, source.objects, ctx.scene.spec,
-            ctx.scene.local_folder(),
-        )  # fmt: skip
+        box = source.data.box
 
         ctx.log("measuring on held-out lightings and views")
-        cases = held_out_cases(model, source.data.box, objects, ctx.scene, config, ctx.seed)
+        cases = held_out_cases(model, box, objects, ctx.scene, config, ctx.seed)
         figures = summarise(cases)
         counts = parameter_counts(config)
         method_metrics = {
@@ -70,15 +68,44 @@ class PrtMethod:
         report = report_view(ctx.scene, config, ctx.seed)
         camera = report.camera
         ctx.log(f"report view: {camera.width}x{camera.height}, far view under {report.lighting}")
-        frame = render_frame(
-            model, source.data.box, objects, report.tracer, report.cube, camera,
-            k=config.wavelets, weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
-            denoise=config.denoise_direct, checkerboard=config.checkerboard,
-        )  # fmt: skip
+        if config.evaluation_spp is None:
+            frame, seconds, config = self._chosen_frame(ctx, model, box, objects, report, method_metrics)
+        else:
+            frame = render_frame(
+                model, box, objects, report.tracer, report.cube, camera, k=config.wavelets,
+                weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
+                denoise=config.denoise_direct, checkerboard=config.checkerboard,
+            )  # fmt: skip
+            seconds = frame.seconds
+        files = artifact.save(
+            ctx.output_dir, config, model, box, source.objects, ctx.scene.spec, ctx.scene.local_folder()
+        )
         denoised = " denoised" if config.denoise_direct else ""
         shading = " checkerboard" if config.checkerboard else ""
         label = f"direct {config.evaluation_spp} spp{denoised} + K={config.wavelets}{shading}"
-        timed = TimedImage(label, frame.image, frame.seconds)
+        timed = TimedImage(label, frame.image, seconds)
         method_metrics["report_view.network_seconds"] = frame.network_seconds
+        method_metrics["frame_spp"] = float(config.evaluation_spp)
         preview = [frame.direct, frame.indirect]
         return Finished(files, report.view, timed, method_metrics, metrics, preview=preview)
+
+    @staticmethod
+    def _chosen_frame(
+        ctx: JobContext,
+        model: PrtNetwork,
+        box: np.ndarray,
+        objects: np.ndarray,
+        report: ReportView,
+        method_metrics: dict[str, float],
+    ) -> tuple[Frame, float, PrtConfig]:
+        """The frame `frame_spp` chooses, its median time, and the config with its spp (the artifact's)."""
+        config: PrtConfig = ctx.config
+        candidates = frame_candidates(model, box, objects, report, config, ctx.seed)
+        for c in candidates:
+            ctx.log(str(c))
+            method_metrics[f"frame_spp.{c.spp}.ratio_flip"] = c.ratio_flip
+            method_metrics[f"frame_spp.{c.spp}.ratio_psnr"] = c.ratio_psnr
+        chosen = best(candidates)
+        ctx.log(f"the artifact's frame: direct light at {chosen.spp} spp (`frame_spp`)")
+        config = config.model_copy(update={"evaluation_spp": chosen.spp})
+        return chosen.frame, chosen.point.seconds_per_frame, config

@@ -1,0 +1,87 @@
+"""The artifact's frame, chosen by the job when `PrtConfig.evaluation_spp` is None: of `FRAME_SPP`, the
+direct light's sample count whose frame of the report's view beats path tracing by the widest margin at
+equal time by both of the report's measures (the smallest of the larger of its two equal-time ratios, by
+FLIP and by PSNR, `workers.runtime.equal_time`).
+
+Why a job chooses: the network's indirect light costs the same at every count, while the direct light's
+noise falls with it, so the best count is where that noise meets the network's own error at the price of a
+sample. Both differ by scene: where the network's error is high (glossy_row) the frame reaches it with few
+samples and more only cost time; where it is low (env_lit_objects) the direct light's noise is most of the
+frame's error and more samples pay (bench_prt's frame curve: best by FLIP at 8 spp on one, 32 on the other).
+The price of a sample against the network's differs by machine as well (bfloat16 products, Embree), so the
+choice is timed on the machine that trains; the job logs every count's figures and reports them."""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import dataclass
+
+import numpy as np
+
+from workers.models.prt.config import PrtConfig
+from workers.models.prt.evaluate import ReportView
+from workers.models.prt.frame import Frame, render_frame
+from workers.models.prt.network import PrtNetwork
+from workers.runtime.equal_time import equal_time_ratio
+from workers.runtime.report import SpeedErrorPoint, TimedImage
+
+FRAME_SPP = (4, 8, 16, 32, 64)  # the counts a job times, those under its reference's
+TIMED_FRAMES = 3  # renders per count, their median time (the first of them is the one measured)
+
+
+@dataclass(frozen=True)
+class FrameCandidate:
+    spp: int
+    frame: Frame
+    point: SpeedErrorPoint  # its time (median of `TIMED_FRAMES`) and error against the report's reference
+    ratio_flip: float
+    ratio_psnr: float
+
+    @property
+    def ratio(self) -> float:
+        """The larger of its equal-time ratios: below 1, it beats path tracing by FLIP and by PSNR."""
+        return max(self.ratio_flip, self.ratio_psnr)
+
+    def __str__(self) -> str:
+        error = self.point.error
+        return (
+            f"frame at {self.spp} spp: {self.point.seconds_per_frame * 1e3:.0f} ms, FLIP {error.flip:.4f}, "
+            f"{error.psnr:.2f} dB; equal-time ratio by FLIP {self.ratio_flip:.2f}, "
+            f"by PSNR {self.ratio_psnr:.2f}"
+        )
+
+
+def frame_candidates(
+    model: PrtNetwork,
+    box: np.ndarray,
+    objects: np.ndarray,
+    report: ReportView,
+    config: PrtConfig,
+    seed: int,
+) -> list[FrameCandidate]:
+    """The report view's frame at each of `FRAME_SPP` under the reference's spp (the config's denoising and
+    checkerboard), each against the report's path-tracing curve of the same view (`report.view`, rendered
+    here once and kept for the report)."""
+    reference = report.view.reference()
+    curve = [SpeedErrorPoint.measure(frame, reference) for frame in report.view.curve()]
+
+    def rendered(spp: int) -> Frame:
+        return render_frame(
+            model, box, objects, report.tracer, report.cube, report.camera, k=config.wavelets,
+            weighting=config.selection, spp=spp, seed=seed, denoise=config.denoise_direct,
+            checkerboard=config.checkerboard,
+        )  # fmt: skip
+
+    candidates = []
+    for spp in (s for s in FRAME_SPP if s < config.reference_spp):
+        frames = [rendered(spp) for _ in range(TIMED_FRAMES)]
+        timed = TimedImage(f"{spp} spp", frames[0].image, statistics.median(f.seconds for f in frames))
+        point = SpeedErrorPoint.measure(timed, reference)
+        ratios = (equal_time_ratio(point, curve, metric) for metric in ("flip", "psnr"))
+        candidates.append(FrameCandidate(spp, frames[0], point, *ratios))
+    return candidates
+
+
+def best(candidates: list[FrameCandidate]) -> FrameCandidate:
+    """The candidate with the smallest `ratio` (the fewer samples on a tie)."""
+    return min(candidates, key=lambda c: (c.ratio, c.spp))

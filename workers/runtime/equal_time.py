@@ -1,0 +1,43 @@
+"""Equal-time comparison with path tracing: how long a path tracer's (seconds, error) curve takes to reach
+an error, and a frame's time over that (below 1, the frame beats path tracing at its own error)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from workers.runtime.report import SpeedErrorPoint
+
+
+def seconds_at_error(
+    seconds: Sequence[float], errors: Sequence[float], target: float, log_error: bool = True
+) -> float:
+    """The time a peer's curve of (seconds, error) points needs to reach error `target`: log seconds
+    interpolated against log error (against the error itself with `log_error` False, for a log already,
+    such as negated dB). The peer's cheapest time where `target` is above all its errors; inf where it is
+    below all of them (the peer never gets there)."""
+    log_seconds = np.log(np.asarray(seconds, np.float64))
+    e = np.log(np.asarray(errors, np.float64)) if log_error else np.asarray(errors, np.float64)
+    t = math.log(target) if log_error else float(target)
+    if t < e.min():
+        return math.inf
+    if t >= e.max():
+        return float(min(seconds))
+    order = np.argsort(e)
+    return float(np.exp(np.interp(t, e[order], log_seconds[order])))
+
+
+def equal_time_ratio(frame: SpeedErrorPoint, curve: Sequence[SpeedErrorPoint], metric: str) -> float:
+    """`frame`'s seconds over the path tracer's at the frame's error by `metric`, "flip" (interpolated
+    log-log) or "psnr" (log seconds against dB). Where the curve never reaches the frame's error, the ratio
+    to its longest render: an upper bound, since path tracing would need longer still."""
+    seconds = [p.seconds_per_frame for p in curve]
+    if metric == "flip":
+        traced = seconds_at_error(seconds, [p.error.flip for p in curve], frame.error.flip)
+    elif metric == "psnr":
+        traced = seconds_at_error(seconds, [-p.error.psnr for p in curve], -frame.error.psnr, log_error=False)
+    else:
+        raise ValueError(f"metric: 'flip' or 'psnr', got {metric!r}")
+    return frame.seconds_per_frame / (traced if math.isfinite(traced) else max(seconds))
