@@ -21,7 +21,7 @@ from services.inference.wire import OCTET_STREAM, encode_binary
 from tests.integration.test_api_server import TOKENS
 from tests.integration.test_inference_server import install_tokens, publish, start_server
 from tests.support.jobs import run_kind_job
-from workers.models.prt.frame_spp import FRAME_SPP
+from workers.models.prt.config import FRAME_SPP
 from workers.models.prt.infer import INFERENCE, PrtQuery, PrtRender
 from workers.models.registry import QUERY, RENDER
 from workers.runtime.report import Report

@@ -21,8 +21,22 @@ def test_a_convex_object_alone_is_left_to_direct_light_and_the_plan_says_why():
     plan = kind.plan(SceneRef(convex_box()), kind.resolve_config("quick", {}))
     items = {item.name: item for item in plan.items}
     assert items["box"].choice == "direct only" and "indirect is 0.0%" in items["box"].reason
-    assert {"lighting", "hash grid box", "memory", "ground truth"} <= set(items)
+    assert {"lighting", "hash grid box", "memory", "ground truth", "frame"} <= set(items)
     assert plan.summary.startswith("indirect light of 0 of 1 objects") and plan.estimated_seconds > 0
+
+
+def test_the_plan_says_the_default_job_times_its_frame_and_a_fixed_count_is_kept():
+    kind = get_kind("prt")
+    timed = plan_items(kind, "default", {})["frame"]
+    assert timed.choice == "direct light at 4, 8, 16, 32, 64 spp, timed"
+    assert "beats path tracing" in timed.reason
+    fixed = plan_items(kind, "default", {"evaluation_spp": 8, "checkerboard": False})["frame"]
+    assert fixed.choice == "direct light at 8 spp" and fixed.reason.endswith("the network at every pixel")
+
+
+def plan_items(kind, preset: str, overrides: dict) -> dict:
+    plan = kind.plan(SceneRef(convex_box()), kind.resolve_config(preset, overrides))
+    return {item.name: item for item in plan.items}
 
 
 def test_the_estimate_charges_wider_grid_features():

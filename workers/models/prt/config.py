@@ -15,6 +15,8 @@ from workers.nn.configs import HashGridConfig, MLPConfig, SphericalHarmonicsConf
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
 
+FRAME_SPP = (4, 8, 16, 32, 64)
+
 
 class LightingConfig(BaseModel):
     """Where training lightings come from (a fresh one every step, Sec. 5) and which are held out.
@@ -481,6 +483,11 @@ class PrtConfig(TrainedKindConfig):
         if self.train_top_wavelets + self.train_uniform_wavelets == 0:
             raise ValueError("train_top_wavelets + train_uniform_wavelets must be positive")
         return self
+
+    @property
+    def frame_spp_choices(self) -> tuple[int, ...]:
+        """The direct-light counts a job times for its frame (`frame_spp`): 4 to 64, under the reference's."""
+        return tuple(spp for spp in FRAME_SPP if spp < self.reference_spp)
 
     @property
     def n_wavelets(self) -> int:

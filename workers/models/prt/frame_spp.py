@@ -1,7 +1,7 @@
-"""The artifact's frame, chosen by the job when `PrtConfig.evaluation_spp` is None: of `FRAME_SPP`, the
-direct light's sample count whose frame of the report's view beats path tracing by the widest margin at
-equal time by both of the report's measures (the smallest of the larger of its two equal-time ratios, by
-FLIP and by PSNR, `workers.runtime.equal_time`).
+"""The artifact's frame, chosen by the job when `PrtConfig.evaluation_spp` is None: of the counts in
+`PrtConfig.frame_spp_choices`, the direct light's spp whose frame of the report's view beats path tracing by
+the widest margin at equal time by both of the report's measures (the smallest of the larger of its two
+equal-time ratios, by FLIP and by PSNR, `workers.runtime.equal_time`).
 
 Why a job chooses: the network's indirect light costs the same at every count, while the direct light's
 noise falls with it, so the best count is where that noise meets the network's own error at the price of a
@@ -25,7 +25,6 @@ from workers.models.prt.network import PrtNetwork
 from workers.runtime.equal_time import equal_time_ratio
 from workers.runtime.report import SpeedErrorPoint, TimedImage
 
-FRAME_SPP = (4, 8, 16, 32, 64)  # the counts a job times, those under its reference's
 TIMED_FRAMES = 3  # renders per count, their median time (the first of them is the one measured)
 
 
@@ -59,9 +58,9 @@ def frame_candidates(
     config: PrtConfig,
     seed: int,
 ) -> list[FrameCandidate]:
-    """The report view's frame at each of `FRAME_SPP` under the reference's spp (the config's denoising and
-    checkerboard), each against the report's path-tracing curve of the same view (`report.view`, rendered
-    here once and kept for the report)."""
+    """The report view's frame at each of `frame_spp_choices` (the config's denoising and checkerboard),
+    each against the report's path-tracing curve of the same view (`report.view`, rendered here once and
+    kept for the report)."""
     reference = report.view.reference()
     curve = [SpeedErrorPoint.measure(frame, reference) for frame in report.view.curve()]
 
@@ -73,7 +72,7 @@ def frame_candidates(
         )  # fmt: skip
 
     candidates = []
-    for spp in (s for s in FRAME_SPP if s < config.reference_spp):
+    for spp in config.frame_spp_choices:
         frames = [rendered(spp) for _ in range(TIMED_FRAMES)]
         timed = TimedImage(f"{spp} spp", frames[0].image, statistics.median(f.seconds for f in frames))
         point = SpeedErrorPoint.measure(timed, reference)
