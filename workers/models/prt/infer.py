@@ -6,8 +6,8 @@ lat-long map uploaded as the `environment` array; with `rotate` and `scale`) in,
 the K (`params.wavelets`) wavelets of the lighting, the network's indirect light and path-traced direct
 light at `params.spp` under the map itself (full resolution, importance-sampled), denoised if
 `params.denoise`; `params.checkerboard` runs the network at half the pixels. Each defaults to the
-artifact's frame (`evaluation_spp`, `denoise_direct`, `checkerboard`: the frame its report times against
-path tracing). The service adds the frame time as `Server-Timing`.
+artifact's frame (`evaluation_spp`, the count its job timed and kept unless its config fixed one;
+`denoise_direct`; `checkerboard`): the frame its report times against path tracing. The service adds the frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
 viewer, kd, ks, roughness) under a lighting: what a rasteriser needs to add the network's light itself.
