@@ -51,9 +51,13 @@ class PathTracedView:
             self._frames[spp] = TimedImage(f"{spp} spp", result.image, result.seconds)
         return self._frames[spp]
 
+    def curve_spp(self) -> list[int]:
+        """The curve's sample counts: `PATH_TRACING_SPP` below the reference's spp."""
+        return [spp for spp in PATH_TRACING_SPP if spp < self.reference_spp]
+
     def curve(self) -> list[TimedImage]:
-        """The report's speed-against-error curve: `PATH_TRACING_SPP` below the reference's spp."""
-        return [self.frame(spp) for spp in PATH_TRACING_SPP if spp < self.reference_spp]
+        """The report's speed-against-error curve, at `curve_spp`."""
+        return [self.frame(spp) for spp in self.curve_spp()]
 
     def reference(self) -> np.ndarray:
         """The converged image every frame is measured against (its own seed)."""

@@ -14,7 +14,10 @@ choice is timed on the machine that trains; the job logs every count's figures a
 from __future__ import annotations
 
 import statistics
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -22,17 +25,18 @@ from workers.models.prt.config import PrtConfig
 from workers.models.prt.evaluate import ReportView
 from workers.models.prt.frame import Frame, render_frame
 from workers.models.prt.network import PrtNetwork
+from workers.render.render import RenderResult, render
 from workers.runtime.equal_time import equal_time_ratio
 from workers.runtime.report import SpeedErrorPoint, TimedImage
 
-TIMED_FRAMES = 3  # renders per count, their median time (the first of them is the one measured)
+TIMED_RENDERS = 3  # per count and per path-traced point, in rounds: their median CPU time
 
 
 @dataclass(frozen=True)
 class FrameCandidate:
     spp: int
-    frame: Frame
-    point: SpeedErrorPoint  # its time (median of `TIMED_FRAMES`) and error against the report's reference
+    frame: Frame  # as rendered first (its `seconds` wall time, as the report measures path tracing)
+    point: SpeedErrorPoint  # its CPU time, median of `TIMED_RENDERS`, and error against the reference
     ratio_flip: float
     ratio_psnr: float
 
@@ -44,8 +48,8 @@ class FrameCandidate:
     def __str__(self) -> str:
         error = self.point.error
         return (
-            f"frame at {self.spp} spp: {self.point.seconds_per_frame * 1e3:.0f} ms, FLIP {error.flip:.4f}, "
-            f"{error.psnr:.2f} dB; equal-time ratio by FLIP {self.ratio_flip:.2f}, "
+            f"frame at {self.spp} spp: {self.point.seconds_per_frame * 1e3:.0f} CPU ms, "
+            f"FLIP {error.flip:.4f}, {error.psnr:.2f} dB; equal-time ratio by FLIP {self.ratio_flip:.2f}, "
             f"by PSNR {self.ratio_psnr:.2f}"
         )
 
@@ -58,26 +62,44 @@ def frame_candidates(
     config: PrtConfig,
     seed: int,
 ) -> list[FrameCandidate]:
-    """The report view's frame at each of `frame_spp_choices` (the config's denoising and checkerboard),
-    each against the report's path-tracing curve of the same view (`report.view`, rendered here once and
-    kept for the report)."""
+    """The report view's frame at each of `frame_spp_choices` (the config's denoising and checkerboard)
+    against path tracing of the same view at the report curve's counts (`report.view`; its reference).
+    Both are timed in CPU seconds of this process, medians of `TIMED_RENDERS` taken in rounds over every
+    render, so that other processes' load and drift over the measurement move them alike."""
     reference = report.view.reference()
-    curve = [SpeedErrorPoint.measure(frame, reference) for frame in report.view.curve()]
 
-    def rendered(spp: int) -> Frame:
+    def frame(spp: int) -> Frame:
         return render_frame(
             model, box, objects, report.tracer, report.cube, report.camera, k=config.wavelets,
             weighting=config.selection, spp=spp, seed=seed, denoise=config.denoise_direct,
             checkerboard=config.checkerboard,
         )  # fmt: skip
 
+    def traced(spp: int) -> RenderResult:
+        return render(report.tracer, report.view.at(spp))
+
+    renders: dict[tuple[str, int], Callable[[], Frame | RenderResult]]
+    renders = {("frame", spp): partial(frame, spp) for spp in config.frame_spp_choices}
+    renders |= {("traced", spp): partial(traced, spp) for spp in report.view.curve_spp()}
+    times: dict[tuple[str, int], list[float]] = {key: [] for key in renders}
+    first = {}
+    for _ in range(TIMED_RENDERS):
+        for key, make in renders.items():
+            start = time.process_time()
+            made = make()
+            times[key].append(time.process_time() - start)
+            first.setdefault(key, made)
+
+    def point(key: tuple[str, int]) -> SpeedErrorPoint:
+        timed = TimedImage(f"{key[1]} spp", first[key].image, statistics.median(times[key]))
+        return SpeedErrorPoint.measure(timed, reference)
+
+    curve = [point(key) for key in renders if key[0] == "traced"]
     candidates = []
     for spp in config.frame_spp_choices:
-        frames = [rendered(spp) for _ in range(TIMED_FRAMES)]
-        timed = TimedImage(f"{spp} spp", frames[0].image, statistics.median(f.seconds for f in frames))
-        point = SpeedErrorPoint.measure(timed, reference)
-        ratios = (equal_time_ratio(point, curve, metric) for metric in ("flip", "psnr"))
-        candidates.append(FrameCandidate(spp, frames[0], point, *ratios))
+        measured = point(("frame", spp))
+        ratios = (equal_time_ratio(measured, curve, metric) for metric in ("flip", "psnr"))
+        candidates.append(FrameCandidate(spp, first[("frame", spp)], measured, *ratios))
     return candidates
 
 

@@ -7,7 +7,8 @@ the K (`params.wavelets`) wavelets of the lighting, the network's indirect light
 light at `params.spp` under the map itself (full resolution, importance-sampled), denoised if
 `params.denoise`; `params.checkerboard` runs the network at half the pixels. Each defaults to the
 artifact's frame (`evaluation_spp`, the count its job timed and kept unless its config fixed one;
-`denoise_direct`; `checkerboard`): the frame its report times against path tracing. The service adds the frame time as `Server-Timing`.
+`denoise_direct`; `checkerboard`): the frame its report times against path tracing. The service adds
+the frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
 viewer, kd, ks, roughness) under a lighting: what a rasteriser needs to add the network's light itself.
