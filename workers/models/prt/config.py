@@ -110,7 +110,7 @@ class PrtConfig(TrainedKindConfig):
     # Twice the pairs per step at 16000 steps (prt20; glossy_row seed 1, far views against bench_prt's
     # 4096-spp truth, indirect (full), /tmp harness; the two jobs side by side, 421-427 s of training
     # each): 256 pixels 26.95 (30.37), 96 + 96 wavelets 26.55 (30.30), against 26.64 (30.35) at 128 x 96
-    # (264 s alone): +0.3 dB indirect for the pixels, about a run's spread, for a step that costs ~2x.
+    # (264 s alone): +0.3 dB indirect for the pixels, about a run's spread, for twice the pairs a step.
     pixels_per_step: int = Field(128, ge=4, description="paper 2048, an equal share from each pixel map")
     # env_lit_objects, default preset, 2000 steps, held-out indirect PSNR (train seeds 0 / 1; same rows):
     # 1 lighting (the paper) 20.15 / 18.58 dB, 4 lightings 20.42 / 21.32 (no indirect: 12.7); 8 lightings
