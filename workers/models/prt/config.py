@@ -448,13 +448,12 @@ class PrtConfig(TrainedKindConfig):
     # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs, so since prt20 the job times its
     # own (None, `frame_spp`): the weights stay the seed's alone, the frame's count is the machine's choice.
     # prt20 (`PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`, seed 0, quiet AMD EPYC, prt16's
-    # kind of machine): the jobs chose 16 spp on env_lit_objects (their own ratio against the report's
-    # 1 / 4 / 16 / 64-spp curve, FLIP / PSNR, 0.87 / 0.76) and 8 on glossy_row (0.87 / 0.48). On the
-    # bench's finer curve (CPU s, medians of 3) those frames score 0.73 / 0.63 and 0.85 / 0.38, where 32
-    # spp fixed would have scored 0.67 / 0.54 and 1.26 / 0.38: glossy_row's frame is now under 1 by FLIP
-    # too, and env_lit_objects' within 10% of its best (32 spp; the job's wall-clock times, one path-traced
-    # render per count, put it at 1.15: frame times move by ~20% between measurements, so the two trade
-    # places, both under 1).
+    # kind of machine): the jobs chose 16 spp on env_lit_objects and 8 on glossy_row. Their own ratios
+    # against the report's 1 / 4 / 16 / 64-spp curve (CPU s, medians of 3; FLIP / PSNR) are 0.89 / 0.79
+    # (32 spp: 1.01 / 0.79) and 0.85 / 0.47 (16 spp: 0.90 / 0.33). The bench's finer curve gives those
+    # frames 0.73 / 0.63 and 0.85 / 0.38, where 32 spp fixed scored 0.67 / 0.54 and 1.26 / 0.38: glossy_row's
+    # frame is now under 1 by FLIP too, and env_lit_objects' within 10% of the bench's best (32 spp, whose
+    # path-traced peer the bench timed high: frame times move by 10-20% between measurements).
     evaluation_spp: int | None = Field(
         None,
         ge=1,
