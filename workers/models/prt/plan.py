@@ -90,22 +90,7 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
             reason=f"{config.rows_per_view} pixels x {config.cameras.train_views} views at "
             f"{config.row_spp} spp, binned by escape texel: one trace serves every lighting; {targets}",
         ),
-        PlanItem(
-            name="frame",
-            choice=(
-                f"direct light at {config.evaluation_spp} spp"
-                if config.evaluation_spp is not None
-                else f"direct light at {', '.join(map(str, config.frame_spp_choices))} spp, timed"
-            ),
-            reason=(
-                "set by the config"
-                if config.evaluation_spp is not None
-                else "the job keeps the count whose frame of the report's view beats path tracing by most "
-                "at equal time, by FLIP and by PSNR (`frame_spp`)"
-            )
-            + f"; {'denoised, ' if config.denoise_direct else ''}the network at "
-            + ("half the pixels (checkerboard)" if config.checkerboard else "every pixel"),
-        ),
+        frame_item(config),
     ]
     test_pixels = (config.cameras.near_views + config.cameras.far_views) * config.image_size**2
     lightings = len(config.lighting.test_hdris) + config.lighting.test_procedural
@@ -119,6 +104,25 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
     modelled = sum(c.modelled for c in choices)
     summary = f"indirect light of {modelled} of {len(choices)} objects under any lighting; {rows} rows"
     return Plan(items=items, estimated_seconds=seconds, summary=summary)
+
+
+def frame_item(config: PrtConfig) -> PlanItem:
+    """The artifact's frame: the config's direct-light spp, or the counts the job will time (`frame_spp`)."""
+    shading = "half the pixels (checkerboard)" if config.checkerboard else "every pixel"
+    how = f"{'denoised, ' if config.denoise_direct else ''}the network at {shading}"
+    if config.evaluation_spp is not None:
+        return PlanItem(
+            name="frame",
+            choice=f"direct light at {config.evaluation_spp} spp",
+            reason=f"set by the config; {how}",
+        )
+    counts = ", ".join(map(str, config.frame_spp_choices))
+    return PlanItem(
+        name="frame",
+        choice=f"direct light at {counts} spp, timed",
+        reason="the job keeps the count whose frame of the report's view beats path tracing by most at equal "
+        f"time, by FLIP and by PSNR (`frame_spp`); {how}",
+    )
 
 
 def _pair_cost(config: PrtConfig) -> float:
