@@ -28,7 +28,6 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ from workers.models.prt.transport import trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.nn.metrics import flip, psnr
 from workers.render.render import render
-from workers.runtime.equal_time import equal_time_ratio, seconds_at_error
+from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.report import Report
 from workers.runtime.threads import torch_threads
 from workers.scene.builtin import get_builtin
@@ -337,12 +336,12 @@ def run() -> list[BenchSection]:
             config = get_kind_config(PRESET)
             for name in held_out_lightings(config.lighting, SEED):
                 lightings.add(scene=scene, lighting=name, **{k: m[f"{name}.{k}"] for k in FIGURES[:5]})
-            ratio = partial(equal_time_ratio, report.model, report.path_tracing)
+            ratio = report.equal_time_ratio
             timing.add(
                 scene=scene, model=report.model.label, model_s=report.model.seconds_per_frame,
                 model_flip=report.model.error.flip, equal_time_pt=report.path_tracing_equal_time.label,
-                equal_time_pt_flip=report.path_tracing_equal_time.error.flip, equal_time_ratio=ratio("flip"),
-                model_psnr=report.model.error.psnr, equal_time_ratio_psnr=ratio("psnr"),
+                equal_time_pt_flip=report.path_tracing_equal_time.error.flip, equal_time_ratio=ratio["flip"],
+                model_psnr=report.model.error.psnr, equal_time_ratio_psnr=ratio["psnr"],
                 training_s=report.training_seconds, parameter_bytes=report.parameter_bytes,
             )  # fmt: skip
             frame_curve(folder / "out", scene, curve)

@@ -183,6 +183,7 @@ def test_a_trained_job_shows_its_speed_error_report_and_comparison(page, trained
         expect(plot.locator(".equal[data-point]")).to_have_count(1)
         expect(plot.locator(".model[data-point]")).to_have_count(1)
     expect(page.locator("#report-table .model-row")).to_contain_text("lsnif")
+    expect(page.locator("#equal-time-ratio")).to_contain_text("x path tracing's time by FLIP")
     screenshot(page, "report")
 
     page.click("[data-tab=compare]")

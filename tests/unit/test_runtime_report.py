@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import torch
 
+from workers.runtime.equal_time import equal_time_ratio
 from workers.runtime.report import (
     PLOT_FILE,
     REPORT_FILE,
@@ -51,6 +52,14 @@ def test_report_measures_error_against_the_reference(report):
     assert report.model.error.flip < report.path_tracing_equal_time.error.flip
     assert report.path_tracing_equal_time == report.path_tracing[0]  # 0.01 s is nearest 0.02 s
     assert not report.worse_than_one_spp and report.warnings() == []
+
+
+def test_the_report_gives_the_equal_time_ratio_on_its_own_curve(report):
+    """The model's frame (0.02 s, noise 0.05) is cleaner than the whole curve (16 spp: noise 0.25, 0.16 s),
+    so its ratio is the bound against the longest render."""
+    for metric in ("flip", "psnr"):
+        assert report.equal_time_ratio[metric] == equal_time_ratio(report.model, report.path_tracing, metric)
+        assert report.equal_time_ratio[metric] == pytest.approx(0.02 / 0.16)
 
 
 def test_json_round_trip_and_plot(report, tmp_path):

@@ -135,6 +135,7 @@ def _run_method(method: Method, ctx: JobContext) -> RunOutput:
     metrics = {
         "flip": report.model.error.flip,
         "flip_path_tracing_equal_time": report.path_tracing_equal_time.error.flip,
+        **{f"equal_time_ratio_{metric}": ratio for metric, ratio in report.equal_time_ratio.items()},
         "parameter_bytes": float(report.parameter_bytes),
         "worse_than_one_spp": float(report.worse_than_one_spp),
         **finished.metrics,

@@ -2,7 +2,9 @@
 
 A neural representation is only worth having if it beats the path tracer it replaces at equal time, so the
 report puts the model's (time per frame, error) point on the same axes as path tracing at the spp of
-`PATH_TRACING_SPP`, and records the path-traced image that took as long as the model's frame. Every kind
+`PATH_TRACING_SPP`, records the path-traced image that took as long as the model's frame and gives the
+equal-time ratio, the frame's time over path tracing's at the frame's own error by FLIP and by PSNR
+(`equal_time`: below 1, the model is faster than the path tracer it replaces). Every kind
 fills the same fields, so reports of different kinds can be compared and plotted together. A model whose
 frame is worse than one sample per pixel of path tracing is flagged (`worse_than_one_spp`): training ran
 but produced nothing worth shipping, and the job's log and the CLI say so.
@@ -24,6 +26,7 @@ from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 from pydantic import BaseModel, ConfigDict
 
 from workers.nn.metrics import flip, psnr, relative_mse
+from workers.runtime.equal_time import METRICS, equal_time_ratio
 from workers.runtime.training import TrainResult
 
 PATH_TRACING_SPP = (1, 4, 16, 64, 256)  # the curve's sample counts (those below the reference's spp)
@@ -97,6 +100,8 @@ class Report(BaseModel):
     path_tracing_equal_time: SpeedErrorPoint
     path_tracing: list[SpeedErrorPoint]
     worse_than_one_spp: bool = False  # the model's FLIP exceeds 1-spp path tracing's
+    # "flip", "psnr": the frame's time over path tracing's at its error (`equal_time.equal_time_ratio`)
+    equal_time_ratio: dict[str, float] = {}
     method_metrics: dict[str, float] = {}
 
     def warnings(self) -> list[str]:
@@ -237,5 +242,6 @@ def build_report(
         path_tracing_equal_time=curve[_nearest_index(path_tracing, model_frame.seconds)],
         path_tracing=curve,
         worse_than_one_spp=not model.error.flip <= curve[0].error.flip,  # NaN counts as worse
+        equal_time_ratio={metric: equal_time_ratio(model, curve, metric) for metric in METRICS},
         method_metrics=method_metrics or {},
     )

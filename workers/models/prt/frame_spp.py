@@ -26,7 +26,7 @@ from workers.models.prt.evaluate import ReportView
 from workers.models.prt.frame import Frame, render_frame
 from workers.models.prt.network import PrtNetwork
 from workers.render.render import RenderResult, render
-from workers.runtime.equal_time import equal_time_ratio
+from workers.runtime.equal_time import METRICS, equal_time_ratio
 from workers.runtime.report import SpeedErrorPoint, TimedImage
 
 TIMED_RENDERS = 3  # per count and per path-traced point, in rounds: their median CPU time
@@ -98,7 +98,7 @@ def frame_candidates(
     candidates = []
     for spp in config.frame_spp_choices:
         measured = point(("frame", spp))
-        ratios = (equal_time_ratio(measured, curve, metric) for metric in ("flip", "psnr"))
+        ratios = (equal_time_ratio(measured, curve, metric) for metric in METRICS)
         candidates.append(FrameCandidate(spp, first[("frame", spp)], measured, *ratios))
     return candidates
 

@@ -190,6 +190,13 @@ export function jobView(jobId, requestedTab) {
       h("td", { class: "num" }, formatValue(k, v))))));
   }
 
+  function equalTime(ratio) {
+    if (!ratio || ratio.flip === undefined) return null; // reports from before the ratio was recorded
+    return h("p", { id: "equal-time-ratio" },
+      `At its own error the model's frame takes ${formatNumber(ratio.flip, 2)}x path tracing's time by FLIP and `
+      + `${formatNumber(ratio.psnr, 2)}x by PSNR (below 1: faster than the path tracer it replaces).`);
+  }
+
   async function report() {
     const found = await manifest();
     if (!found.files.some((f) => f.name === REPORT)) return h("p", {}, "This artifact has no report.");
@@ -201,7 +208,7 @@ export function jobView(jobId, requestedTab) {
     const points = [...data.path_tracing.map((p) => ["path tracing", p]), ["equal time", data.path_tracing_equal_time], [data.kind, data.model]];
     return [
       data.worse_than_one_spp ? h("div", { class: "problem" }, "The model's frame is worse than 1-spp path tracing of the same view: it is not usable.") : null,
-      h("section", { class: "card" }, h("h3", {}, "Speed against error"),
+      h("section", { class: "card" }, h("h3", {}, "Speed against error"), equalTime(data.equal_time_ratio),
         h("div", { class: "plots", id: "speed-error" }, speedErrorPlot(data, "flip", "FLIP"), speedErrorPlot(data, "relative_mse", "relative MSE"))),
       h("section", { class: "card" }, h("h3", {}, "Frames against the reference"),
         h("table", { class: "table", id: "report-table" },
