@@ -91,6 +91,8 @@ def test_the_job_times_its_frame_and_keeps_the_count_that_beats_path_tracing_mos
     chosen = min(timed, key=lambda spp: (timed[spp], spp))
     assert served.config.evaluation_spp == figures["frame_spp"] == chosen
     assert report.model.label.startswith(f"direct {chosen} spp")
+    for metric in ("flip", "psnr"):  # the report times the frame and path tracing as the choice did
+        assert report.equal_time_ratio[metric] == pytest.approx(figures[f"frame_spp.{chosen}.ratio_{metric}"])
 
 
 def test_a_checkerboard_render_is_close_to_the_every_pixel_one(served):

@@ -8,6 +8,7 @@ uses instead of tracing it twice.
 from __future__ import annotations
 
 import os
+import statistics
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +29,8 @@ class PathTracedView:
     settings: RenderSettings
     reference_spp: int
     tracer: PathTracer | None = field(default=None, repr=False)  # built on first use when not given
-    _frames: dict[int, TimedImage] = field(default_factory=dict, repr=False)
+    _images: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
+    _seconds: dict[int, list[float]] = field(default_factory=dict, repr=False)  # every render's, per spp
     _reference: np.ndarray | None = field(default=None, repr=False)
     _warm: bool = field(default=False, repr=False)
 
@@ -41,15 +43,18 @@ class PathTracedView:
         """The view's settings at `spp`."""
         return self.settings.model_copy(update={"spp": spp})
 
-    def frame(self, spp: int) -> TimedImage:
-        """The view path-traced at `spp` with the view's seed, timed."""
-        if spp not in self._frames:
+    def frame(self, spp: int, renders: int = 1) -> TimedImage:
+        """The view path-traced at `spp` with the view's seed, timed: the median of at least `renders`
+        renders (the image is the same each time), as many as any call asked for."""
+        seconds = self._seconds.setdefault(spp, [])
+        while len(seconds) < renders:
             if not self._warm:  # kernels load and threads start on a first render: not the frame's time
                 render(self._path_tracer(), self.at(1))
                 self._warm = True
             result = render(self._path_tracer(), self.at(spp))
-            self._frames[spp] = TimedImage(f"{spp} spp", result.image, result.seconds)
-        return self._frames[spp]
+            self._images.setdefault(spp, result.image)
+            seconds.append(result.seconds)
+        return TimedImage(f"{spp} spp", self._images[spp], statistics.median(seconds))
 
     def curve_spp(self) -> list[int]:
         """The curve's sample counts: `PATH_TRACING_SPP` below the reference's spp."""

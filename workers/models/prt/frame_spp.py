@@ -14,10 +14,7 @@ choice is timed on the machine that trains; the job logs every count's figures a
 from __future__ import annotations
 
 import statistics
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 
@@ -25,18 +22,17 @@ from workers.models.prt.config import PrtConfig
 from workers.models.prt.evaluate import ReportView
 from workers.models.prt.frame import Frame, render_frame
 from workers.models.prt.network import PrtNetwork
-from workers.render.render import RenderResult, render
 from workers.runtime.equal_time import METRICS, equal_time_ratio
 from workers.runtime.report import SpeedErrorPoint, TimedImage
 
-TIMED_RENDERS = 3  # per count and per path-traced point, in rounds: their median CPU time
+TIMED_RENDERS = 3  # per count, and per point of path tracing's curve: their median time
 
 
 @dataclass(frozen=True)
 class FrameCandidate:
     spp: int
-    frame: Frame  # as rendered first (its `seconds` wall time, as the report measures path tracing)
-    point: SpeedErrorPoint  # its CPU time, median of `TIMED_RENDERS`, and error against the reference
+    frame: Frame  # as first rendered
+    point: SpeedErrorPoint  # its median time and its error against the report's reference
     ratio_flip: float
     ratio_psnr: float
 
@@ -48,8 +44,8 @@ class FrameCandidate:
     def __str__(self) -> str:
         error = self.point.error
         return (
-            f"frame at {self.spp} spp: {self.point.seconds_per_frame * 1e3:.0f} CPU ms, "
-            f"FLIP {error.flip:.4f}, {error.psnr:.2f} dB; equal-time ratio by FLIP {self.ratio_flip:.2f}, "
+            f"frame at {self.spp} spp: {self.point.seconds_per_frame * 1e3:.0f} ms, FLIP {error.flip:.4f}, "
+            f"{error.psnr:.2f} dB; equal-time ratio by FLIP {self.ratio_flip:.2f}, "
             f"by PSNR {self.ratio_psnr:.2f}"
         )
 
@@ -63,43 +59,27 @@ def frame_candidates(
     seed: int,
 ) -> list[FrameCandidate]:
     """The report view's frame at each of `frame_spp_choices` (the config's denoising and checkerboard)
-    against path tracing of the same view at the report curve's counts (`report.view`; its reference).
-    Both are timed in CPU seconds of this process, medians of `TIMED_RENDERS` taken in rounds over every
-    render, so that other processes' load and drift over the measurement move them alike."""
+    against the report's path-tracing curve of the same view (`report.view`). Both are timed as the median
+    of `TIMED_RENDERS` renders, and the curve keeps its medians, so that the report gives the chosen frame
+    the ratio it was chosen by."""
     reference = report.view.reference()
+    traced = [report.view.frame(spp, TIMED_RENDERS) for spp in report.view.curve_spp()]
+    curve = [SpeedErrorPoint.measure(frame, reference) for frame in traced]
 
-    def frame(spp: int) -> Frame:
+    def rendered(spp: int) -> Frame:
         return render_frame(
             model, box, objects, report.tracer, report.cube, report.camera, k=config.wavelets,
             weighting=config.selection, spp=spp, seed=seed, denoise=config.denoise_direct,
             checkerboard=config.checkerboard,
         )  # fmt: skip
 
-    def traced(spp: int) -> RenderResult:
-        return render(report.tracer, report.view.at(spp))
-
-    renders: dict[tuple[str, int], Callable[[], Frame | RenderResult]]
-    renders = {("frame", spp): partial(frame, spp) for spp in config.frame_spp_choices}
-    renders |= {("traced", spp): partial(traced, spp) for spp in report.view.curve_spp()}
-    times: dict[tuple[str, int], list[float]] = {key: [] for key in renders}
-    first = {}
-    for _ in range(TIMED_RENDERS):
-        for key, make in renders.items():
-            start = time.process_time()
-            made = make()
-            times[key].append(time.process_time() - start)
-            first.setdefault(key, made)
-
-    def point(key: tuple[str, int]) -> SpeedErrorPoint:
-        timed = TimedImage(f"{key[1]} spp", first[key].image, statistics.median(times[key]))
-        return SpeedErrorPoint.measure(timed, reference)
-
-    curve = [point(key) for key in renders if key[0] == "traced"]
     candidates = []
     for spp in config.frame_spp_choices:
-        measured = point(("frame", spp))
-        ratios = (equal_time_ratio(measured, curve, metric) for metric in METRICS)
-        candidates.append(FrameCandidate(spp, first[("frame", spp)], measured, *ratios))
+        frames = [rendered(spp) for _ in range(TIMED_RENDERS)]
+        timed = TimedImage(f"{spp} spp", frames[0].image, statistics.median(f.seconds for f in frames))
+        point = SpeedErrorPoint.measure(timed, reference)
+        ratios = (equal_time_ratio(point, curve, metric) for metric in METRICS)
+        candidates.append(FrameCandidate(spp, frames[0], point, *ratios))
     return candidates
 
 

@@ -98,8 +98,7 @@ class PrtMethod:
         report: ReportView,
         method_metrics: dict[str, float],
     ) -> tuple[Frame, float, PrtConfig]:
-        """The frame `frame_spp` chooses, its wall time (the report's clock), and the config with its spp
-        (the artifact's)."""
+        """The frame `frame_spp` chooses, its median time, and the config with its spp (the artifact's)."""
         config: PrtConfig = ctx.config
         candidates = frame_candidates(model, box, objects, report, config, ctx.seed)
         for c in candidates:
@@ -109,4 +108,4 @@ class PrtMethod:
         chosen = best(candidates)
         ctx.log(f"the artifact's frame: direct light at {chosen.spp} spp (`frame_spp`)")
         config = config.model_copy(update={"evaluation_spp": chosen.spp})
-        return chosen.frame, chosen.frame.seconds, config
+        return chosen.frame, chosen.point.seconds_per_frame, config
