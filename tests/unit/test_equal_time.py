@@ -49,3 +49,10 @@ def test_worse_than_the_curve_the_ratio_is_against_its_cheapest_render():
 def test_an_unknown_metric_is_refused_by_name():
     with pytest.raises(ValueError, match="metric: 'flip' or 'psnr', got 'ssim'"):
         equal_time_ratio(CURVE[0], CURVE, "ssim")
+
+
+def test_a_perfect_frame_is_bounded_and_a_broken_one_never_beats_path_tracing():
+    perfect = point(0.32, 0.0, math.inf)
+    assert equal_time_ratio(perfect, CURVE, "flip") == equal_time_ratio(perfect, CURVE, "psnr") == 0.5
+    broken = point(0.01, math.nan, math.nan)
+    assert equal_time_ratio(broken, CURVE, "flip") == equal_time_ratio(broken, CURVE, "psnr") == math.inf

@@ -24,7 +24,8 @@ def seconds_at_error(
     below all of them (the peer never gets there)."""
     log_seconds = np.log(np.asarray(seconds, np.float64))
     e = np.log(np.asarray(errors, np.float64)) if log_error else np.asarray(errors, np.float64)
-    t = math.log(target) if log_error else float(target)
+    with np.errstate(divide="ignore"):  # an error of 0 is below every curve: -inf
+        t = float(np.log(target)) if log_error else float(target)
     if t < e.min():
         return math.inf
     if t >= e.max():
@@ -36,8 +37,11 @@ def seconds_at_error(
 def equal_time_ratio(frame: SpeedErrorPoint, curve: Sequence[SpeedErrorPoint], metric: str) -> float:
     """`frame`'s seconds over the path tracer's at the frame's error by `metric`, "flip" (interpolated
     log-log) or "psnr" (log seconds against dB). Where the curve never reaches the frame's error, the ratio
-    to its longest render: an upper bound, since path tracing would need longer still."""
+    to its longest render: an upper bound, since path tracing would need longer still. A frame whose error
+    is NaN (a broken model) is infinitely slow."""
     seconds = [p.seconds_per_frame for p in curve]
+    if math.isnan(frame.error.flip if metric == "flip" else frame.error.psnr):
+        return math.inf
     if metric == "flip":
         traced = seconds_at_error(seconds, [p.error.flip for p in curve], frame.error.flip)
     elif metric == "psnr":

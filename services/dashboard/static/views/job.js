@@ -191,7 +191,8 @@ export function jobView(jobId, requestedTab) {
   }
 
   function equalTime(ratio) {
-    if (!ratio || ratio.flip === undefined) return null; // reports from before the ratio was recorded
+    // none in reports from before the ratio was recorded; "Infinity" for a broken model (flagged above)
+    if (!ratio || typeof ratio.flip !== "number" || typeof ratio.psnr !== "number") return null;
     return h("p", { id: "equal-time-ratio" },
       `At its own error the model's frame takes ${formatNumber(ratio.flip, 2)}x path tracing's time by FLIP and `
       + `${formatNumber(ratio.psnr, 2)}x by PSNR (below 1: faster than the path tracer it replaces).`);
