@@ -447,13 +447,14 @@ class PrtConfig(TrainedKindConfig):
     # the lowest geometric mean by FLIP (1.25; 8 raw 1.42), and its frames are the cleanest of these (32.0
     # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs, so since prt20 the job times its
     # own (None, `frame_spp`): the weights stay the seed's alone, the frame's count is the machine's choice.
-    # prt20 (`PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`, seed 0, quiet AMD EPYC, prt16's
-    # kind of machine): the jobs chose 16 spp on env_lit_objects and 8 on glossy_row. Their own ratios
-    # against the report's 1 / 4 / 16 / 64-spp curve (CPU s, medians of 3; FLIP / PSNR) are 0.89 / 0.79
-    # (32 spp: 1.01 / 0.79) and 0.85 / 0.47 (16 spp: 0.90 / 0.33). The bench's finer curve gives those
-    # frames 0.73 / 0.63 and 0.85 / 0.38, where 32 spp fixed scored 0.67 / 0.54 and 1.26 / 0.38: glossy_row's
-    # frame is now under 1 by FLIP too, and env_lit_objects' within 10% of the bench's best (32 spp, whose
-    # path-traced peer the bench timed high: frame times move by 10-20% between measurements).
+    # prt20 (seed 0, quiet AMD EPYC, prt16's kind of machine; default jobs, the job's log or bench_prt's
+    # timing table, `PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`): env_lit_objects chose 16
+    # spp in each of three jobs, its equal-time ratio against the report's 1 / 4 / 16 / 64-spp curve 0.87-0.99
+    # by FLIP and 0.76-0.88 by PSNR (32 spp 1.01-1.15 / 0.79-0.85); glossy_row chose 8 in three and 16 in a
+    # fourth (through `nbake serve`), 0.79-0.87 / 0.27-0.48 (32 spp 1.16-1.32 / 0.31-0.42). The ratios move
+    # by ~10% between jobs with the machine's timings (medians of 3 renders since the last of them). On
+    # bench_prt's finer curve (CPU s, medians of 3) the chosen frames score 0.73 / 0.63 and 0.85 / 0.38,
+    # where 32 spp fixed scored 0.67 / 0.54 and 1.26 / 0.38.
     evaluation_spp: int | None = Field(
         None,
         ge=1,
