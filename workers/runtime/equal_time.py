@@ -39,13 +39,14 @@ def equal_time_ratio(frame: SpeedErrorPoint, curve: Sequence[SpeedErrorPoint], m
     log-log) or "psnr" (log seconds against dB). Where the curve never reaches the frame's error, the ratio
     to its longest render: an upper bound, since path tracing would need longer still. A frame whose error
     is NaN (a broken model) is infinitely slow."""
-    seconds = [p.seconds_per_frame for p in curve]
-    if math.isnan(frame.error.flip if metric == "flip" else frame.error.psnr):
-        return math.inf
-    if metric == "flip":
-        traced = seconds_at_error(seconds, [p.error.flip for p in curve], frame.error.flip)
-    elif metric == "psnr":
-        traced = seconds_at_error(seconds, [-p.error.psnr for p in curve], -frame.error.psnr, log_error=False)
-    else:
+    if metric not in METRICS:
         raise ValueError(f"metric: 'flip' or 'psnr', got {metric!r}")
+
+    def error(point: SpeedErrorPoint) -> float:  # FLIP, or negated dB (a log already)
+        return point.error.flip if metric == "flip" else -point.error.psnr
+
+    if math.isnan(error(frame)):
+        return math.inf
+    seconds = [p.seconds_per_frame for p in curve]
+    traced = seconds_at_error(seconds, [error(p) for p in curve], error(frame), log_error=metric == "flip")
     return frame.seconds_per_frame / (traced if math.isfinite(traced) else max(seconds))
