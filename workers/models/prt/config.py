@@ -498,7 +498,10 @@ class PrtConfig(TrainedKindConfig):
 
     @property
     def frame_spp_choices(self) -> tuple[int, ...]:
-        """The direct-light counts a job times for its frame (`frame_spp`): 4 to 64, under the reference's."""
+        """The direct-light counts a job times for its frame (`frame_spp`): the config's, or 4 to 64 under
+        the reference's."""
+        if self.evaluation_spp is not None:
+            return (self.evaluation_spp,)
         return tuple(spp for spp in FRAME_SPP if spp < self.reference_spp)
 
     @property

@@ -1,7 +1,7 @@
-"""The artifact's frame, chosen by the job when `PrtConfig.evaluation_spp` is None: of the counts in
-`PrtConfig.frame_spp_choices`, the direct light's spp whose frame of the report's view beats path tracing by
-the widest margin at equal time by both of the report's measures (the smallest of the larger of its two
-equal-time ratios, by FLIP and by PSNR, `workers.runtime.equal_time`).
+"""The artifact's frame, chosen by the job: of the counts in `PrtConfig.frame_spp_choices` (4 to 64 when
+`evaluation_spp` is None, else that one, only timed), the direct light's spp whose frame of the report's
+view beats path tracing by the widest margin at equal time by both of the report's measures (the smallest
+of the larger of its two equal-time ratios, by FLIP and by PSNR, `workers.runtime.equal_time`).
 
 Why a job chooses: the network's indirect light costs the same at every count, while the direct light's
 noise falls with it, so the best count is where that noise meets the network's own error at the price of a

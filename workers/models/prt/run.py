@@ -12,7 +12,7 @@ import torch
 from workers.models.prt import artifact
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.evaluate import ReportView, held_out_cases, report_view, summarise
-from workers.models.prt.frame import Frame, render_frame
+from workers.models.prt.frame import Frame
 from workers.models.prt.frame_spp import best, frame_candidates
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.plan import parameter_counts
@@ -68,15 +68,7 @@ class PrtMethod:
         report = report_view(ctx.scene, config, ctx.seed)
         camera = report.camera
         ctx.log(f"report view: {camera.width}x{camera.height}, far view under {report.lighting}")
-        if config.evaluation_spp is None:
-            frame, seconds, config = self._chosen_frame(ctx, model, box, objects, report, method_metrics)
-        else:
-            frame = render_frame(
-                model, box, objects, report.tracer, report.cube, camera, k=config.wavelets,
-                weighting=config.selection, spp=config.evaluation_spp, seed=ctx.seed,
-                denoise=config.denoise_direct, checkerboard=config.checkerboard,
-            )  # fmt: skip
-            seconds = frame.seconds
+        frame, seconds, config = self._chosen_frame(ctx, model, box, objects, report, method_metrics)
         files = artifact.save(
             ctx.output_dir, config, model, box, source.objects, ctx.scene.spec, ctx.scene.local_folder()
         )
@@ -98,7 +90,8 @@ class PrtMethod:
         report: ReportView,
         method_metrics: dict[str, float],
     ) -> tuple[Frame, float, PrtConfig]:
-        """The frame `frame_spp` chooses, its median time, and the config with its spp (the artifact's)."""
+        """The frame `frame_spp` chooses among the config's counts (one when the config fixes it), its
+        median time, and the config with its spp (the artifact's)."""
         config: PrtConfig = ctx.config
         candidates = frame_candidates(model, box, objects, report, config, ctx.seed)
         for c in candidates:
@@ -106,6 +99,7 @@ class PrtMethod:
             method_metrics[f"frame_spp.{c.spp}.ratio_flip"] = c.ratio_flip
             method_metrics[f"frame_spp.{c.spp}.ratio_psnr"] = c.ratio_psnr
         chosen = best(candidates)
-        ctx.log(f"the artifact's frame: direct light at {chosen.spp} spp (`frame_spp`)")
+        how = "the config's" if config.evaluation_spp is not None else "timed and kept, `frame_spp`"
+        ctx.log(f"the artifact's frame: direct light at {chosen.spp} spp ({how})")
         config = config.model_copy(update={"evaluation_spp": chosen.spp})
         return chosen.frame, chosen.point.seconds_per_frame, config
