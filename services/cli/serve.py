@@ -5,12 +5,15 @@ a SQLite job database and a local artifact directory), or parts of a scale-out v
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -18,10 +21,12 @@ import ray
 import ray._private.ray_constants as ray_constants
 import typer
 import uvicorn
+from uvicorn.config import STARTUP_FAILURE
 
 from services.api.app import create_app
 from services.api.auth import configured_tokens, generated_admin_token
 from services.api.grpc.server import with_grpc
+from services.api.ports import http_socket, reserved_port
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
 from services.cli.lifetime import die_with_parent
@@ -86,6 +91,9 @@ def serve_command(
     if not tokens:
         _, path = generated_admin_token(data_dir)
         typer.echo(f"admin token: {path}", err=True)
+    http = taken("--port", http_socket, host, port)
+    grpc_reservation = taken("--grpc-port", reserved_port, host, grpc_port)
+    port, grpc_port = http.getsockname()[1], grpc_reservation.getsockname()[1]
     typer.echo(f"dashboard: http://{f'[{host}]' if ':' in host else host}:{port}/ui", err=True)
     ray_connection, ray_temp = start_ray(data_dir)
     inference = None
@@ -94,13 +102,13 @@ def serve_command(
         command += ["--port", str(inference_port), "--grpc-port", str(inference_grpc_port)]
         inference = subprocess.Popen([*command, "--data-dir", str(data_dir), "--log-level", log_level])
     try:
-        uvicorn.run(
-            with_grpc(create_app(settings, ray_connection), host, grpc_port),
-            host=host,
-            port=port,
-            log_level=log_level,
-            timeout_graceful_shutdown=5,
-        )
+        app = with_grpc(create_app(settings, ray_connection), host, grpc_port, grpc_reservation)
+        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, timeout_graceful_shutdown=5)
+        server = uvicorn.Server(config)
+        with contextlib.suppress(KeyboardInterrupt):  # uvicorn has shut down gracefully by then
+            server.run(sockets=[http])
+        if not server.started:
+            sys.exit(STARTUP_FAILURE)
     finally:
         if inference is not None:
             inference.terminate()
@@ -108,6 +116,14 @@ def serve_command(
         ray.shutdown()
         if ray_temp is not None:
             shutil.rmtree(ray_temp, ignore_errors=True)
+
+
+def taken(option: str, bind: Callable[[str, int], socket.socket], host: str, port: int) -> socket.socket:
+    """The port, bound before Ray starts (`services.api.ports`), or the error of a port in use."""
+    try:
+        return bind(host, port)
+    except OSError as error:
+        fail(option, f"cannot listen on {host}:{port}: {error.strerror}")
 
 
 def start_ray(data_dir: Path) -> tuple[RayConnection, Path | None]:

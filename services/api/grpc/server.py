@@ -7,6 +7,7 @@ are capped in size and calls share a bounded worker pool (beyond it, RESOURCE_EX
 
 from __future__ import annotations
 
+import socket
 from collections.abc import AsyncIterator, Iterator
 from concurrent import futures
 from contextlib import asynccontextmanager, contextmanager
@@ -58,8 +59,12 @@ class GrpcServer:
         self.server.stop(STOP_GRACE_S).wait()
 
 
-def start_grpc_server(services: Services, host: str, port: int) -> GrpcServer:
-    """Serve the gRPC API on `host:port` (0: any free port; `GrpcServer.port` says which)."""
+def start_grpc_server(
+    services: Services, host: str, port: int, reservation: socket.socket | None = None
+) -> GrpcServer:
+    """Serve the gRPC API on `host:port` (0: any free port; `GrpcServer.port` says which). A `reservation`
+    (`services.api.ports.reserved_port`) held the port until now: it closes once the server has bound it.
+    """
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-grpc"),
         interceptors=[ErrorMapping(), TokenAuth(services.db)],
@@ -80,7 +85,11 @@ def start_grpc_server(services: Services, host: str, port: int) -> GrpcServer:
         server,
     )
     address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    bound = server.add_insecure_port(address)
+    try:
+        bound = server.add_insecure_port(address)
+    finally:
+        if reservation is not None:
+            reservation.close()
     server.start()
     for name in ("", *SERVICE_NAMES):
         checker.set(name, health_pb2.HealthCheckResponse.SERVING)
@@ -88,15 +97,17 @@ def start_grpc_server(services: Services, host: str, port: int) -> GrpcServer:
 
 
 @contextmanager
-def grpc_serving(services: Services, host: str, port: int) -> Iterator[GrpcServer]:
-    running = start_grpc_server(services, host, port)
+def grpc_serving(
+    services: Services, host: str, port: int, reservation: socket.socket | None = None
+) -> Iterator[GrpcServer]:
+    running = start_grpc_server(services, host, port, reservation)
     try:
         yield running
     finally:
         running.stop()
 
 
-def with_grpc(app: FastAPI, host: str, port: int) -> FastAPI:
+def with_grpc(app: FastAPI, host: str, port: int, reservation: socket.socket | None = None) -> FastAPI:
     """`app`, whose lifespan also runs the gRPC server: it starts after the services (migrations, tokens,
     scheduler) are up and stops before they shut down, so it never answers from a half-built service.
     """
@@ -105,7 +116,7 @@ def with_grpc(app: FastAPI, host: str, port: int) -> FastAPI:
     @asynccontextmanager
     async def lifespan(application: FastAPI) -> AsyncIterator:
         async with inner(application) as state:
-            with grpc_serving(application.state.services, host, port):
+            with grpc_serving(application.state.services, host, port, reservation):
                 yield state
 
     app.router.lifespan_context = lifespan
