@@ -13,7 +13,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -30,6 +29,7 @@ from services.api.ports import http_socket, reserved_port
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
 from services.cli.lifetime import die_with_parent
+from services.cli.listening import taken
 from services.jobs.ray_connection import RayConnection
 
 RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
@@ -93,14 +93,18 @@ def serve_command(
         typer.echo(f"admin token: {path}", err=True)
     http = taken("--port", http_socket, host, port)
     grpc_reservation = taken("--grpc-port", reserved_port, host, grpc_port)
+    inference_sockets = None
+    if inference_port is not None:
+        inference_sockets = (
+            taken("--inference-port", http_socket, host, inference_port),
+            taken("--inference-grpc-port", reserved_port, host, inference_grpc_port),
+        )
     port, grpc_port = http.getsockname()[1], grpc_reservation.getsockname()[1]
-    typer.echo(f"dashboard: http://{f'[{host}]' if ':' in host else host}:{port}/ui", err=True)
+    typer.echo(f"dashboard: http://{url_host(host)}:{port}/ui", err=True)
     ray_connection, ray_temp = start_ray(data_dir)
     inference = None
-    if inference_port is not None:
-        command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--host", host]
-        command += ["--port", str(inference_port), "--grpc-port", str(inference_grpc_port)]
-        inference = subprocess.Popen([*command, "--data-dir", str(data_dir), "--log-level", log_level])
+    if inference_sockets is not None:
+        inference = start_inference(inference_sockets, host, data_dir, log_level)
     try:
         app = with_grpc(create_app(settings, ray_connection), host, grpc_port, grpc_reservation)
         config = uvicorn.Config(app, host=host, port=port, log_level=log_level, timeout_graceful_shutdown=5)
@@ -118,12 +122,27 @@ def serve_command(
             shutil.rmtree(ray_temp, ignore_errors=True)
 
 
-def taken(option: str, bind: Callable[[str, int], socket.socket], host: str, port: int) -> socket.socket:
-    """The port, bound before Ray starts (`services.api.ports`), or the error of a port in use."""
+def url_host(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
+
+
+def start_inference(
+    sockets: tuple[socket.socket, socket.socket], host: str, data_dir: Path, log_level: str
+) -> subprocess.Popen:
+    """`nbake serve-inference` as a child process, serving the REST socket and the reserved gRPC port this
+    process took before Ray started (file descriptors the child inherits; ours close once it has them)."""
+    http, reservation = sockets
+    ports = http.getsockname()[1], reservation.getsockname()[1]
+    command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--host", host]
+    command += ["--http-fd", str(http.fileno()), "--grpc-fd", str(reservation.fileno())]
+    command += ["--data-dir", str(data_dir), "--log-level", log_level]
     try:
-        return bind(host, port)
-    except OSError as error:
-        fail(option, f"cannot listen on {host}:{port}: {error.strerror}")
+        child = subprocess.Popen(command, pass_fds=(http.fileno(), reservation.fileno()))
+    finally:
+        for held in sockets:
+            held.close()
+    typer.echo(f"inference: http://{url_host(host)}:{ports[0]} (gRPC port {ports[1]})", err=True)
+    return child
 
 
 def start_ray(data_dir: Path) -> tuple[RayConnection, Path | None]:

@@ -3,14 +3,18 @@ store and token database as `nbake serve` (same data dir or the same `NBAKE_*` s
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 import uvicorn
+from uvicorn.config import STARTUP_FAILURE
 
+from services.api.ports import http_socket, reserved_port
 from services.cli.errors import fail
 from services.cli.lifetime import die_with_parent
+from services.cli.listening import inherited, taken
 from services.inference.app import create_inference_app
 from services.inference.settings import InferenceSettings
 
@@ -59,6 +63,12 @@ def serve_inference_command(
         str | None, typer.Option(help="auto (CUDA when present), cpu or cuda[:n] (NBAKE_INFERENCE_DEVICE).")
     ] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    http_fd: Annotated[
+        int | None, typer.Option(hidden=True, help="A bound REST socket handed down by `nbake serve`.")
+    ] = None,
+    grpc_fd: Annotated[
+        int | None, typer.Option(hidden=True, help="A reserved gRPC port handed down by `nbake serve`.")
+    ] = None,
     outlive_parent: Annotated[
         bool,
         typer.Option(
@@ -88,10 +98,18 @@ def serve_inference_command(
         )
     except ValueError as error:
         fail("settings", str(error))
-    uvicorn.run(
-        create_inference_app(settings, host, grpc_port),
-        host=host,
-        port=port,
-        log_level=log_level,
-        timeout_graceful_shutdown=5,
-    )
+    # Both ports are taken before the app loads models or opens the database, so a port in use is an error
+    # at once, and neither can be lost to another process while it starts (`services.api.ports`).
+    if http_fd is not None:
+        http = inherited("--http-fd", http_fd)
+    else:
+        http = taken("--port", http_socket, host, port)
+    if grpc_fd is not None:
+        reservation = inherited("--grpc-fd", grpc_fd)
+    else:
+        reservation = taken("--grpc-port", reserved_port, host, grpc_port)
+    app = create_inference_app(settings, host, reservation.getsockname()[1], reservation)
+    server = uvicorn.Server(uvicorn.Config(app, log_level=log_level, timeout_graceful_shutdown=5))
+    server.run(sockets=[http])
+    if not server.started:
+        sys.exit(STARTUP_FAILURE)

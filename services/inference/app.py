@@ -3,6 +3,7 @@ and in its lifespan the gRPC `InferenceService` on its own port (when one is giv
 
 from __future__ import annotations
 
+import socket
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
@@ -18,8 +19,13 @@ from services.jobs.db import Database
 
 
 def create_inference_app(
-    settings: InferenceSettings, grpc_host: str = "127.0.0.1", grpc_port: int | None = None
+    settings: InferenceSettings,
+    grpc_host: str = "127.0.0.1",
+    grpc_port: int | None = None,
+    reservation: socket.socket | None = None,
 ):
+    """The app; with a `grpc_port`, its lifespan serves gRPC there too (a `reservation` of that port, from
+    `services.api.ports.reserved_port`, closes once gRPC has bound it)."""
     shared = settings.shared
     state = InferenceState(InferenceService(settings), Database(shared.db_url, shared.database_schema))
 
@@ -27,7 +33,9 @@ def create_inference_app(
     async def lifespan(app: FastAPI):
         grpc_server = None
         if grpc_port is not None:
-            grpc_server = start_grpc_inference(state, grpc_host, grpc_port, settings.max_body_bytes)
+            grpc_server = start_grpc_inference(
+                state, grpc_host, grpc_port, settings.max_body_bytes, reservation
+            )
             app.state.grpc_port = grpc_server.port
         try:
             yield

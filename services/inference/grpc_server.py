@@ -4,6 +4,7 @@ statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRPC API.
 
 from __future__ import annotations
 
+import socket
 from concurrent import futures
 
 import grpc
@@ -100,8 +101,15 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
             )
 
 
-def start_grpc_inference(state: InferenceState, host: str, port: int, max_message_bytes: int) -> GrpcServer:
-    """Serve InferenceService on `host:port` (0: any free port; `.port` says which)."""
+def start_grpc_inference(
+    state: InferenceState,
+    host: str,
+    port: int,
+    max_message_bytes: int,
+    reservation: socket.socket | None = None,
+) -> GrpcServer:
+    """Serve InferenceService on `host:port` (0: any free port; `.port` says which). A `reservation`
+    (`services.api.ports.reserved_port`) held the port until now: it closes once the server has bound it."""
     server = grpc.server(
         futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-inference-grpc"),
         interceptors=[ErrorMapping(), TokenAuth(state.db, needed_scope)],
@@ -116,7 +124,11 @@ def start_grpc_inference(state: InferenceState, host: str, port: int, max_messag
     health_name = health_pb2.DESCRIPTOR.services_by_name["Health"].full_name
     reflection.enable_server_reflection((SERVICE, health_name, reflection.SERVICE_NAME), server)
     address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    bound = server.add_insecure_port(address)
+    try:
+        bound = server.add_insecure_port(address)
+    finally:
+        if reservation is not None:
+            reservation.close()
     server.start()
     for name in ("", SERVICE):
         checker.set(name, health_pb2.HealthCheckResponse.SERVING)

@@ -1,13 +1,22 @@
 """`nbake serve` takes its ports before Ray starts its own servers on random ports: the gRPC port is held
-by a reservation that gRPC can share and nothing else can, and a port in use is a clear error at once."""
+by a reservation that gRPC can share and nothing else can, and a port in use is a clear error at once. The
+inference service's ports too: `nbake serve --inference-port` takes them before Ray and hands them to its
+child `nbake serve-inference`, which serves them as they are."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import socket
+import subprocess
+import sys
+import time
 from concurrent import futures
 from pathlib import Path
 
 import grpc
+import httpx
 import pytest
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from neuralbake_client.cli.main import app
@@ -39,17 +48,67 @@ def test_a_reserved_port_is_refused_to_others_and_shared_with_grpc():
         server.stop(None)
 
 
-@pytest.mark.parametrize("option", ["--port", "--grpc-port"])
+SERVE_PORTS = ("--port", "--grpc-port", "--inference-port", "--inference-grpc-port")
+
+
+@pytest.mark.parametrize("option", SERVE_PORTS)
 def test_serve_on_a_port_in_use_fails_before_starting_anything(tmp_path, monkeypatch, option):
     monkeypatch.setenv("NBAKE_TOKENS", "t:admin")
     started: list[Path] = []
     monkeypatch.setattr(serve, "start_ray", started.append)  # the suite's own Ray may already be up
     with http_socket("127.0.0.1", 0) as busy:
         busy.listen()
-        ports = {"--port": str(free_port()), "--grpc-port": str(free_port())}
+        ports = {name: str(free_port()) for name in SERVE_PORTS}
         ports[option] = str(busy.getsockname()[1])
         arguments = ["serve", *(part for pair in ports.items() for part in pair), "--outlive-parent"]
         result = CliRunner().invoke(app, [*arguments, "--data-dir", str(tmp_path / "data")])
     assert result.exit_code == 2, result.output
     assert f"error: {option}: cannot listen on 127.0.0.1:{ports[option]}" in result.stderr
     assert started == []  # no cluster was started for a server that cannot listen
+
+
+@pytest.mark.parametrize("option", ["--port", "--grpc-port"])
+def test_serve_inference_on_a_port_in_use_fails_at_once(tmp_path, monkeypatch, option):
+    monkeypatch.setenv("NBAKE_TOKENS", "t:admin")
+    with http_socket("127.0.0.1", 0) as busy:
+        busy.listen()
+        ports = {"--port": str(free_port()), "--grpc-port": str(free_port())}
+        ports[option] = str(busy.getsockname()[1])
+        arguments = ["serve-inference", *(part for pair in ports.items() for part in pair)]
+        result = CliRunner().invoke(app, [*arguments, "--data-dir", str(tmp_path / "data")])
+    assert result.exit_code == 2, result.output
+    assert f"error: {option}: cannot listen on 127.0.0.1:{ports[option]}" in result.stderr
+
+
+def test_serve_inference_serves_the_sockets_it_is_handed(tmp_path):
+    """What `nbake serve --inference-port` does: the ports are bound here, passed as file descriptors and
+    closed here; the child answers REST on the bound socket and gRPC on the reserved port."""
+    http, reservation = http_socket("127.0.0.1", 0), reserved_port("127.0.0.1", 0)
+    port, grpc_port = http.getsockname()[1], reservation.getsockname()[1]
+    command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--outlive-parent"]
+    command += ["--http-fd", str(http.fileno()), "--grpc-fd", str(reservation.fileno())]
+    environment = {**os.environ, "NBAKE_TOKENS": "t:admin"}
+    child = subprocess.Popen(
+        [*command, "--data-dir", str(tmp_path / "data"), "--log-level", "warning"],
+        pass_fds=(http.fileno(), reservation.fileno()),
+        env=environment,
+    )
+    http.close()
+    reservation.close()
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            assert child.poll() is None, f"serve-inference exited with {child.returncode}"
+            with contextlib.suppress(httpx.TransportError):
+                if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=5).status_code == 200:
+                    break
+            assert time.monotonic() < deadline, "serve-inference never answered on the handed socket"
+            time.sleep(0.2)
+        with grpc.insecure_channel(f"127.0.0.1:{grpc_port}") as channel:
+            reply = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=10)
+        assert reply.status == health_pb2.HealthCheckResponse.SERVING
+        with socket.socket() as other, pytest.raises(OSError):
+            other.bind(("127.0.0.1", grpc_port))  # the gRPC server holds it, the reservation closed
+    finally:
+        child.terminate()
+        assert child.wait(30) in (0, -signal.SIGTERM)  # uvicorn shuts down, then re-raises the signal
