@@ -66,7 +66,8 @@ CURVE_SEEDS = (0, 11, 23)  # not the reference's seed (2): its first pass would 
 # Since the truth's paths take strata of their first bounce (`transport.trace_rows`) its far-view ceiling at
 # 1024 spp is 32.4 dB indirect (37.1 full) on glossy_row, 34.8 (39.1) on env_lit_objects; at 4096, 38.4
 # (43.1) on glossy_row, where a default model (seed 0, prt18) scored 27.44 (30.80) raw and 27.84 (31.10)
-# denoised against 26.39 (29.97) and 27.71 (30.99) at 1024; seed 1 26.64 (30.35) and 26.94 (30.56). The
+# denoised against 26.39 (29.97) and 27.71 (30.99) at 1024; seed 1 26.64 (30.35) and 26.94 (30.56); seed 2
+# 27.92 (31.57) and 28.29 (nearest rows 27.59; stop 40, `run_kind_job` + `against_fine_truth`, 842 s). The
 # 4096-spp truth took 312-367 s for glossy_row's held-out views and lightings, beside another job.
 TRUTH_SPP = int(os.environ.get("PRT_BENCH_TRUTH_SPP", "4096"))
 NEAREST_ROWS = 16  # training rows averaged per held-out pixel by the model-free baseline
