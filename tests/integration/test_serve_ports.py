@@ -6,11 +6,8 @@ child `nbake serve-inference`, which serves them as they are."""
 from __future__ import annotations
 
 import contextlib
-import os
 import signal
 import socket
-import subprocess
-import sys
 import time
 from concurrent import futures
 from pathlib import Path
@@ -80,21 +77,15 @@ def test_serve_inference_on_a_port_in_use_fails_at_once(tmp_path, monkeypatch, o
     assert f"error: {option}: cannot listen on 127.0.0.1:{ports[option]}" in result.stderr
 
 
-def test_serve_inference_serves_the_sockets_it_is_handed(tmp_path):
-    """What `nbake serve --inference-port` does: the ports are bound here, passed as file descriptors and
-    closed here; the child answers REST on the bound socket and gRPC on the reserved port."""
+def test_serve_inference_serves_the_sockets_it_is_handed(tmp_path, monkeypatch):
+    """`nbake serve --inference-port`'s child (`serve.start_inference`): the ports are bound here, passed as
+    file descriptors and closed here; the child answers REST on the bound socket and gRPC on the reserved
+    port."""
+    monkeypatch.setenv("NBAKE_TOKENS", "t:admin")
     http, reservation = http_socket("127.0.0.1", 0), reserved_port("127.0.0.1", 0)
     port, grpc_port = http.getsockname()[1], reservation.getsockname()[1]
-    command = [str(Path(sys.executable).with_name("nbake")), "serve-inference", "--outlive-parent"]
-    command += ["--http-fd", str(http.fileno()), "--grpc-fd", str(reservation.fileno())]
-    environment = {**os.environ, "NBAKE_TOKENS": "t:admin"}
-    child = subprocess.Popen(
-        [*command, "--data-dir", str(tmp_path / "data"), "--log-level", "warning"],
-        pass_fds=(http.fileno(), reservation.fileno()),
-        env=environment,
-    )
-    http.close()
-    reservation.close()
+    child = serve.start_inference((http, reservation), "127.0.0.1", tmp_path / "data", "warning")
+    assert http.fileno() == -1 and reservation.fileno() == -1  # this process's copies are closed
     try:
         deadline = time.monotonic() + 120
         while True:
