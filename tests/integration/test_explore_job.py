@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.support.jobs import assert_resumes_to_the_uninterrupted_weights, run_kind_job
+from tests.support.jobs import assert_resumes_to_the_uninterrupted_weights, progress_steps, run_kind_job
 from tests.support.quality import report_failures
 from workers.models.explore import artifact, evaluate
 from workers.models.explore.evaluate import configurations, reference_images
@@ -70,6 +70,36 @@ def test_a_job_stopped_mid_training_resumes_to_the_uninterrupted_weights(short_j
     assert_resumes_to_the_uninterrupted_weights(
         run_short, short_job.parent, tmp_path, SHORT_TRAIN, ["checkpoints/{final}", f"out/{artifact.WEIGHTS}"]
     )
+
+
+def test_the_uniform_baseline_trains_at_equal_time_is_compared_in_the_report_and_resumes(short_job, tmp_path):
+    steps, every = SHORT_TRAIN.steps, SHORT_TRAIN.checkpoint_every
+    options = SHORT | {"uniform_baseline": True}
+    stopped_events, resumed_events = [], []
+    _, stopped = run_kind_job(
+        "explore", get_builtin(SCENE), tmp_path, options, seed=SEED, events=stopped_events,
+        cancel_after_step=steps + every + 1,
+    )  # fmt: skip
+    assert stopped.state == "cancelled"
+    assert progress_steps(stopped_events)[-1] > steps + every  # stopped inside the baseline
+    _, outcome = run_kind_job(
+        "explore", get_builtin(SCENE), tmp_path, options, seed=SEED, events=resumed_events
+    )
+    assert outcome.state == "succeeded", outcome.error
+    assert progress_steps(resumed_events)[0] > steps + every  # resumed there, not at step 0
+    figures = Report.read(str(tmp_path / "out")).method_metrics
+    baseline_steps = figures["uniform.steps"]
+    assert figures["active.steps"] == steps <= baseline_steps
+    # the resumed job gave its baseline the steps the first decided (the progress's total once decided)
+    totals = {e.total for e in stopped_events + resumed_events if e.type == "progress" and e.step > steps}
+    assert totals == {steps + baseline_steps}
+    assert (tmp_path / "checkpoints" / "uniform" / f"step-{int(baseline_steps):09d}").is_dir()
+    assert figures["uniform.seconds"] > 0 and figures["active.seconds"] > 0
+    ratio = figures["configurations.dssim"] / figures["uniform.dssim"]
+    assert figures["active_over_uniform.dssim"] == pytest.approx(ratio)
+    assert outcome.metrics["dssim_over_uniform"] == pytest.approx(ratio)
+    # the baseline is a measurement, not part of the artifact
+    assert Report.read(str(tmp_path / "out")).parameter_bytes == Report.read(str(short_job)).parameter_bytes
 
 
 def test_the_plan_names_the_variables_what_is_static_and_the_cost():

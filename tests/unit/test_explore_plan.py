@@ -36,3 +36,12 @@ def test_a_scene_without_variables_is_refused_naming_the_field():
     with pytest.raises(SceneError) as error:
         KIND.plan(SceneRef(get_builtin("cornell_box")), CONFIG)
     assert error.value.field == "variables"
+
+
+def test_the_uniform_baseline_is_planned_at_twice_the_training_time():
+    scene = SceneRef(get_builtin("cornell_moving_light"))
+    alone = KIND.plan(scene, CONFIG)
+    compared = KIND.plan(scene, KIND.resolve_config("quick", {"uniform_baseline": True}))
+    assert "baseline" not in {item.name for item in alone.items}
+    assert {item.name: item.choice for item in compared.items}["baseline"].startswith("uniform")
+    assert compared.estimated_seconds == pytest.approx(2 * alone.estimated_seconds)

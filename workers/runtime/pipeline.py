@@ -51,6 +51,10 @@ class Trainable:
     # `RequestSource`) by the job's sampler actors, it returns the batch stream to train on, in place of
     # `source`'s seed-indexed batches.
     driven: Callable[[Renders], BatchStream] | None = None
+    # A comparison run rather than a part of the artifact (a baseline at equal training time): given the
+    # trainables trained before it, its step count, decided once they have trained; it counts in neither
+    # the report's training figures nor its parameter bytes.
+    baseline_steps: Callable[[list[Trained]], int] | None = None
 
 
 @dataclass
@@ -111,10 +115,11 @@ def _run_method(method: Method, ctx: JobContext) -> RunOutput:
     ctx.log(
         f"measuring against path tracing at {finished.view.settings.width}x{finished.view.settings.height}"
     )
+    shipped = [t for t in trained if t.trainable.baseline_steps is None]
     report = build_report(
         method.kind,
-        TrainResult.combined([t.result for t in trained]),
-        sum(parameter_bytes(t.model, t.trainable.stored_dtype) for t in trained),
+        TrainResult.combined([t.result for t in shipped]),
+        sum(parameter_bytes(t.model, t.trainable.stored_dtype) for t in shipped),
         finished.frame,
         finished.view.curve(),
         finished.view.reference(),
@@ -145,7 +150,8 @@ def _run_method(method: Method, ctx: JobContext) -> RunOutput:
 
 def _train_all(ctx: JobContext, trainables: list[Trainable], samplers: int) -> list[Trained]:
     """Each trainable in turn on the job's sampler actors (or in process without any), resuming from its
-    checkpoints; progress counts steps across all of them."""
+    checkpoints; progress counts steps across all of them. A baseline's steps are decided when its turn
+    comes (`Trainable.baseline_steps`)."""
     total = sum(t.train.steps for t in trainables)
     trained: list[Trained] = []
     if not trainables:
@@ -155,9 +161,13 @@ def _train_all(ctx: JobContext, trainables: list[Trainable], samplers: int) -> l
         done = 0
         for trainable in trainables:
             ctx.raise_if_cancelled()
+            if trainable.baseline_steps is not None:
+                steps = trainable.baseline_steps(trained)
+                total += steps - trainable.train.steps
+                trainable.train = trainable.train.model_copy(update={"steps": steps})
             store = ctx.checkpoints.sub(trainable.name) if trainable.name else ctx.checkpoints
 
-            def progress(p: Progress, done: int = done) -> None:
+            def progress(p: Progress, done: int = done, total: int = total) -> None:
                 ctx.raise_if_cancelled()
                 ctx.progress(done + p.step, total, loss=p.loss, samples_per_s=p.samples_per_s, eta_s=p.eta_s)
 

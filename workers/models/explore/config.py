@@ -42,6 +42,11 @@ class ExploreConfig(TrainedKindConfig):
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
+    # The job trains the uniform baseline as well, at equal wall-clock time, and its report gives both
+    # runs' errors at the configurations (`baseline`): about twice the training time
+    uniform_baseline: bool = Field(
+        False, description="also train the uniform baseline at equal time and compare them in the report"
+    )
     # The chains' state holds the patch position as well as v. On an underfit network the position is most
     # of what the target sees: 40 CPU s into a uniform run (16^2 patches of 64^2 views, a light sweeping to
     # a wall), the position explained 64% of the per-patch loss's variance and v 3%, and active runs
@@ -174,6 +179,8 @@ class ExploreConfig(TrainedKindConfig):
             )
         if self.store_capacity < 2 * self.chains:
             raise ValueError(f"store_capacity: keep at least two patches per chain ({2 * self.chains})")
+        if self.uniform_baseline and self.exploration == UNIFORM:
+            raise ValueError("uniform_baseline: the run itself is the uniform baseline")
         if self.resolution_max < self.resolution_start:
             raise ValueError("resolution_max: must be at least resolution_start")
         return self

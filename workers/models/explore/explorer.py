@@ -30,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import json
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
@@ -56,6 +57,8 @@ PATCH_KEYS = ("features", "emission", "target")
 STATE_FILE = "stream-exploration.json"  # the exploration's part of a training checkpoint
 AVERAGE_FILE = "stream-average.safetensors"  # the averaged weights
 COUNTS = ("proposals", "accepted", "large_steps", "generated", "reused", "chain_age")
+# wall-clock seconds of the training loop between this stream's batches, and of them in the targets
+TIMES = ("seconds", "target_seconds")
 AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10 + n))
 
 
@@ -136,7 +139,8 @@ class Explorer:
         self.chains = [Chain() for _ in range(c.chains)]
         self.loss_new, self.loss_existing = MovingAverage(c.reuse_ema), MovingAverage(c.reuse_ema)
         self.generations = 0
-        self.counts = dict.fromkeys(COUNTS, 0)
+        self.counts = dict.fromkeys(COUNTS, 0) | dict.fromkeys(TIMES, 0.0)
+        self._last_batch: float | None = None
         self.average.load_state_dict(self.model.state_dict())
         self.averaged = 0
 
@@ -188,6 +192,10 @@ class Explorer:
         return reuse_probability(existing, new, self.config.reuse_beta)
 
     def __next__(self) -> Batch:
+        now = time.perf_counter()
+        if self._last_batch is not None:  # a resumed stream counts from its first batch again
+            self.counts["seconds"] += now - self._last_batch
+        self._last_batch = now
         rng = np.random.default_rng([self.seed, self.position, 1])
         bootstrapping = self.generations < self.config.bootstrap or len(self.store) == 0
         if bootstrapping or rng.random() >= self.reuse_probability():
@@ -224,7 +232,11 @@ class Explorer:
         ]
         judged = [k for k, chain in enumerate(self.chains) if not uniform and chain.patch_id is not None]
         currents = [self.store.patches[self.chains[k].patch_id] for k in judged]
-        values = self.targets([patches[k] for k in judged] + currents) if judged else np.zeros(0)
+        values = np.zeros(0)
+        if judged:
+            started = time.perf_counter()
+            values = self.targets([patches[k] for k in judged] + currents)
+            self.counts["target_seconds"] += time.perf_counter() - started
         accepted = {k: bool(greedy(values[i], values[len(judged) + i])) for i, k in enumerate(judged)}
         self.counts["proposals"] += len(judged)
         self.counts["accepted"] += sum(accepted.values())
@@ -327,6 +339,8 @@ class Explorer:
             # generations a chain had kept its state, averaged over chains and generations
             "mean_chain_age": self.counts["chain_age"] / max(self.counts["generated"] * len(self.chains), 1),
             "stored_patches": float(len(self.store)),
+            "training_seconds": self.counts["seconds"],
+            "target_seconds": self.counts["target_seconds"],
         }
 
 

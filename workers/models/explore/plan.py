@@ -115,6 +115,15 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
     network = SECONDS_PER_PIXEL_LAYER * patches * (config.mlp.depth + 1) * config.mlp.width / 128
     step = SECONDS_PER_STEP + network
     seconds = config.train.steps * (generation_share * (render_seconds + 2 * network) + step)
+    if config.uniform_baseline:
+        items.append(
+            PlanItem(
+                name="baseline",
+                choice="uniform sampling at equal wall-clock time",
+                reason="the same network, store and start; compared at the configurations in the report",
+            )
+        )
+        seconds *= 2
     summary = (
         f"{spec.dimensions} dimension(s), {len(spec.variables)} variable(s); {config.exploration} exploration"
     )

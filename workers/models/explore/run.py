@@ -3,14 +3,18 @@ job's sampler actors for, exported with the scene and measured at fixed configur
 
 The report's view is the scene at the middle of every range; `method_metrics` add the mean DSSIM and MAPE
 over `evaluation_configurations` fixed configurations against `reference_spp` path tracing, the frame
-time and the explorer's figures (acceptance rate, share of generated steps, final R and p_s).
+time and the explorer's figures (acceptance rate, share of generated steps, final R and p_s). With
+`uniform_baseline` the job also trains the uniform baseline at equal wall-clock time (`baseline`) and the
+report gives its errors, steps and time beside active exploration's, and their ratios.
 """
 
 from __future__ import annotations
 
+import math
+
 import torch
 
-from workers.models.explore import artifact
+from workers.models.explore import artifact, baseline
 from workers.models.explore.config import ExploreConfig
 from workers.models.explore.evaluate import (
     ANTIALIASING,
@@ -35,26 +39,47 @@ class ExploreMethod:
 
     def __init__(self) -> None:
         self.explorer: Explorer | None = None
+        self.baseline: Explorer | None = None
         self.source: PatchSource | None = None
 
     def trainables(self, ctx: JobContext) -> list[Trainable]:
         config: ExploreConfig = ctx.config
         spec = SourceSpec(PatchSource, PatchSourceConfig(ctx.scene, config), ctx.seed)
         self.source = spec.build()
-        torch.manual_seed(ctx.seed)
-        model = PixelGenerator.of(config, self.source.dimensions)
-        self.explorer = Explorer(config, self.source.dimensions, model, ctx.seed)
-        phases = [self.explorer.phase()]
-        return [
-            Trainable(
-                model,
-                phases,
-                spec,
-                config.train,
-                stored_dtype=artifact.STORAGE_DTYPE,
-                driven=self.explorer.open,
+        self.explorer = self._explorer(config, ctx.seed)
+        trainables = [self._trainable(self.explorer, spec)]
+        if config.uniform_baseline:
+            self.baseline = self._explorer(baseline.uniform_config(config), ctx.seed)
+            active, steps = self.explorer, config.train.steps
+            trainables.append(
+                self._trainable(
+                    self.baseline,
+                    spec,
+                    name=baseline.NAME,
+                    baseline_steps=lambda _: baseline.equal_time_steps(
+                        steps, active.counts["seconds"], active.counts["target_seconds"]
+                    ),
+                )
             )
-        ]
+        return trainables
+
+    def _explorer(self, config: ExploreConfig, seed: int) -> Explorer:
+        """An explorer of a new network, initialised from the seed (the same weights for the baseline)."""
+        torch.manual_seed(seed)
+        model = PixelGenerator.of(config, self.source.dimensions)
+        return Explorer(config, self.source.dimensions, model, seed)
+
+    @staticmethod
+    def _trainable(explorer: Explorer, spec: SourceSpec, **options) -> Trainable:
+        return Trainable(
+            explorer.model,
+            [explorer.phase()],
+            spec,
+            explorer.config.train,
+            stored_dtype=artifact.STORAGE_DTYPE,
+            driven=explorer.open,
+            **options,
+        )
 
     def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
         config: ExploreConfig = ctx.config
@@ -98,5 +123,25 @@ class ExploreMethod:
             "mape": means["mape"],
             "acceptance_rate": statistics["acceptance_rate"],
         }
+        if self.baseline is not None:
+            ctx.log("measuring the uniform baseline at the same configurations")
+            uniform = configuration_errors(self.baseline.average, tracers, vectors, references, source.box)
+            compared = self._compared(trained, means, uniform.means())
+            method_metrics.update(compared)
+            metrics.update({f"{k}_over_uniform": compared[f"active_over_uniform.{k}"] for k in means})
         frame = TimedImage("network", image, seconds)
         return Finished(files, view, frame, method_metrics, metrics)
+
+    def _compared(self, trained: list[Trained], active: dict, uniform: dict) -> dict[str, float]:
+        """The baseline's errors, steps and wall-clock time beside active exploration's, and the ratios."""
+        runs = {"active": (trained[0], self.explorer), "uniform": (trained[1], self.baseline)}
+        figures = {
+            f"{name}.{k}": v
+            for name, (run, explorer) in runs.items()
+            for k, v in (("steps", float(run.trainable.train.steps)), ("seconds", explorer.counts["seconds"]))
+        }
+        figures |= {f"uniform.{k}": v for k, v in uniform.items()}
+        ratios = {
+            f"active_over_uniform.{k}": active[k] / uniform[k] if uniform[k] > 0 else math.nan for k in active
+        }
+        return figures | ratios
