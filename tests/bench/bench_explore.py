@@ -82,8 +82,12 @@ SCENES = tuple(os.environ.get("EXPLORE_BENCH_SCENES", "cornell_variable,mirror_v
 WORKERS = int(os.environ.get("EXPLORE_BENCH_WORKERS", "2"))
 SECONDS = float(os.environ.get("EXPLORE_BENCH_SECONDS", "240"))
 EVAL_EVERY = SECONDS / 6
-SIZE = 32
-REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "1024"))
+# EXPLORE_BENCH_SIZE: the side of the measured frames and their references
+SIZE = int(os.environ.get("EXPLORE_BENCH_SIZE", "32"))
+# mirror_variable's 1024-spp references (light the mirror reflects onto the room: caustic paths) were
+# DSSIM 0.017 from 8192-spp ones, a third of the networks' error there (cornell_variable: 0.002); 8192
+# spp costs ~40 CPU s per scene (explore13)
+REFERENCE_SPP = int(os.environ.get("EXPLORE_BENCH_REFERENCE_SPP", "8192"))
 CONFIGURATIONS = 8
 SEED = 11  # of the configurations and the references
 SEEDS = tuple(int(x) for x in os.environ.get("EXPLORE_BENCH_SEEDS", str(SEED)).split(","))  # of the runs

@@ -140,6 +140,13 @@ class ExploreConfig(TrainedKindConfig):
     # error either: at the end, 128 x 4 is within the end points' noise of 64 x 3 (cornell 0.0217/0.0188
     # against 0.0201/0.0187, mirror 0.0512/0.0540 against 0.0535/0.0611), 256 x 4 is worse (0.0231/0.0231,
     # 0.0641/0.0647). So the bench keeps 64 x 3.
+    # Against the issue's baseline (uniform, no schedule) at 300 CPU s, averaged DSSIM over the second
+    # half (explore13; bench_explore, one run each, cornell / mirror): seed 3 as is 0.85 / 1.38 (MAPE
+    # 1.04 / 1.10), small steps doubled 0.85 / 1.15, doubled with R only to 96 0.87 / 1.23. Against
+    # 8192-spp references (the 1024-spp ones carry DSSIM 0.017 of caustic noise on mirror), mirror seeds
+    # 3 / 4: as is 1.41 / 1.06, small steps doubled 1.19 / 0.99. Targets at 64 spp instead of 16 (both
+    # arms; ~0.6x the steps): 0.78 / 1.32 (at the end 0.74 / 1.38, MAPE 0.99 / 1.07): cleaner targets
+    # help the chains on cornell, not on mirror, where they still park on the light's reflection
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
