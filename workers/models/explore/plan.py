@@ -63,7 +63,7 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
         raise SceneError(
             "variables", "explore trains a renderer for a variable scene: name at least one variable"
         )
-    compiled = CompiledVariableScene(spec, scene.folder)
+    compiled = CompiledVariableScene(spec, scene.local_folder())
     tracer = VariableTracer(compiled)
     slices = variable_slices(spec)
     items = []

@@ -58,7 +58,7 @@ class PatchSource:
     def __init__(self, config: PatchSourceConfig, seed: int) -> None:
         self.config = config
         self.seed = seed
-        self.scene = CompiledVariableScene(config.scene.spec, config.scene.folder)
+        self.scene = CompiledVariableScene(config.scene.spec, config.scene.local_folder())
         self.tracer = VariableTracer(self.scene)
         self.box = self.scene.base.bounds
 
