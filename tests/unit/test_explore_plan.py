@@ -1,15 +1,20 @@
 """`explore`'s plan: the variables and their dimensions, what stays static, and which variables the
-camera never sees change anything."""
+camera never sees change anything; an uploaded scene plans and renders from its stored files."""
 
 from __future__ import annotations
 
+import hashlib
+
 import pytest
+import trimesh
 
 from workers.models.explore import KIND
+from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.scene.builtin import get_builtin
 from workers.scene.errors import SceneError
 from workers.scene.io import scene_from_dict
 from workers.scene.reference import SceneRef
+from workers.scene.stored import CACHE_ENV, StoredScene
 
 CONFIG = KIND.resolve_config("quick", {})
 
@@ -45,3 +50,23 @@ def test_the_uniform_baseline_is_planned_at_twice_the_training_time():
     assert "baseline" not in {item.name for item in alone.items}
     assert {item.name: item.choice for item in compared.items}["baseline"].startswith("uniform")
     assert compared.estimated_seconds == pytest.approx(2 * alone.estimated_seconds)
+
+
+def test_an_uploaded_scene_plans_and_renders_patches_from_its_stored_files(tmp_path, monkeypatch):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "node-cache"))
+    mesh = tmp_path / "blob" / "torus.obj"
+    mesh.parent.mkdir()
+    trimesh.creation.torus(0.3, 0.1).export(mesh)
+    data = get_builtin("cornell_moving_light").model_dump(mode="json")
+    data["objects"].append(
+        {"name": "torus", "shape": {"type": "mesh", "path": "torus.obj"}, "material": "white",
+         "transform": {"translate": [0.3, -0.6, 0.2]}}
+    )  # fmt: skip
+    data["variables"].append({"type": "translate", "name": "torus", "object": "torus", "max": [0.3, 0, 0]})
+    digest = "sha256:" + hashlib.sha256(mesh.read_bytes()).hexdigest()
+    stored = StoredScene(key="2" * 64, files={"torus.obj": {"url": str(mesh), "digest": digest}})
+    scene = SceneRef(scene_from_dict(data), stored=stored)  # a worker's reference: no local folder
+    assert "torus" in {item.name for item in KIND.plan(scene, CONFIG).items}
+    source = PatchSource(PatchSourceConfig(scene, CONFIG), seed=0)
+    patch = source.render(PatchRequest((0.5, 0.5, 0.5), CONFIG.resolution_start, 0, 0, seed=1))
+    assert patch["target"].shape == (CONFIG.patch, CONFIG.patch, 3)
