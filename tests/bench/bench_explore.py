@@ -170,8 +170,11 @@ def train_for(
     clock = {"trained": 0.0, "since": time.process_time(), "next_eval": EVAL_EVERY}
 
     def measure(steps: int) -> None:
-        errors = configuration_errors(model, tracers, vectors, references, source.box).means()
-        mean = configuration_errors(explorer.average, tracers, vectors, references, source.box).means()
+        bounces = config.mirror_bounces
+        errors = configuration_errors(model, tracers, vectors, references, source.box, bounces).means()
+        mean = configuration_errors(
+            explorer.average, tracers, vectors, references, source.box, bounces
+        ).means()
         curve.append(
             {
                 "seconds": clock["trained"],
@@ -279,8 +282,9 @@ def _frame_rows(scene, model, tracers, vectors, references, box, config) -> list
             for _ in range(3):
                 started = time.process_time()
                 image, _ = network_image(
-                    model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, antialiasing
-                )
+                    model, tracer, tracer.scene.spec.camera, box, v, SIZE, SIZE, antialiasing,
+                    config.mirror_bounces,
+                )  # fmt: skip
                 times.append(time.process_time() - started)
             errors.append(dssim(reference, image))
         network_dssim, network_seconds = float(np.mean(errors)), float(np.median(times))

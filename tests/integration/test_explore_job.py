@@ -201,3 +201,29 @@ def test_a_query_of_the_frames_gbuffers_answers_the_frames_pixels(short_job):
     )
     with pytest.raises(ValueError, match=r"^arrays\.v: "):
         loaded.answer(QUERY, inference.operations[QUERY].params(), arrays | {"v": arrays["v"][:, :1]})
+
+
+def test_an_artifact_trained_through_mirrors_serves_frames_through_them(tmp_path):
+    """`mirror_bounces` travels with the artifact: served frames are the network's radiance at the
+    surfaces the mirrors show, times the mirrors' colour (a query of those buffers, scaled)."""
+    overrides = SHORT | {"mirror_bounces": 1}
+    _, outcome = run_kind_job("explore", get_builtin("mirror_variable"), tmp_path, overrides, seed=SEED)
+    assert outcome.state == "succeeded", outcome.error
+    inference = get_inference("explore")
+    loaded = inference.load(tmp_path / "out", "cpu")
+    size = {"width": 16, "height": 16}
+    frame = loaded.answer(RENDER, inference.operations[RENDER].params(camera=size, antialiasing=1), {})
+    state = loaded.scene.at(np.asarray(frame.meta["v"]))
+    camera = PinholeCamera(state.compiled.spec.camera.model_copy(update=size))
+    buffers = primary_gbuffers(loaded.tracer.state_tracer(state), camera, mirror_bounces=1)
+    assert (buffers.throughput < 1).any()
+    n = buffers.hit.size
+    arrays = {
+        name: getattr(buffers, name).reshape(n, -1).astype(np.float32)
+        for name in ("position", "normal", "wo", "albedo", "roughness", "emission")
+    }
+    arrays["v"] = np.tile(np.asarray(frame.meta["v"], np.float32), (n, 1))
+    arrays["hit"] = buffers.hit.reshape(n)
+    radiance = loaded.answer(QUERY, inference.operations[QUERY].params(), arrays).arrays["radiance"]
+    expected = (radiance * buffers.throughput.reshape(n, 3)).reshape(frame.arrays["image"].shape)
+    np.testing.assert_allclose(frame.arrays["image"], expected, rtol=1e-5, atol=1e-6)

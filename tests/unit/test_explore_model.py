@@ -15,7 +15,7 @@ from workers.models.explore.evaluate import RGSS, network_image, pixel_offsets
 from workers.models.explore.explorer import Explorer, patch_losses
 from workers.models.explore.features import BUFFER_CHANNELS
 from workers.models.explore.network import PixelGenerator
-from workers.models.explore.source import PatchSource, PatchSourceConfig
+from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
@@ -208,3 +208,32 @@ def test_frames_average_the_network_at_each_pixels_points():
     assert np.all(np.isfinite(rotated)) and not np.allclose(rotated, grid)
     with pytest.raises(ValueError, match=r"^antialiasing: "):
         pixel_offsets(0)
+
+
+def test_patches_and_frames_through_mirrors_demodulate_and_remodulate():
+    """With `mirror_bounces`, a patch's target is the traced radiance over the mirrors' throughput (the
+    same render: the buffers change, not the paths), and a frame is the network's radiance times it."""
+    config = QUICK.model_copy(update={"mirror_bounces": 1})
+    sources = [
+        PatchSource(PatchSourceConfig(SceneRef(get_builtin("mirror_variable")), c), 0)
+        for c in (QUICK, config)
+    ]
+    request = PatchRequest((0.5,) * sources[0].dimensions, 32, 8, 8, seed=7)  # the mirror's centre
+    plain, followed = (s.render(request) for s in sources)
+    ratio = plain["target"] / followed["target"].clamp_min(1e-12)
+    mirrored = ~torch.isclose(plain["features"], followed["features"]).all(dim=-1)
+    assert mirrored.float().mean() > 0.5
+    lit = mirrored & (plain["target"] > 0).all(dim=-1)
+    torch.testing.assert_close(ratio[lit], torch.full_like(ratio[lit], 0.9))
+    torch.testing.assert_close(plain["target"][~mirrored], followed["target"][~mirrored])
+    model = PixelGenerator.of(config, sources[1].dimensions)
+    with torch.no_grad():  # a network that answers 1 everywhere
+        model.output.weight.zero_()
+        model.output.bias.fill_(float(np.log1p(1.0)))
+    v = np.full(sources[1].dimensions, 0.5)
+    tracer = sources[1].tracer.at(v)
+    frame, _ = network_image(model, tracer, tracer.scene.spec.camera, sources[1].box, v, 16, 16, 1, 1)
+    for value in (1.0, 0.9):  # the room, and the room in the mirror
+        assert np.isclose(frame, value, atol=1e-5).all(axis=-1).sum() > 20, value
+    emitted = frame.reshape(-1, 3)[frame.sum(axis=-1).argmax()]  # the light, and its reflection
+    assert np.isclose(frame, 0.9 * emitted, rtol=1e-5).all(axis=-1).any()

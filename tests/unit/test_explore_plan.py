@@ -1,5 +1,5 @@
 """`explore`'s plan: the variables and their dimensions, what stays static, and which variables the
-camera never sees change anything; an uploaded scene plans and renders from its stored files."""
+camera never sees change anything, the mirrors; an uploaded scene plans and renders from its stored files."""
 
 from __future__ import annotations
 
@@ -50,6 +50,17 @@ def test_the_uniform_baseline_is_planned_at_twice_the_training_time():
     assert "baseline" not in {item.name for item in alone.items}
     assert {item.name: item.choice for item in compared.items}["baseline"].startswith("uniform")
     assert compared.estimated_seconds == pytest.approx(2 * alone.estimated_seconds)
+
+
+def test_mirrors_are_reported_learned_or_followed():
+    scene = SceneRef(get_builtin("mirror_variable"))
+    learned = {item.name: item for item in KIND.plan(scene, CONFIG).items}["mirrors"]
+    assert learned.choice == "learned by the network" and learned.reason.startswith("mirror:")
+    followed = KIND.plan(scene, KIND.resolve_config("quick", {"mirror_bounces": 1}))
+    assert {item.name: item.choice for item in followed.items}["mirrors"].startswith("followed")
+    assert "mirrors" not in {
+        item.name for item in KIND.plan(SceneRef(get_builtin("cornell_moving_light")), CONFIG).items
+    }
 
 
 def test_an_uploaded_scene_plans_and_renders_patches_from_its_stored_files(tmp_path, monkeypatch):

@@ -3,16 +3,33 @@ window of it.
 
 One ray per pixel centre, so a window's buffers are exactly the crop of the full image's (unlike the
 jittered, averaged AOVs of `render`): what a neural renderer reads per pixel at training and at inference.
+
+Optionally the buffers follow mirrors (thesis Fig. 5.10, the hybrid that traces specular bounces into the
+G-buffer): where a camera ray hits a near-smooth conductor, the ray is reflected about the shading normal
+and the buffers describe the surface it reaches, up to `mirror_bounces` times. `throughput` is the product
+of the mirrors' specular colours along the way (the conductor's Fresnel term, `bsdfs.conductor`), so a
+pixel's radiance is `throughput` times the radiance leaving the buffers' surface towards the last mirror:
+a network reads an ordinary surface there and does not have to learn the reflection.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from workers.render.camera import PinholeCamera
-from workers.render.integrator import PathTracer
+from workers.render.integrator import PathTracer, SurfaceRecords
+from workers.scene import spec
+
+# GGX alpha at or below which a conductor is followed as a mirror: its lobe is a few degrees wide, so the
+# reflection of one direction stands for the whole lobe (mirror_variable's mirror is 0.01)
+MIRROR_ROUGHNESS = 0.05
+
+
+def is_mirror(material: spec.Material) -> bool:
+    """Whether G-buffers that follow mirrors reflect off surfaces of `material`."""
+    return isinstance(material, spec.Conductor) and material.roughness <= MIRROR_ROUGHNESS
 
 
 @dataclass
@@ -24,8 +41,9 @@ class GBuffers:
     wo: np.ndarray  # unit direction from the hit back to the camera
     albedo: np.ndarray
     roughness: np.ndarray  # (H, W, 1): GGX alpha, 1 for Lambertian surfaces
-    emission: np.ndarray  # radiance emitted towards the camera
+    emission: np.ndarray  # radiance emitted towards the camera (or the last mirror)
     hit: np.ndarray  # (H, W) bool
+    throughput: np.ndarray  # (H, W, 3): the mirrors' colours the pixel sees the surface through (1: none)
 
 
 def primary_gbuffers(
@@ -33,10 +51,11 @@ def primary_gbuffers(
     camera: PinholeCamera,
     window: tuple[int, int, int, int] | None = None,
     offsets: np.ndarray | None = None,
+    mirror_bounces: int = 0,
 ) -> GBuffers:
     """G-buffers of pixels x0 <= x < x1, y0 <= y < y1 (default: the whole image) through pixel centres, or
     through n points per pixel at `offsets` (n, 2) in [0, 1)^2 from its corner: then (H, W * n) with each
-    pixel's n samples side by side (for antialiased frames)."""
+    pixel's n samples side by side (for antialiased frames); through up to `mirror_bounces` mirrors."""
     x0, y0, x1, y1 = window or (0, 0, camera.width, camera.height)
     if not (0 <= x0 < x1 <= camera.width and 0 <= y0 < y1 <= camera.height):
         raise ValueError(
@@ -48,6 +67,9 @@ def primary_gbuffers(
     py = (ys[..., None] + offsets[:, 1]).ravel()
     origins, directions = camera.rays(px, py)
     rec = tracer.first_hits(origins, directions)
+    throughput = np.ones((len(directions), 3))
+    for _ in range(mirror_bounces):
+        directions = _through_mirrors(tracer, rec, directions, throughput)
     h, w = y1 - y0, (x1 - x0) * len(offsets)
     hit = rec.hit[:, None]
 
@@ -62,4 +84,28 @@ def primary_gbuffers(
         roughness=image(rec.roughness[:, None]),
         emission=image(rec.emission),
         hit=rec.hit.reshape(h, w),
+        throughput=throughput.reshape(h, w, 3).astype(np.float32),
     )
+
+
+def _through_mirrors(
+    tracer: PathTracer, rec: SurfaceRecords, directions: np.ndarray, throughput: np.ndarray
+) -> np.ndarray:
+    """Replace, in place, the records of rays that hit a mirror (`is_mirror`, not emitting) by those of
+    their reflection about the shading normal, multiplying `throughput` by the mirror's colour; the rays'
+    new directions."""
+    mirrors = np.array([is_mirror(m) for m in tracer.scene.materials])
+    mirror = rec.hit & mirrors[np.maximum(rec.material_id, 0)] & ~rec.emission.any(axis=1)
+    rows = np.flatnonzero(mirror)
+    if len(rows) == 0:
+        return directions
+    d, n = directions[rows], rec.shading_normal[rows]
+    reflected = d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n  # w_r = d - 2 (d . n) n
+    origins = tracer.offset(rec.position[rows], rec.geometric_normal[rows], reflected)
+    throughput[rows] *= rec.albedo[rows]
+    seen = tracer.first_hits(origins, reflected)
+    for field in fields(rec):
+        getattr(rec, field.name)[rows] = getattr(seen, field.name)
+    directions = directions.copy()
+    directions[rows] = reflected
+    return directions

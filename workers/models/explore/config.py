@@ -87,6 +87,10 @@ class ExploreConfig(TrainedKindConfig):
     resolution_max: int = Field(128, ge=4, le=8192)
     resolution_step: int = Field(4, ge=0, le=1024, description="pixels R grows by every `resolution_every`")
     resolution_every: int = Field(200, ge=1, description="iterations between resolution steps")
+    # The hybrid of thesis Fig. 5.10: G-buffers traced through up to this many mirrors (near-smooth
+    # conductors, `workers.render.gbuffer`), so the network learns the surfaces a mirror shows rather than
+    # the reflection; 0 learns every path, as the thesis's method does
+    mirror_bounces: int = Field(0, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
     max_depth: int = Field(5, ge=1, le=64, description="path segments of a training patch")
     # [code]: a rejected proposal is trained on beside the chain's current state, so batches hold

@@ -64,11 +64,12 @@ def configurations(dimensions: int, count: int, seed: int) -> np.ndarray:
 @torch.no_grad()
 def network_image(
     model: PixelGenerator, tracer: PathTracer, camera: Camera, box: np.ndarray, v: np.ndarray,
-    width: int, height: int, antialiasing: Antialiasing = 1,
+    width: int, height: int, antialiasing: Antialiasing = 1, mirror_bounces: int = 0,
 ) -> tuple[np.ndarray, float]:  # fmt: skip
     """(H, W, 3) linear radiance of the view at v, and the seconds it took (G-buffers and network); each
     pixel the mean of the network at its `antialiasing` sample points (`pixel_offsets`), traced and run in
-    bands of rows of about `PIXELS_PER_CHUNK` samples, so memory does not grow with the frame."""
+    bands of rows of about `PIXELS_PER_CHUNK` samples, so memory does not grow with the frame. Through
+    `mirror_bounces` mirrors, the network's radiance is scaled by the mirrors' throughput."""
     started = time.perf_counter()
     offsets = pixel_offsets(antialiasing)
     n = len(offsets)
@@ -79,10 +80,11 @@ def network_image(
     with torch_threads(1):  # small layers: a second thread busy-waits (`workers.runtime.threads`)
         for y0 in range(0, height, rows):
             y1 = min(height, y0 + rows)
-            buffers = primary_gbuffers(tracer, pinhole, (0, y0, width, y1), offsets)
+            buffers = primary_gbuffers(tracer, pinhole, (0, y0, width, y1), offsets, mirror_bounces)
             features = torch.from_numpy(pixel_features(buffers, box, v)).reshape(-1, 13 + len(v))
             emission = torch.from_numpy(buffers.emission).reshape(-1, 3)
             radiance = model.radiance(features.to(device), emission.to(device)).float().cpu().numpy()
+            radiance *= buffers.throughput.reshape(-1, 3)
             image[y0:y1] = radiance.reshape(y1 - y0, width, n, 3).mean(axis=2)
     return image, time.perf_counter() - started
 
@@ -106,12 +108,13 @@ def reference_images(
 
 def configuration_errors(
     model: PixelGenerator, tracers: list[PathTracer], vectors: np.ndarray, references: list[np.ndarray],
-    box: np.ndarray,
+    box: np.ndarray, mirror_bounces: int = 0,
 ) -> ConfigurationErrors:  # fmt: skip
     errors = ConfigurationErrors([], [])
     for tracer, v, reference in zip(tracers, vectors, references, strict=True):
         h, w = reference.shape[:2]
-        image, _ = network_image(model, tracer, tracer.scene.spec.camera, box, v, w, h, ANTIALIASING)
+        camera = tracer.scene.spec.camera
+        image, _ = network_image(model, tracer, camera, box, v, w, h, ANTIALIASING, mirror_bounces)
         errors.dssim.append(dssim(reference, image))
         errors.mape.append(mape(reference, image))
     return errors

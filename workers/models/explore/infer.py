@@ -10,7 +10,8 @@ fields.
 
 `query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
 albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, which the network sees as
-zeros as in a frame) and a scene vector per row, normalised.
+zeros as in a frame) and a scene vector per row, normalised: the radiance leaving each surface towards
+w_o. A caller that follows mirrors into its buffers (`mirror_bounces`) multiplies it by their colours.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ class ExploreModel:
         with torch.inference_mode():
             image, seconds = network_image(
                 self.artifact.model, self.tracer.state_tracer(state), camera, self.artifact.box, v,
-                camera.width, camera.height, params.antialiasing,
+                camera.width, camera.height, params.antialiasing, self.artifact.config.mirror_bounces,
             )  # fmt: skip
         return Answer(
             {"image": image}, {"v": v.tolist(), "dimensions": self.artifact.dimensions, "seconds": seconds}
@@ -111,6 +112,7 @@ class ExploreModel:
             position=arrays["position"][None], normal=arrays["normal"][None], wo=arrays["wo"][None],
             albedo=arrays["albedo"][None], roughness=arrays["roughness"][None],
             emission=arrays["emission"][None], hit=arrays.get("hit", np.ones(n, bool)).reshape(1, n),
+            throughput=np.ones((1, n, 3), np.float32),
         )  # fmt: skip
         features = pixel_features(buffers, self.artifact.box, np.zeros(0))[0]
         features = np.concatenate([features, v.astype(np.float32)], axis=-1)

@@ -14,7 +14,7 @@ import numpy as np
 
 from workers.models.explore.config import ExploreConfig
 from workers.render.camera import PinholeCamera
-from workers.render.gbuffer import primary_gbuffers
+from workers.render.gbuffer import is_mirror, primary_gbuffers
 from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.contract import Plan, PlanItem
@@ -84,6 +84,18 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
             reason=f"no variable moves {', '.join(static)}",
         )
     )
+    mirrors = [o.name for o in spec.objects if is_mirror(spec.materials[o.material])]
+    if mirrors:
+        items.append(
+            PlanItem(
+                name="mirrors",
+                choice=f"followed into the G-buffers ({config.mirror_bounces} bounces)"
+                if config.mirror_bounces
+                else "learned by the network",
+                reason=f"{', '.join(mirrors)}: near-smooth conductors; mirror_bounces traces what they show "
+                "(thesis Fig. 5.10) instead of learning the reflection",
+            )
+        )
     schedule = (
         f"R {config.resolution_start} -> {config.resolution_max} by {config.resolution_step} every "
         f"{config.resolution_every} iterations"

@@ -104,10 +104,11 @@ class ExploreMethod:
         ctx.log(f"measuring the network at {len(vectors)} configurations against {config.reference_spp} spp")
         others = reference_images(tracers[1:], size, config.reference_spp, config.max_depth, ctx.seed + 2)
         references = [view.reference(), *others]
-        errors = configuration_errors(model, tracers, vectors, references, source.box)
+        bounces = config.mirror_bounces
+        errors = configuration_errors(model, tracers, vectors, references, source.box, bounces)
         camera = states[0].compiled.spec.camera
         image, seconds = network_image(  # timed as the errors are measured: antialiased
-            model, tracers[0], camera, source.box, vectors[0], size, size, ANTIALIASING
+            model, tracers[0], camera, source.box, vectors[0], size, size, ANTIALIASING, bounces
         )
         statistics = self.explorer.statistics()
         means = errors.means()
@@ -125,7 +126,9 @@ class ExploreMethod:
         }
         if self.baseline is not None:
             ctx.log("measuring the uniform baseline at the same configurations")
-            uniform = configuration_errors(self.baseline.average, tracers, vectors, references, source.box)
+            uniform = configuration_errors(
+                self.baseline.average, tracers, vectors, references, source.box, bounces
+            )
             compared = self._compared(trained, means, uniform.means())
             method_metrics.update(compared)
             metrics.update({f"{k}_over_uniform": compared[f"active_over_uniform.{k}"] for k in means})

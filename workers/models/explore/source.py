@@ -40,6 +40,13 @@ def render_seed(*entropy: int) -> int:
     return int(np.random.SeedSequence(list(entropy)).generate_state(1)[0])
 
 
+def demodulated(radiance: np.ndarray, throughput: np.ndarray) -> np.ndarray:
+    """The radiance leaving the G-buffers' surface: the pixel's over the mirrors' throughput it is seen
+    through (`primary_gbuffers`), 0 where a mirror's colour is 0 (the pixel is black whatever it is)."""
+    safe = np.where(throughput > 0, throughput, 1.0)
+    return np.where(throughput > 0, radiance / safe, 0.0).astype(np.float32)
+
+
 def request_for(state: np.ndarray, resolution: int, patch: int, seed: int) -> PatchRequest:
     """The patch of state u = (v, patch position) at resolution R."""
     x0, y0 = patch_origin(state[-2:], resolution, patch)
@@ -72,7 +79,7 @@ class PatchSource:
         tracer = self.tracer.state_tracer(state)
         camera = PinholeCamera(state.compiled.spec.camera, request.resolution, request.resolution)
         window = (request.x0, request.y0, request.x0 + c.patch, request.y0 + c.patch)
-        buffers = primary_gbuffers(tracer, camera, window)
+        buffers = primary_gbuffers(tracer, camera, window, mirror_bounces=c.mirror_bounces)
         settings = RenderSettings(
             spp=c.spp, width=request.resolution, height=request.resolution, max_depth=c.max_depth,
             seed=request.seed, threads=1, tile_size=max(c.patch, 8), window=window,
@@ -81,7 +88,7 @@ class PatchSource:
         return {
             "features": torch.from_numpy(pixel_features(buffers, self.box, state.v)),
             "emission": torch.from_numpy(buffers.emission),
-            "target": torch.from_numpy(np.ascontiguousarray(radiance, np.float32)),
+            "target": torch.from_numpy(demodulated(radiance, buffers.throughput)),
         }
 
     def batch(self, index: int) -> Batch:
