@@ -68,3 +68,15 @@ def test_a_window_outside_the_image_is_an_error_naming_it(tracer):
         render(tracer, RenderSettings(spp=1, width=8, height=8, window=(4, 4, 9, 6)))
     with pytest.raises(ValueError, match=r"^window: "):
         primary_gbuffers(tracer, PinholeCamera(tracer.scene.spec.camera, 8, 8), (3, 3, 3, 5))
+
+
+def test_centre_samples_see_what_the_gbuffers_describe(tracer):
+    """`pixel_samples="centre"` traces every path through the pixel's centre: its first hits are the
+    G-buffers' at every pixel, edges included, where area samples mix the surfaces a pixel covers."""
+    camera = PinholeCamera(tracer.scene.spec.camera, SIZE, SIZE)
+    buffers = primary_gbuffers(tracer, camera)
+    settings = RenderSettings(spp=4, width=SIZE, height=SIZE, max_depth=2, aovs=True, pixel_samples="centre")
+    centre = render(tracer, settings).aovs["position"]
+    np.testing.assert_allclose(centre, buffers.position, atol=1e-5)
+    area = render(tracer, settings.model_copy(update={"pixel_samples": "area"})).aovs["position"]
+    assert np.abs(area - buffers.position).max() > 0.1  # at the edges

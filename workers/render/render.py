@@ -53,6 +53,11 @@ class RenderSettings(BaseModel):
     window: tuple[int, int, int, int] | None = Field(
         None, description="render only pixels x0 <= x < x1, y0 <= y < y1 of the image (a crop window)"
     )
+    pixel_samples: Literal["area", "centre"] = Field(
+        "area",
+        description="area: jittered over each pixel (a box filter); centre: every sample through the "
+        "pixel's centre, the point first-hit G-buffers describe (`workers.render.gbuffer`)",
+    )
     sampler: Literal["independent", "stratified"] = Field(
         "independent",
         description="stratified: a pixel's samples in a pass lie in strata at the camera and the first "
@@ -256,6 +261,8 @@ def _render_tile(
     xs = np.repeat(xs.ravel(), spp)
     ys = np.repeat(ys.ravel(), spp)
     jitter = rng.jitter() if isinstance(rng, StratifiedUniforms) else rng.random((len(xs), 2))
+    if settings.pixel_samples == "centre":
+        jitter = np.full_like(jitter, 0.5)  # drawn all the same, so the paths' random streams do not shift
     origins, directions = camera.rays(xs + jitter[:, 0], ys + jitter[:, 1])
     result = tracer.trace(
         origins, directions, rng, settings.max_depth, settings.rr_depth, spread=camera.spread

@@ -89,9 +89,16 @@ class ExploreConfig(TrainedKindConfig):
     resolution_every: int = Field(200, ge=1, description="iterations between resolution steps")
     # The hybrid of thesis Fig. 5.10: G-buffers traced through up to this many mirrors (near-smooth
     # conductors, `workers.render.gbuffer`), so the network learns the surfaces a mirror shows rather than
-    # the reflection; 0 learns every path, as the thesis's method does
+    # the reflection; 0 learns every path, as the thesis's method does. It did not pay on mirror_variable,
+    # whose mirror shows plain walls (explore14; bench_explore 300 CPU s, 8192-spp references, averaged
+    # DSSIM over the second half): uniform 0.040 with it, 0.037 without (seed 3, separate runs); active
+    # with it 0.070 / 0.064 (seeds 3 / 4), 1.73 / 1.51 times uniform with it (1.41 / 1.06 without, explore13).
+    # The chains still sat on the top centre a quarter of the time (36% without): see target_pixel_samples
     mirror_bounces: int = Field(0, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
+    target_pixel_samples: Literal["area", "centre"] = Field(
+        "area", description="a patch's paths: over each pixel's area, or through its centre as its G-buffers"
+    )
     max_depth: int = Field(5, ge=1, le=64, description="path segments of a training patch")
     # [code]: a rejected proposal is trained on beside the chain's current state, so batches hold
     # `chains` to 2 `chains` patches; without it they hold the chains' states after the decision only.

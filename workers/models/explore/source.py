@@ -83,6 +83,7 @@ class PatchSource:
         settings = RenderSettings(
             spp=c.spp, width=request.resolution, height=request.resolution, max_depth=c.max_depth,
             seed=request.seed, threads=1, tile_size=max(c.patch, 8), window=window,
+            pixel_samples=c.target_pixel_samples,
         )  # fmt: skip
         radiance = render(tracer, settings, view=state.compiled.spec.camera).image
         return {
