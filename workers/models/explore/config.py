@@ -96,6 +96,16 @@ class ExploreConfig(TrainedKindConfig):
     # The chains still sat on the top centre a quarter of the time (36% without): see target_pixel_samples
     mirror_bounces: int = Field(0, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
+    # A patch's G-buffers describe its pixels' centres, its area-sampled targets the pixels' areas: at an
+    # edge (the light's, which moves with v) the target mixes surfaces the buffers do not show, an error
+    # no network removes and whose gradient never fades, so f = loss x step stays high there (120 CPU s of
+    # active on mirror_variable, explore14: 36% of the chains' states in the top-centre sixteenth of the
+    # view, the light's). Centre targets, both arms (bench_explore 300 CPU s, 8192-spp references,
+    # averaged DSSIM over the second half, seeds 3 / 4, explore14): active/uniform 0.70 / 0.77 on cornell
+    # (chain age 1.6), 1.27 / 1.22 on mirror (3.3; 5.5 with area targets). But they cost uniform: in the
+    # same run (seed 4) uniform with area targets was 0.83x uniform with centre targets on cornell (1.00x on
+    # mirror), so active with centre targets is ~0.92x the strongest uniform there. Not the default: the
+    # frames average the network over each pixel, and area targets measure better for the baseline
     target_pixel_samples: Literal["area", "centre"] = Field(
         "area", description="a patch's paths: over each pixel's area, or through its centre as its G-buffers"
     )
