@@ -89,7 +89,7 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
         items.append(
             PlanItem(
                 name="mirrors",
-                choice=f"followed into the G-buffers ({config.mirror_bounces} bounces)"
+                choice=f"followed into the G-buffers, up to {config.mirror_bounces} bounce(s)"
                 if config.mirror_bounces
                 else "learned by the network",
                 reason=f"{', '.join(mirrors)}: near-smooth conductors; mirror_bounces traces what they show "
