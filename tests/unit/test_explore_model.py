@@ -13,7 +13,7 @@ import torch
 from workers.models.explore.config import PRESETS, ExploreConfig
 from workers.models.explore.evaluate import RGSS, network_image, pixel_offsets
 from workers.models.explore.explorer import Explorer, patch_losses
-from workers.models.explore.features import BUFFER_CHANNELS, interior_pixels
+from workers.models.explore.features import BUFFER_CHANNELS
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.nn.configs import HashGridConfig, MLPConfig
@@ -237,53 +237,3 @@ def test_patches_and_frames_through_mirrors_demodulate_and_remodulate():
         assert np.isclose(frame, value, atol=1e-5).all(axis=-1).sum() > 20, value
     emitted = frame.reshape(-1, 3)[frame.sum(axis=-1).argmax()]  # the light, and its reflection
     assert np.isclose(frame, 0.9 * emitted, rtol=1e-5).all(axis=-1).any()
-
-
-def flat_patch(h: int = 6, w: int = 7) -> torch.Tensor:
-    """Features of one plane facing +z, positions spread over a hundredth of the box."""
-    features = torch.zeros(h, w, BUFFER_CHANNELS + K)
-    ys, xs = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
-    features[..., 0], features[..., 1] = xs * 1e-3, ys * 1e-3
-    features[..., 3:6] = torch.tensor([0.5, 0.5, 1.0])  # n = +z
-    return features
-
-
-def test_interior_pixels_leave_out_both_sides_of_every_edge():
-    features, emission = flat_patch(), torch.zeros(6, 7, 3)
-    assert interior_pixels(features, emission).eq(1).all()  # one surface
-    stepped = features.clone()
-    stepped[:, 4:, 2] = 0.3  # a depth step between columns 3 and 4
-    stepped[4:, :, 3:6] = torch.tensor([1.0, 0.5, 0.5])  # the normal turns to +x from row 4 on
-    lit = emission.clone()
-    lit[1, 1] = 5.0  # an emitting pixel
-    interior = interior_pixels(stepped, lit)[..., 0]
-    expected = torch.ones(6, 7)
-    expected[:, 3:5] = 0
-    expected[3:5, :] = 0
-    expected[0:3, 0:3] = torch.tensor([[1.0, 0, 1], [0, 0, 0], [1, 0, 1]])
-    torch.testing.assert_close(interior, expected)
-    batched = interior_pixels(torch.stack([stepped, features]), torch.stack([lit, emission]))
-    torch.testing.assert_close(batched[0, ..., 0], expected)  # per patch of a batch
-
-
-def test_judged_on_the_interior_an_error_at_an_edge_costs_the_target_nothing():
-    model = network()
-    with torch.no_grad():  # answers e - 1 everywhere, but its step for a patch is not zero
-        model.output.weight.mul_(1e-3)
-        model.output.bias.fill_(1.0)
-    features = flat_patch()
-    features[:, 4:, 2] = 0.3
-    emission = torch.zeros(6, 7, 3)
-    with torch.no_grad():
-        exact = torch.expm1(model(features, emission))
-    target = exact.clone()
-    target[:, 3:5] += 1.0  # wrong only beside the edge
-    patch = {"features": features, "emission": emission, "target": target}
-    config = QUICK.model_copy(update={"loss_ssim_weight": 0.0})
-    judged = Explorer(config.model_copy(update={"judge_interior": True}), K, model, 0).targets([patch])
-    everything = Explorer(config, K, model, 0).targets([patch])
-    assert judged[0] < 1e-5 < everything[0]
-    weighted = {k: v[None] for k, v in patch.items()} | {"weight": torch.ones(1, 6, 7, 1)}
-    torch.testing.assert_close(  # all-ones weights are the plain mean
-        patch_losses(model, weighted, 2.0), patch_losses(model, {k: v[None] for k, v in patch.items()}, 2.0)
-    )

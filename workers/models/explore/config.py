@@ -172,9 +172,6 @@ class ExploreConfig(TrainedKindConfig):
     # 3 / 4: as is 1.41 / 1.06, small steps doubled 1.19 / 0.99. Targets at 64 spp instead of 16 (both
     # arms; ~0.6x the steps): 0.78 / 1.32 (at the end 0.74 / 1.38, MAPE 0.99 / 1.07): cleaner targets
     # help the chains on cornell, not on mirror, where they still park on the light's reflection
-    # f judged on the pixels that show one surface across their area (`features.interior_pixels`): see
-    # target_pixel_samples for why the edges hold the chains
-    judge_interior: bool = Field(False, description="f leaves out pixels at surface edges")
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")

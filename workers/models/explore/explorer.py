@@ -42,7 +42,7 @@ from torch.func import functional_call, grad, vmap
 
 from workers.models.explore.config import UNIFORM, ExploreConfig
 from workers.models.explore.exploration import greedy, large_step, propose
-from workers.models.explore.features import POSITION, interior_pixels
+from workers.models.explore.features import POSITION
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.oracle import adam_step_norms
 from workers.models.explore.reuse import MovingAverage, PatchStore, reuse_probability
@@ -65,17 +65,10 @@ AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10
 def patch_losses(
     model: Callable[[Tensor, Tensor], Tensor], batch: Batch, l1_weight: float, ssim_weight: float = 1.0
 ) -> Tensor:
-    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1);
-    the L1 term over the pixels of `batch["weight"]` [N, H, W, 1] where it is given."""
+    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1)."""
     prediction = model(batch["features"], batch["emission"])
     reference = torch.log1p(batch["target"].clamp_min(0.0))
-    difference = (prediction - reference).abs()
-    if "weight" in batch:
-        weight = batch["weight"]
-        l1 = (difference * weight).sum(dim=(1, 2, 3)) / (3 * weight.sum(dim=(1, 2, 3))).clamp_min(1.0)
-    else:
-        l1 = difference.mean(dim=(1, 2, 3))
-    loss = l1_weight * l1
+    loss = l1_weight * (prediction - reference).abs().mean(dim=(1, 2, 3))
     if ssim_weight:
         loss = loss + ssim_weight * (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
     return loss
@@ -289,8 +282,6 @@ class Explorer:
         device = next(self.model.parameters()).device
         c = self.config
         batch = {k: torch.stack([patch[k] for patch in patches]).to(device) for k in PATCH_KEYS}
-        if c.judge_interior:
-            batch["weight"] = interior_pixels(batch["features"], batch["emission"])
         if self.adam is None:
             with torch.no_grad():
                 losses = patch_losses(self.model, batch, c.loss_l1_weight, c.loss_ssim_weight)
@@ -303,7 +294,7 @@ class Explorer:
             def network(features: Tensor, emission: Tensor) -> Tensor:
                 return functional_call(self.model, weights, (features, emission), {"encoded": encoded[None]})
 
-            single = {k: v[None] for k, v in one.items()}
+            single = {k: one[k][None] for k in PATCH_KEYS}
             loss = patch_losses(network, single, c.loss_l1_weight, c.loss_ssim_weight)[0]
             return loss, loss.detach()
 
