@@ -68,8 +68,10 @@ def primary_gbuffers(
     origins, directions = camera.rays(px, py)
     rec = tracer.first_hits(origins, directions)
     throughput = np.ones((len(directions), 3))
-    for _ in range(mirror_bounces):
-        directions = _through_mirrors(tracer, rec, directions, throughput)
+    if mirror_bounces:
+        mirrors = np.array([is_mirror(m) for m in tracer.scene.materials])  # by material id
+        for _ in range(mirror_bounces):
+            directions = _through_mirrors(tracer, mirrors, rec, directions, throughput)
     h, w = y1 - y0, (x1 - x0) * len(offsets)
     hit = rec.hit[:, None]
 
@@ -89,12 +91,12 @@ def primary_gbuffers(
 
 
 def _through_mirrors(
-    tracer: PathTracer, rec: SurfaceRecords, directions: np.ndarray, throughput: np.ndarray
-) -> np.ndarray:
-    """Replace, in place, the records of rays that hit a mirror (`is_mirror`, not emitting) by those of
-    their reflection about the shading normal, multiplying `throughput` by the mirror's colour; the rays'
-    new directions."""
-    mirrors = np.array([is_mirror(m) for m in tracer.scene.materials])
+    tracer: PathTracer, mirrors: np.ndarray, rec: SurfaceRecords, directions: np.ndarray,
+    throughput: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Replace, in place, the records of rays that hit a mirror (`mirrors[material id]`, not emitting) by
+    those of their reflection about the shading normal, multiplying `throughput` by the mirror's colour;
+    the rays' new directions."""
     mirror = rec.hit & mirrors[np.maximum(rec.material_id, 0)] & ~rec.emission.any(axis=1)
     rows = np.flatnonzero(mirror)
     if len(rows) == 0:
