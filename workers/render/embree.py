@@ -36,7 +36,11 @@ _INVALID_ID = -1  # RTC_INVALID_GEOMETRY_ID as int32
 # RTCRayHit16's layout, in 32-bit words: 12 ray fields of 16 lanes (org xyz, tnear, dir xyz, time, tfar,
 # mask, id, flags), then the hit's (Ng xyz, u, v, primID, geomID, instID, instPrimID).
 _TFAR, _MASK, _U, _V, _PRIM, _GEOM, _INST = 8, 9, 15, 16, 17, 18, 19
-_PACKET_WORDS = 24 * 16  # room for every field above (21 used), 64-byte aligned
+# Room for the fields above and more, 64-byte aligned, for both queries: Embree 4.4's rtcOccluded16 reads
+# past RTCRay16's 12 fields (bytes 0x4c0-0x540 of the packet, where RTCRayHit16 keeps its instance
+# fields, whose count is a build option), which segfaulted where a 12-field packet ended at a page's end
+# (about every other run of tests/unit/test_explore_model.py on one machine); 64 fields, 4 KB
+_PACKET_WORDS = 64 * 16
 _PACKET = 16
 
 
@@ -122,6 +126,14 @@ def _load_packet(o, d, t_far, start, count, packet, valid):
 
 
 @njit(cache=True, nogil=True)
+def _clear_hits(words):
+    """No hit and no instance in every lane of a packet's hit fields (Embree reads them on both queries)."""
+    for k in range(_PACKET):
+        words[_GEOM * _PACKET + k] = _INVALID_ID
+        words[_INST * _PACKET + k] = _INVALID_ID
+
+
+@njit(cache=True, nogil=True)
 def _intersect16(scene, o, d, t_far, prim, t, u, v):
     """Closest hits of rays (o, d) up to `t_far` (float32): prim (-1 on a miss), t, u, v per ray."""
     packet = _aligned(_PACKET_WORDS, np.float32, 64)
@@ -131,9 +143,7 @@ def _intersect16(scene, o, d, t_far, prim, t, u, v):
     for start in range(0, n, _PACKET):
         count = min(_PACKET, n - start)
         _load_packet(o, d, t_far, start, count, packet, valid)
-        for k in range(_PACKET):
-            words[_GEOM * _PACKET + k] = _INVALID_ID
-            words[_INST * _PACKET + k] = _INVALID_ID
+        _clear_hits(words)
         _rtc_intersect16(valid.ctypes.data, scene, packet.ctypes.data, 0)
         for k in range(count):
             i = start + k
@@ -146,12 +156,14 @@ def _intersect16(scene, o, d, t_far, prim, t, u, v):
 @njit(cache=True, nogil=True)
 def _occluded16(scene, o, d, t_far, blocked):
     """Whether something lies on each ray (o, d) up to `t_far` (float32); Embree sets tfar to -inf then."""
-    packet = _aligned(12 * _PACKET, np.float32, 64)
+    packet = _aligned(_PACKET_WORDS, np.float32, 64)
+    words = packet.view(np.int32)
     valid = _aligned(_PACKET, np.int32, 64)
     n = len(o)
     for start in range(0, n, _PACKET):
         count = min(_PACKET, n - start)
         _load_packet(o, d, t_far, start, count, packet, valid)
+        _clear_hits(words)
         _rtc_occluded16(valid.ctypes.data, scene, packet.ctypes.data, 0)
         for k in range(count):
             blocked[start + k] = packet[_TFAR * _PACKET + k] == -np.inf
