@@ -2,11 +2,17 @@
 
 Same network (and initial weights), store, reuse, sampler actors and schedule of the learning rate; large
 steps only, every proposal accepted, no resolution schedule unless the config asks for one. Equal time:
-active exploration's extra cost is its targets (a per-patch backward pass of each judged proposal and
-current state, `Explorer.targets`), which the baseline does not pay, so over the active run's wall-clock
-training time T, of which T_f went to the targets, the baseline runs N T / (T - T_f) steps for active's N.
-Both times are the explorer's own counts, checkpointed with it, so a resumed job decides the same number;
-the report gives both runs' measured times beside their errors, which shows how equal they came out.
+the baseline's step is active exploration's without the chains' work, so its cost is estimated from the
+parts of active's wall-clock time its explorer measured (`Explorer.counts`, checkpointed with it, so a
+resumed job decides the same number): a step on a reused batch costs what active's reused steps cost
+(the same `chains` stored patches), and renders cost what active's did per step (the same patches per
+generation, at the same generation rate). The chains' own work, the targets' per-patch backward passes
+and the training rows of rejected proposals (batches of up to 2 `chains` patches), is what the baseline
+spends on more steps (charging the targets alone, N T / (T - T_f), left the rows out: ~1% fewer steps in
+`quick`). The baseline generated as many batches as active in its steps (81 / 80, 78 / 78 in `quick`
+jobs of 3000 steps, seeds 5 / 6); its measured time was 1.07 / 0.88 of active's there, with a benchmark
+loading the 2-core machine: the noise of the step times themselves (a reused step 3.1-3.8 ms between
+runs). The report gives both runs' measured times beside their errors.
 """
 
 from __future__ import annotations
@@ -23,10 +29,16 @@ def uniform_config(config: ExploreConfig) -> ExploreConfig:
     return config.model_copy(update={"exploration": UNIFORM})
 
 
-def equal_time_steps(steps: int, seconds: float, target_seconds: float) -> int:
-    """The steps the baseline takes in the wall-clock time active exploration took for `steps`, of which
-    `target_seconds` went to its targets: N T / (T - T_f), at least N (no time measured: N)."""
-    spent = seconds - target_seconds
-    if steps < 1 or not math.isfinite(seconds) or seconds <= 0 or spent <= 0:
+def equal_time_steps(steps: int, counts: dict[str, float]) -> int:
+    """The steps the baseline takes in the wall-clock time T active exploration took for `steps`, from
+    its explorer's `counts`: T / (renders a step + a reused step), at least `steps`. Without a timed
+    reused step, N T / (T - T_f) for T_f the targets' time; nothing measured: N."""
+    seconds = counts["seconds"]
+    if steps < 1 or not math.isfinite(seconds) or seconds <= 0:
         return max(steps, 1)
-    return max(steps, round(steps * seconds / spent))
+    if counts.get("timed_reuses", 0) > 0:
+        batches = max(counts["generated"] + counts["reused"], 1)
+        per_step = counts["render_seconds"] / batches + counts["reuse_seconds"] / counts["timed_reuses"]
+        return max(steps, round(seconds / per_step))
+    spent = seconds - counts["target_seconds"]
+    return max(steps, round(steps * seconds / spent)) if spent > 0 else steps

@@ -56,9 +56,11 @@ from workers.runtime.training import Phase
 PATCH_KEYS = ("features", "emission", "target")
 STATE_FILE = "stream-exploration.json"  # the exploration's part of a training checkpoint
 AVERAGE_FILE = "stream-average.safetensors"  # the averaged weights
-COUNTS = ("proposals", "accepted", "large_steps", "generated", "reused", "chain_age")
-# wall-clock seconds of the training loop between this stream's batches, and of them in the targets
-TIMES = ("seconds", "target_seconds")
+COUNTS = ("proposals", "accepted", "large_steps", "generated", "reused", "chain_age", "timed_reuses")
+# wall-clock seconds of the training loop between this stream's batches; of them, in the targets, in the
+# patches' renders, and in the steps on reused batches (`timed_reuses` of them): what the uniform
+# baseline's equal-time step count is estimated from (`baseline.equal_time_steps`)
+TIMES = ("seconds", "target_seconds", "render_seconds", "reuse_seconds")
 AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10 + n))
 
 
@@ -141,6 +143,7 @@ class Explorer:
         self.generations = 0
         self.counts = dict.fromkeys(COUNTS, 0) | dict.fromkeys(TIMES, 0.0)
         self._last_batch: float | None = None
+        self._last_reused = False  # whether the batch whose step the next interval times was reused
         self.average.load_state_dict(self.model.state_dict())
         self.averaged = 0
 
@@ -195,13 +198,14 @@ class Explorer:
         now = time.perf_counter()
         if self._last_batch is not None:  # a resumed stream counts from its first batch again
             self.counts["seconds"] += now - self._last_batch
+            if self._last_reused:
+                self.counts["reuse_seconds"] += now - self._last_batch
+                self.counts["timed_reuses"] += 1
         self._last_batch = now
         rng = np.random.default_rng([self.seed, self.position, 1])
         bootstrapping = self.generations < self.config.bootstrap or len(self.store) == 0
-        if bootstrapping or rng.random() >= self.reuse_probability():
-            batch = self._generate(rng)
-        else:
-            batch = self._reuse(rng)
+        self._last_reused = not bootstrapping and rng.random() < self.reuse_probability()
+        batch = self._reuse(rng) if self._last_reused else self._generate(rng)
         self.position += 1
         return batch
 
@@ -225,7 +229,9 @@ class Explorer:
             request_for(state, resolution, c.patch, render_seed(self.seed, self.position, k))
             for k, state in enumerate(states)
         ]
+        started = time.perf_counter()
         patches = self.renders.map(requests)
+        self.counts["render_seconds"] += time.perf_counter() - started
         ids = [
             self.store.add(patch, is_large, request=request)
             for patch, is_large, request in zip(patches, large.tolist(), requests, strict=True)

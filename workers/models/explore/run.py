@@ -56,9 +56,7 @@ class ExploreMethod:
                     self.baseline,
                     spec,
                     name=baseline.NAME,
-                    baseline_steps=lambda _: baseline.equal_time_steps(
-                        steps, active.counts["seconds"], active.counts["target_seconds"]
-                    ),
+                    baseline_steps=lambda _: baseline.equal_time_steps(steps, active.counts),
                 )
             )
         return trainables
