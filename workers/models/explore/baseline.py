@@ -8,7 +8,7 @@ resumed job decides the same number): a step on a reused batch costs what active
 (the same `chains` stored patches), and renders cost what active's did per step (the same patches per
 generation, at the same generation rate). The chains' own work, the targets' per-patch backward passes
 and the training rows of rejected proposals (batches of up to 2 `chains` patches), is what the baseline
-spends on more steps (charging the targets alone, N T / (T - T_f), left the rows out: ~1% fewer steps in
+spends on more steps (charging the targets alone, N T / (T - T_f), left the rows out: 1-2% fewer steps in
 `quick`). The baseline generated as many batches as active in its steps (81 / 80, 78 / 78 in `quick`
 jobs of 3000 steps, seeds 5 / 6); its measured time was 1.07 / 0.88 of active's there, with a benchmark
 loading the 2-core machine: the noise of the step times themselves (a reused step 3.1-3.8 ms between

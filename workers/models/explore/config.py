@@ -172,6 +172,11 @@ class ExploreConfig(TrainedKindConfig):
     # 3 / 4: as is 1.41 / 1.06, small steps doubled 1.19 / 0.99. Targets at 64 spp instead of 16 (both
     # arms; ~0.6x the steps): 0.78 / 1.32 (at the end 0.74 / 1.38, MAPE 0.99 / 1.07): cleaner targets
     # help the chains on cornell, not on mirror, where they still park on the light's reflection
+    # At 256 spp, the thesis's regime of few costly samples (explore15; same bench, seed 3, one run, on a
+    # machine ~1.5x slower): renders are the budget (1736 / 1744 patches rendered on cornell), 2060 /
+    # 2175 steps; averaged DSSIM at the end cornell 0.0332 / 0.0455 (0.73), mirror 0.0661 / 0.0576
+    # (1.15); over the second half 0.84 / 1.13 (MAPE 1.09 / 0.93), and both arms' errors are above the
+    # 16-spp runs' (cornell ~0.02): costlier, cleaner targets do not turn the ratio either
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
