@@ -1,4 +1,5 @@
-"""One Ray local cluster shared by every integration test: starting one costs about two seconds."""
+"""One Ray local cluster shared by every integration test: starting one costs about two seconds; and
+`database_incidental`, a test whose PostgreSQL variant runs only with `make test-all`."""
 
 from __future__ import annotations
 
@@ -17,3 +18,13 @@ def ray_cluster():
             yield ray
         finally:
             ray.shutdown()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A `database_incidental` test in a module run on both databases (`test_api_server.database`) tests
+    the driver or the files, not the database: its PostgreSQL variant repeats the same work (45-58 s of
+    the suite for the retried and the cancelled job), so it is `slow`."""
+    for item in items:
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        if item.get_closest_marker("database_incidental") and params.get("database") == "postgresql":
+            item.add_marker(pytest.mark.slow)

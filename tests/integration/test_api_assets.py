@@ -15,7 +15,7 @@ from tests.integration import test_api_server as api
 from tests.integration.test_api_server import ServerThread, events, problem_of, settings_for, submit
 from workers.scene.builtin import get_builtin
 
-database = api.database  # fixture
+database = api.incidental_database  # fixture: the uploads' files, not the database, are tested
 LIMITS = UploadLimits(
     max_total_bytes=64 << 10, max_files=4, max_file_bytes=48 << 10, max_compression_ratio=20
 )

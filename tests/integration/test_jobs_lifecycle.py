@@ -37,6 +37,7 @@ def driver_alive(job_id: str) -> bool:
     return True
 
 
+@pytest.mark.database_incidental
 def test_cancelling_a_running_job_stops_it(client):
     job = submit(client, **LONG_RENDER)
     first_event(client, job["id"], "progress")
@@ -65,6 +66,7 @@ def test_a_failing_job_reports_a_useful_error(client):
     assert failed["error"] == final["error"] and failed["attempts"] == 1  # the job's fault: not retried
 
 
+@pytest.mark.database_incidental
 def test_an_infrastructure_failure_is_retried_from_the_checkpoint(client):
     job = submit(
         client, **{**QUICK_RENDER, "config": {"spp": 512, "checkpoint_interval_s": 0}, "force": True}

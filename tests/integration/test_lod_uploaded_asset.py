@@ -44,6 +44,9 @@ def client(ray_cluster, tmp_path_factory):
         yield http
 
 
+# slow: a trained model's quality check (77 s of the default suite on a 2-core machine); uploads through
+# the server are tested by test_api_assets.py and lod's training and resume by test_lod_job.py
+@pytest.mark.slow
 def test_lod_trains_on_an_uploaded_mesh_through_the_server(client):
     files = [("scene.yaml", scene_yaml()), ("meshes/blob.obj", blob_obj())]
     response = client.post("/v1/assets", files=[("files", (name, data)) for name, data in files])
