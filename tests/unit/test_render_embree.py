@@ -1,10 +1,15 @@
-"""Embree queries bounded by a distance: what a caller keeps is what an unbounded query finds."""
+"""Embree queries: bounded by a distance, what a caller keeps is what an unbounded query finds; 16 rays at
+a time, what embreex's one-ray queries find; and no query reads past its ray packet."""
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import mmap
+
 import numpy as np
 
-from workers.render.embree import RayScene
+from workers.render.embree import _PACKET_WORDS, RayScene, _intersect16, _occluded16
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
 
@@ -61,3 +66,49 @@ def test_packet_queries_answer_as_embreex_one_ray_at_a_time():
     expected_blocked = reference.run(o32, d32, dists=t_max.astype(np.float32), query="OCCLUDED") != -1
     np.testing.assert_array_equal(blocked, expected_blocked)
     assert 0.2 < blocked.mean() < 0.8
+
+
+@contextlib.contextmanager
+def packet_before_a_guard_page():
+    """A `_PACKET_WORDS` float32 ray packet whose last byte ends a page that an unreadable page follows:
+    a query that reads past its packet faults instead of reading whatever the heap holds there."""
+    page, size = mmap.PAGESIZE, _PACKET_WORDS * 4
+    region = mmap.mmap(-1, 2 * page)
+    address = ctypes.addressof(ctypes.c_char.from_buffer(region))
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.mprotect.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    assert libc.mprotect(address + page, page, 0) == 0, ctypes.get_errno()  # PROT_NONE
+    packet = np.frombuffer(region, np.float32, _PACKET_WORDS, offset=page - size)
+    try:
+        yield packet
+    finally:
+        libc.mprotect(address + page, page, mmap.PROT_READ | mmap.PROT_WRITE)
+
+
+def test_queries_read_nothing_past_their_packet():
+    """Embree 4.4's rtcOccluded16 reads the packet past RTCRay16's 12 fields: with a 12-field packet that
+    ended a page, the query segfaulted (about every other run of the explore unit tests); a packet of the
+    size the kernels are given answers as `RayScene`'s own queries."""
+    scene = compile_scene(cornell_box())
+    rays = RayScene(scene.positions)
+    rng = np.random.default_rng(1)
+    n = 37  # two full packets and a partial one
+    origins = np.tile([0.0, 0.0, 3.0], (n, 1))
+    directions = rng.normal(size=(n, 3)) * [0.3, 0.3, 1.0] - [0.0, 0.0, 1.0]
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    t_far = np.full(n, 4.0, np.float32)
+    expected_hits, expected_blocked = (
+        rays.intersect(origins, directions),
+        rays.occluded(origins, directions, t_far),
+    )
+    with packet_before_a_guard_page() as packet:
+        assert packet.flags.writeable and packet.ctypes.data % 64 == 0
+        blocked = np.empty(n, np.bool_)
+        _occluded16(rays._scene, origins, directions, t_far, blocked, packet)
+        prim, t = np.empty(n, np.int32), np.empty(n)
+        u, v = np.empty(n, np.float32), np.empty(n, np.float32)
+        _intersect16(rays._scene, origins, directions, np.full(n, 1e37, np.float32), prim, t, u, v, packet)
+    np.testing.assert_array_equal(blocked, expected_blocked)
+    np.testing.assert_array_equal(prim, expected_hits.prim)
+    np.testing.assert_array_equal(t, expected_hits.t)
+    assert expected_blocked.any() and not expected_blocked.all() and expected_hits.found.any()

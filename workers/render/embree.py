@@ -39,7 +39,8 @@ _TFAR, _MASK, _U, _V, _PRIM, _GEOM, _INST = 8, 9, 15, 16, 17, 18, 19
 # Room for the fields above and more, 64-byte aligned, for both queries: Embree 4.4's rtcOccluded16 reads
 # past RTCRay16's 12 fields (bytes 0x4c0-0x540 of the packet, where RTCRayHit16 keeps its instance
 # fields, whose count is a build option), which segfaulted where a 12-field packet ended at a page's end
-# (about every other run of tests/unit/test_explore_model.py on one machine); 64 fields, 4 KB
+# (about every other run of tests/unit/test_explore_model.py on one machine; test_render_embree.py puts a
+# packet before an unreadable page); 64 fields, 4 KB
 _PACKET_WORDS = 64 * 16
 _PACKET = 16
 
@@ -134,9 +135,9 @@ def _clear_hits(words):
 
 
 @njit(cache=True, nogil=True)
-def _intersect16(scene, o, d, t_far, prim, t, u, v):
-    """Closest hits of rays (o, d) up to `t_far` (float32): prim (-1 on a miss), t, u, v per ray."""
-    packet = _aligned(_PACKET_WORDS, np.float32, 64)
+def _intersect16(scene, o, d, t_far, prim, t, u, v, packet):
+    """Closest hits of rays (o, d) up to `t_far` (float32): prim (-1 on a miss), t, u, v per ray, asked
+    through `packet` (`_packet()`)."""
     words = packet.view(np.int32)
     valid = _aligned(_PACKET, np.int32, 64)
     n = len(o)
@@ -154,9 +155,9 @@ def _intersect16(scene, o, d, t_far, prim, t, u, v):
 
 
 @njit(cache=True, nogil=True)
-def _occluded16(scene, o, d, t_far, blocked):
-    """Whether something lies on each ray (o, d) up to `t_far` (float32); Embree sets tfar to -inf then."""
-    packet = _aligned(_PACKET_WORDS, np.float32, 64)
+def _occluded16(scene, o, d, t_far, blocked, packet):
+    """Whether something lies on each ray (o, d) up to `t_far` (float32), asked through `packet`
+    (`_packet()`); Embree sets tfar to -inf then."""
     words = packet.view(np.int32)
     valid = _aligned(_PACKET, np.int32, 64)
     n = len(o)
@@ -222,7 +223,7 @@ class RayScene:
         prim, t = np.empty(n, np.int32), np.empty(n)
         u, v = np.empty(n, np.float32), np.empty(n, np.float32)
         if n:
-            _intersect16(self._scene, _f64(origins), _f64(directions), t_far, prim, t, u, v)
+            _intersect16(self._scene, _f64(origins), _f64(directions), t_far, prim, t, u, v, _packet())
         return Hits(prim, t, u, v)
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -231,8 +232,13 @@ class RayScene:
         blocked = np.empty(n, np.bool_)
         if n:
             t_far = np.ascontiguousarray(np.minimum(t_max, 3.0e38), dtype=np.float32)
-            _occluded16(self._scene, _f64(origins), _f64(directions), t_far, blocked)
+            _occluded16(self._scene, _f64(origins), _f64(directions), t_far, blocked, _packet())
         return blocked
+
+
+def _packet() -> np.ndarray:
+    """A query's ray packet: `_PACKET_WORDS` zeroed float32 words, 64-byte aligned."""
+    return _aligned(_PACKET_WORDS, np.float32, 64)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
