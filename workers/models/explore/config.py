@@ -177,6 +177,10 @@ class ExploreConfig(TrainedKindConfig):
     # 2175 steps; averaged DSSIM at the end cornell 0.0332 / 0.0455 (0.73), mirror 0.0661 / 0.0576
     # (1.15); over the second half 0.84 / 1.13 (MAPE 1.09 / 0.93), and both arms' errors are above the
     # 16-spp runs' (cornell ~0.02): costlier, cleaner targets do not turn the ratio either
+    # At 900 CPU s (explore16; default bench config, seed 3, one run): cornell active 0.0161 / uniform
+    # 0.0219 at the end (0.74; MAPE 0.90), 0.73 over the second half (MAPE 0.95), at 0.89x uniform's
+    # steps: the first run past 25% on cornell. Mirror 0.0441 / 0.0395 (1.12), 1.38 over the second half
+    # (MAPE 1.07 / 1.02): the longer budget pays on cornell and not on mirror
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     small_step_min: float = Field(1 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(1 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
