@@ -9,7 +9,7 @@ import mmap
 
 import numpy as np
 
-from workers.render.embree import _PACKET_WORDS, RayScene, _intersect16, _occluded16
+from workers.render.embree import _PACKET_WORDS, RayScene, _intersect16_through, _occluded16_through
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
 
@@ -104,10 +104,12 @@ def test_queries_read_nothing_past_their_packet():
     with packet_before_a_guard_page() as packet:
         assert packet.flags.writeable and packet.ctypes.data % 64 == 0
         blocked = np.empty(n, np.bool_)
-        _occluded16(rays._scene, origins, directions, t_far, blocked, packet)
+        _occluded16_through(rays._scene, origins, directions, t_far, blocked, packet)
         prim, t = np.empty(n, np.int32), np.empty(n)
         u, v = np.empty(n, np.float32), np.empty(n, np.float32)
-        _intersect16(rays._scene, origins, directions, np.full(n, 1e37, np.float32), prim, t, u, v, packet)
+        _intersect16_through(
+            rays._scene, origins, directions, np.full(n, 1e37, np.float32), prim, t, u, v, packet
+        )
     np.testing.assert_array_equal(blocked, expected_blocked)
     np.testing.assert_array_equal(prim, expected_hits.prim)
     np.testing.assert_array_equal(t, expected_hits.t)

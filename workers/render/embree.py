@@ -135,9 +135,14 @@ def _clear_hits(words):
 
 
 @njit(cache=True, nogil=True)
-def _intersect16(scene, o, d, t_far, prim, t, u, v, packet):
-    """Closest hits of rays (o, d) up to `t_far` (float32): prim (-1 on a miss), t, u, v per ray, asked
-    through `packet` (`_packet()`)."""
+def _intersect16(scene, o, d, t_far, prim, t, u, v):
+    """Closest hits of rays (o, d) up to `t_far` (float32): prim (-1 on a miss), t, u, v per ray."""
+    _intersect16_through(scene, o, d, t_far, prim, t, u, v, _aligned(_PACKET_WORDS, np.float32, 64))
+
+
+@njit(cache=True, nogil=True)
+def _intersect16_through(scene, o, d, t_far, prim, t, u, v, packet):
+    """`_intersect16` asked through a given packet of `_PACKET_WORDS` (a test places one)."""
     words = packet.view(np.int32)
     valid = _aligned(_PACKET, np.int32, 64)
     n = len(o)
@@ -155,9 +160,14 @@ def _intersect16(scene, o, d, t_far, prim, t, u, v, packet):
 
 
 @njit(cache=True, nogil=True)
-def _occluded16(scene, o, d, t_far, blocked, packet):
-    """Whether something lies on each ray (o, d) up to `t_far` (float32), asked through `packet`
-    (`_packet()`); Embree sets tfar to -inf then."""
+def _occluded16(scene, o, d, t_far, blocked):
+    """Whether something lies on each ray (o, d) up to `t_far` (float32); Embree sets tfar to -inf then."""
+    _occluded16_through(scene, o, d, t_far, blocked, _aligned(_PACKET_WORDS, np.float32, 64))
+
+
+@njit(cache=True, nogil=True)
+def _occluded16_through(scene, o, d, t_far, blocked, packet):
+    """`_occluded16` asked through a given packet of `_PACKET_WORDS` (a test places one)."""
     words = packet.view(np.int32)
     valid = _aligned(_PACKET, np.int32, 64)
     n = len(o)
@@ -223,7 +233,7 @@ class RayScene:
         prim, t = np.empty(n, np.int32), np.empty(n)
         u, v = np.empty(n, np.float32), np.empty(n, np.float32)
         if n:
-            _intersect16(self._scene, _f64(origins), _f64(directions), t_far, prim, t, u, v, _packet())
+            _intersect16(self._scene, _f64(origins), _f64(directions), t_far, prim, t, u, v)
         return Hits(prim, t, u, v)
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -232,13 +242,8 @@ class RayScene:
         blocked = np.empty(n, np.bool_)
         if n:
             t_far = np.ascontiguousarray(np.minimum(t_max, 3.0e38), dtype=np.float32)
-            _occluded16(self._scene, _f64(origins), _f64(directions), t_far, blocked, _packet())
+            _occluded16(self._scene, _f64(origins), _f64(directions), t_far, blocked)
         return blocked
-
-
-def _packet() -> np.ndarray:
-    """A query's ray packet: `_PACKET_WORDS` zeroed float32 words, 64-byte aligned."""
-    return _aligned(_PACKET_WORDS, np.float32, 64)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
