@@ -237,3 +237,16 @@ def test_patches_and_frames_through_mirrors_demodulate_and_remodulate():
         assert np.isclose(frame, value, atol=1e-5).all(axis=-1).sum() > 20, value
     emitted = frame.reshape(-1, 3)[frame.sum(axis=-1).argmax()]  # the light, and its reflection
     assert np.isclose(frame, 0.9 * emitted, rtol=1e-5).all(axis=-1).any()
+
+
+@pytest.mark.parametrize("draw", ["loss", "uniform"])
+def test_reuse_draws_stored_patches_by_the_configured_rule(draw):
+    model = network()
+    explorer = Explorer(QUICK.model_copy(update={"reuse_draw": draw}), K, model, 0)
+    patch = {k: torch.zeros(4, 4, 3) for k in ("features", "emission", "target")}
+    ids = [explorer.store.add(patch, large=True) for _ in range(4)]
+    for i in ids:
+        explorer.store.set_weight(i, 1.0 if i == ids[0] else 0.0)
+    rng = np.random.default_rng(0)
+    drawn = {int(i) for _ in range(50) for i in explorer._reuse(rng)["patch_id"]}
+    assert drawn == ({ids[0]} if draw == "loss" else set(ids))

@@ -214,6 +214,7 @@ def test_the_store_draws_by_loss_and_uniformly_when_every_loss_is_zero():
     store.set_weight(ids[2], 1.0)
     store.set_weight(ids[3], float("nan"))  # a NaN loss weighs nothing
     assert set(store.draw(rng, 100)) == {ids[2]}
+    assert set(store.draw(rng, 400, by_loss=False)) == set(ids)  # `reuse_draw: uniform`
 
 
 def test_patches_stay_inside_the_image_as_the_resolution_grows():

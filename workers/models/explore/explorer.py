@@ -7,7 +7,7 @@ step|| evaluated with the current weights (per-patch gradients of the layers, `t
 holds the accepted proposal, or the rejected proposal and the current state [code]: every rendered patch
 is trained on at least once and long-lived states are retrained (`train_rejected`; without it a rejected
 proposal is only stored, and every batch holds one patch per chain). Reusing: `chains` stored patches
-drawn in proportion to their last loss.
+drawn in proportion to their last loss (or uniformly, `reuse_draw`).
 
 The same loop with large steps only, every proposal accepted and no resolution schedule is the uniform
 baseline (Table 5.3), so both share the network, the store, reuse and the time budget.
@@ -267,7 +267,7 @@ class Explorer:
         return _stack(members, reused=False)
 
     def _reuse(self, rng: np.random.Generator) -> Batch:
-        ids = self.store.draw(rng, self.config.chains)
+        ids = self.store.draw(rng, self.config.chains, by_loss=self.config.reuse_draw == "loss")
         self.counts["reused"] += 1
         return _stack([(i, self.store.patches[i], self.store.large[i]) for i in ids], reused=True)
 

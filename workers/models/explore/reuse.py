@@ -3,8 +3,8 @@
 After the bootstrap a step reuses stored patches with probability p_s = sigmoid(L_exist - L_new + beta)
 (Eq. 5.4; beta = 4.6 gives 0.99 for equal losses), both losses moving averages over large-step patches
 only (small steps are biased towards high loss). Reused patches are drawn in proportion to their last loss,
-refreshed whenever they are trained. The store evicts the oldest patch no chain currently sits on, so a
-chain's current sample is never lost.
+refreshed whenever they are trained (or uniformly: `ExploreConfig.reuse_draw`). The store evicts the
+oldest patch no chain currently sits on, so a chain's current sample is never lost.
 
 Each patch keeps the request it was rendered from, so the store's state (`state`, `restore`) is a few
 numbers per patch: a resumed job renders the same patches again instead of checkpointing their pixels.
@@ -86,12 +86,13 @@ class PatchStore:
         if patch_id in self.weights:
             self.weights[patch_id] = loss if np.isfinite(loss) and loss > 0 else 0.0
 
-    def draw(self, rng: np.random.Generator, n: int) -> list[int]:
-        """n ids with replacement, in proportion to their last loss (uniformly when every weight is 0)."""
+    def draw(self, rng: np.random.Generator, n: int, by_loss: bool = True) -> list[int]:
+        """n ids with replacement, in proportion to their last loss (uniformly when every weight is 0, or
+        when not `by_loss`)."""
         ids = np.fromiter(self.patches, np.int64, len(self.patches))
         weights = np.array([self.weights[i] for i in ids])
         total = weights.sum()
-        p = weights / total if total > 0 else None
+        p = weights / total if by_loss and total > 0 else None
         return [int(i) for i in rng.choice(ids, size=n, replace=True, p=p)]
 
     def state(self, encode_request: Callable[[Any], Any]) -> dict:
