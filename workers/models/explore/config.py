@@ -181,7 +181,7 @@ class ExploreConfig(TrainedKindConfig):
     # 0.0219 at the end (0.74; MAPE 0.90), 0.73 over the second half (MAPE 0.95), at 0.89x uniform's
     # steps: the first run past 25% on cornell. Mirror 0.0441 / 0.0395 (1.12), 1.38 over the second half
     # (MAPE 1.07 / 1.02): the longer budget pays on cornell and not on mirror
-    # At 900 CPU s, seed 4 (explore17; same bench, one run): cornell 0.82 at the end, 0.88 over the
+    # At 900 CPU s, seed 4, the thesis's small steps (explore17): cornell 0.82 at the end, 0.88 over the
     # second half (MAPE 0.92 / 0.95); mirror 0.99 / 1.33 (MAPE 1.00 / 1.08)
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     # Small steps twice the thesis's 1/25-1/20 (`paper` keeps those): minutes of CPU training give the
