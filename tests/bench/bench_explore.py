@@ -323,6 +323,7 @@ def _plot(scene: str, seed: int, curves: dict[str, list[dict]]) -> None:
     for axis, name in zip(axes, ("DSSIM", "MAPE"), strict=True):
         axis.set_xlabel("training CPU seconds")
         axis.set_ylabel(name)
+        axis.set_yscale("log")  # the arms part by tens of percent at errors a tenth of the first point's
         axis.set_title(f"{scene}: {name} at {CONFIGURATIONS} configurations")
         axis.legend()
     figure.tight_layout()
