@@ -191,8 +191,8 @@ class ExploreConfig(TrainedKindConfig):
     # uniform_schedule (explore10), 0.85 -> 0.85 / 1.38 -> 1.15 against uniform (explore13; mirror on
     # 8192-spp references, seeds 3 / 4: 1.41 -> 1.19, 1.06 -> 0.99); 900 CPU s, seed 4 0.88 -> 0.79 /
     # 1.33 -> 1.10, at the end 0.82 -> 0.76 / 0.99 -> 0.94 (explore17); seed 5, cornell only, these steps
-    # (explore22): 0.73 at the end, 0.82 over the second half (MAPE 0.84 / 0.92). Four times: no further
-    # gain
+    # (explore22): 0.73 at the end, 0.82 over the second half (MAPE 0.84 / 0.92); mirror, seed 5 (explore23):
+    # 1.23 / 1.23 (MAPE 1.00 / 1.02). Four times: no further gain
     small_step_min: float = Field(2 / 25, gt=0, lt=0.5, description="s1: smallest small-step magnitude")
     small_step_max: float = Field(2 / 20, gt=0, lt=0.5, description="s2: largest small-step magnitude")
     # The paper's 4.6 keeps p_s near 0.99 (loss differences are ~0.1): 1 step in 100 renders, so in minutes
