@@ -202,9 +202,9 @@ class ExploreConfig(TrainedKindConfig):
     reuse_ema: float = Field(0.9, ge=0, lt=1, description="decay of the reuse losses' moving averages")
     # Reused patches drawn uniformly instead of by their last loss: a patch whose loss is mostly its target's
     # noise (mirror_variable's light reflected onto the room, where the chains park) is drawn no more often
-    # than a clean one. bench_explore 300 CPU s, seed 3, averaged DSSIM over the second half (explore18-20,
-    # separate runs for uniform by draw): active by loss / uniformly 0.0209 / 0.0213 on cornell_variable,
-    # 0.0566 / 0.0449 on mirror_variable; uniform 0.0244 / 0.0268 and 0.0359 / 0.0312. Uniform draws help
+    # than a clean one. bench_explore 300 CPU s, seed 3, averaged DSSIM over the second half (explore18-20;
+    # uniform with uniform draws in a run of its own): active by loss / uniformly 0.0209 / 0.0213 on cornell,
+    # 0.0566 / 0.0449 on mirror; uniform 0.0244 / 0.0268 and 0.0359 / 0.0312. Uniform draws help
     # both arms on mirror (0.79x, 0.87x) and cost uniform on cornell (1.10x); active over uniform with
     # the same draw: 0.86 / 1.58 by loss, 0.79 / 1.44 uniformly. Active with uniform draws and small steps
     # doubled (explore21): 0.0427 on mirror, 1.19x uniform by loss. The thesis's rule stays the default
