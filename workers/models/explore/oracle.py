@@ -7,6 +7,12 @@ RMSprop included, bias-corrected at the next step count); with no state yet it i
 zero moments, which is what a real step would do. Nothing of the optimizer or the parameters changes.
 Gradients come stacked, one per sample, so the steps of many patches cost one vectorised pass per
 parameter.
+
+What the factor does, measured once (mirror_variable, bench_explore's config after 1500 steps, the
+last 96 stored patches): the step norm falls as the loss rises (Spearman -0.66 between them), so f
+ranks patches less steeply than the loss alone; and a patch's own share of the step (its gradient
+without the momentum) ranks them as the whole step does (Spearman 0.993 between the two f): one
+patch's gradient is far larger than the momentum of batch means.
 """
 
 from __future__ import annotations
