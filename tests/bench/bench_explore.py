@@ -99,6 +99,7 @@ PATH_TRACING_SPP = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 HARD = {
     "cornell_variable": {"sphere_roughness": (0.0, 0.15)},
     "mirror_variable": {"box.z": (0.0, 0.35)},
+    "mirror_room_variable": {"box.z": (0.0, 0.35)},
 }
 # The default preset made lighter so that minutes of training on the shared 2-core CPU are hundreds of
 # steps; the rate here is the peak, decayed over the CPU budget rather than over steps (`DECAY`). beta 2.2

@@ -120,6 +120,7 @@ EXPECTED_TRIANGLES = {
     "closed_box": (24, 24),
     "cornell_variable": (5_000, 6_000),
     "mirror_variable": (24, 24),
+    "mirror_room_variable": (24, 24),
     "cornell_moving_light": (30, 40),
     "glossy_row": (15_000, 16_000),
     "fur_ball": (1_000, 2_000),  # the shell stands in for the fur: only the sphere and the floor

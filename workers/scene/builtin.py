@@ -24,6 +24,7 @@ from workers.scene.spec import (
     SphereShape,
     Transform,
 )
+from workers.scene.spec import LightIntensityVariable as _LightIntensity
 from workers.scene.spec import LightPositionVariable as _LightPosition
 from workers.scene.spec import RoughnessVariable as _Roughness
 from workers.scene.spec import TranslateVariable as _Translate
@@ -509,6 +510,21 @@ def mirror_variable() -> SceneSpec:
             _LightPosition(name="light", light="light", min=(-0.5, 0.0, 0.0), max=(0.5, 0.0, 0.0)),
         ],
     )
+
+
+@builtin
+def mirror_room_variable() -> SceneSpec:
+    """`mirror_variable` as a configurator would vary it, 8 dimensions: the box's x and z, the light's x
+    and z and intensity, and the red wall's colour. The thesis's gain over uniform sampling grows with
+    the dimensions (Fig. 5.15); `bench_explore` compares the two mirror rooms."""
+    variables = [
+        _Translate(name="box", object="box", min=(-0.6, 0.0, -0.6), max=(0.6, 0.0, 0.4)),
+        _LightPosition(name="light", light="light", min=(-0.5, 0.0, -0.5), max=(0.5, 0.0, 0.5)),
+        _LightIntensity(name="light_intensity", light="light", min=0.5, max=1.5),
+        _Albedo(name="red_wall", material="red", min=(0.2, 0.02, 0.02), max=(0.9, 0.4, 0.3)),
+    ]
+    base = mirror_variable().model_dump()
+    return SceneSpec.model_validate(base | {"name": "mirror_room_variable", "variables": variables})
 
 
 @builtin
