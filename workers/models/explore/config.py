@@ -38,7 +38,10 @@ class ExploreConfig(TrainedKindConfig):
     average_decay: float = Field(0.98, ge=0, lt=1, description="per-step decay of the weights' average")
     # bench_explore, 60 CPU s, seeds 3-5, averaged weights: active/uniform DSSIM 0.93 (cornell_variable)
     # and 1.18 (mirror_variable) at 0.86x uniform's steps once the targets were batched; 1.07 and 1.53 at
-    # 0.65x with one backward pass per patch (explore5, explore6)
+    # 0.65x with one backward pass per patch (explore5, explore6). With the rate decayed over the budget
+    # as a job's is (explore24; 300 CPU s, averaged weights at the end, seeds 3 / 4 / 5): DSSIM 0.68 /
+    # 0.76 / 0.80 on cornell_variable (MAPE 0.97 / 0.92 / 0.94), 1.22 / 1.15 / 1.07 on mirror_variable
+    # (MAPE 0.93 / 0.90 / 0.90), 1.01 / 1.06 on the 8-dimension mirror_room_variable (MAPE 0.93 / 0.91)
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
