@@ -44,7 +44,6 @@ was flat across configurations and active against uniform measured noise.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import math
 import multiprocessing
@@ -181,8 +180,7 @@ def train_for(
     phase = explorer.phase()
     curve: list[dict] = []
     clock = {"trained": 0.0, "since": time.process_time(), "next_eval": EVAL_EVERY}
-    if DECAY == "cosine":
-        phase = dataclasses.replace(phase, loss=_time_decayed(phase.loss, explorer, clock))
+    scales: list[float] = []  # the parameter groups' own `lr_scale`, which the decay multiplies
 
     def measure(steps: int) -> None:
         bounces = config.mirror_bounces
@@ -206,6 +204,9 @@ def train_for(
             clock["next_eval"] += EVAL_EVERY
         if clock["trained"] >= SECONDS:
             raise _BudgetSpent
+        if DECAY == "cosine":
+            scales[:] = scales or [g.get("lr_scale", 1.0) for g in explorer.adam.param_groups]
+            _decay_rates(explorer.adam, scales, clock["trained"] / SECONDS)
         clock["since"] = time.process_time()
 
     with InProcessRenders(spec) as renders, explorer.open(renders) as batches:
@@ -216,18 +217,12 @@ def train_for(
     return curve, explorer.average.state_dict(), explorer.statistics()
 
 
-def _time_decayed(loss, explorer: Explorer, clock: dict):
-    """`loss`, scaling the rates the trainer has just set for this step by a cosine of the CPU time spent
-    (the trainer sets them before it calls the loss and steps after it)."""
-
-    def decayed(model, batch):
-        spent = clock["trained"] + time.process_time() - clock["since"]
-        cosine = 0.5 * (1 + math.cos(math.pi * min(spent / SECONDS, 1.0)))
-        for group in explorer.adam.param_groups:
-            group["lr"] *= DECAY_FLOOR + (1 - DECAY_FLOOR) * cosine
-        return loss(model, batch)
-
-    return decayed
+def _decay_rates(adam: torch.optim.Optimizer, scales: list[float], spent: float) -> None:
+    """Each parameter group's `lr_scale` (the factor the trainer sets its scheduled rate by, every step)
+    at `scales` times a cosine of the fraction of the budget `spent`, down to DECAY_FLOOR at its end."""
+    cosine = 0.5 * (1 + math.cos(math.pi * min(spent, 1.0)))
+    for group, scale in zip(adam.param_groups, scales, strict=True):
+        group["lr_scale"] = scale * (DECAY_FLOOR + (1 - DECAY_FLOOR) * cosine)
 
 
 def run() -> list[BenchSection]:
