@@ -186,6 +186,11 @@ class ExploreConfig(TrainedKindConfig):
     # (MAPE 1.07 / 1.02): the longer budget pays on cornell and not on mirror
     # At 900 CPU s, seed 4, the thesis's small steps (explore17): cornell 0.82 at the end, 0.88 over the
     # second half (MAPE 0.92 / 0.95); mirror 0.99 / 1.33 (MAPE 1.00 / 1.08)
+    # With the rate decayed over the budget (explore24; 300 CPU s, seed 3, averaged DSSIM at the end over
+    # uniform's, default 0.68 on cornell and 1.22 on mirror), dropped: f's loss on the displayed sRGB
+    # images instead of log1p radiance (the metric's space, where the light's edge the chains park on is
+    # white either way): cornell 0.73, mirror 1.07 at the end but 1.19 over the second half (default
+    # 1.15), MAPE 0.82; on mirror, reused patches drawn uniformly in both arms 1.19, p_LS 0.5 1.11
     large_step_probability: float = Field(0.3, gt=0, le=1, description="p_LS of Eq. 5.1")
     # Small steps twice the thesis's 1/25-1/20 (`paper` keeps those): minutes of CPU training give the
     # chains tens of thousands of iterations, not hundreds of thousands, and wider steps leave a parked
