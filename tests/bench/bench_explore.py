@@ -205,7 +205,8 @@ def train_for(
         if clock["trained"] >= SECONDS:
             raise _BudgetSpent
         if DECAY == "cosine":
-            scales[:] = scales or [g.get("lr_scale", 1.0) for g in explorer.adam.param_groups]
+            if not scales:
+                scales.extend(group.get("lr_scale", 1.0) for group in explorer.adam.param_groups)
             _decay_rates(explorer.adam, scales, clock["trained"] / SECONDS)
         clock["since"] = time.process_time()
 
