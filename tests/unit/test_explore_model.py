@@ -250,3 +250,18 @@ def test_reuse_draws_stored_patches_by_the_configured_rule(draw):
     rng = np.random.default_rng(0)
     drawn = {int(i) for _ in range(50) for i in explorer._reuse(rng)["patch_id"]}
     assert drawn == ({ids[0]} if draw == "loss" else set(ids))
+
+
+@pytest.mark.parametrize("space", ["log1p", "display"])
+def test_the_target_judges_patches_in_the_configured_space(space):
+    """A bright emitter (passed through, radiance 3) against a target of 5: far apart in log1p radiance,
+    the same white once displayed, so f sees no error there in display space."""
+    explorer = Explorer(QUICK.model_copy(update={"target_space": space}), K, network(), 0)
+    patch = {
+        "features": torch.zeros(8, 8, BUFFER_CHANNELS + K),
+        "emission": torch.full((8, 8, 3), 3.0),
+        "target": torch.full((8, 8, 3), 5.0),
+    }
+    (value,) = explorer.targets([patch])
+    assert (value == 0.0) == (space == "display")
+    assert value > 0.5 or space == "display"  # 2 |log1p 3 - log1p 5| = 0.81

@@ -48,6 +48,7 @@ from workers.models.explore.oracle import adam_step_norms
 from workers.models.explore.reuse import MovingAverage, PatchStore, reuse_probability
 from workers.models.explore.source import PatchRequest, render_seed, request_for
 from workers.nn.ssim import ssim_map
+from workers.nn.tonemap import srgb_encode
 from workers.runtime.samplers import Renders
 from workers.runtime.sources import Batch
 from workers.runtime.threads import torch_threads
@@ -65,11 +66,18 @@ AVERAGE_WARMUP = 10  # the decay at the n-th average is min(decay, (1 + n) / (10
 
 
 def patch_losses(
-    model: Callable[[Tensor, Tensor], Tensor], batch: Batch, l1_weight: float, ssim_weight: float = 1.0
+    model: Callable[[Tensor, Tensor], Tensor],
+    batch: Batch,
+    l1_weight: float,
+    ssim_weight: float = 1.0,
+    display: bool = False,
 ) -> Tensor:
-    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1)."""
+    """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1);
+    `display`: of the sRGB images a preview shows instead of log1p radiance."""
     prediction = model(batch["features"], batch["emission"])
     reference = torch.log1p(batch["target"].clamp_min(0.0))
+    if display:
+        prediction, reference = srgb_encode(torch.expm1(prediction)), srgb_encode(torch.expm1(reference))
     loss = l1_weight * (prediction - reference).abs().mean(dim=(1, 2, 3))
     if ssim_weight:
         loss = loss + ssim_weight * (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
@@ -288,9 +296,10 @@ class Explorer:
         device = next(self.model.parameters()).device
         c = self.config
         batch = {k: torch.stack([patch[k] for patch in patches]).to(device) for k in PATCH_KEYS}
+        display = c.target_space == "display"
         if self.adam is None:
             with torch.no_grad():
-                losses = patch_losses(self.model, batch, c.loss_l1_weight, c.loss_ssim_weight)
+                losses = patch_losses(self.model, batch, c.loss_l1_weight, c.loss_ssim_weight, display)
             return losses.double().cpu().numpy()
         with torch.no_grad():
             encoded = self.model.encode_position(batch["features"][..., POSITION])
@@ -301,7 +310,7 @@ class Explorer:
                 return functional_call(self.model, weights, (features, emission), {"encoded": encoded[None]})
 
             single = {k: one[k][None] for k in PATCH_KEYS}
-            loss = patch_losses(network, single, c.loss_l1_weight, c.loss_ssim_weight)[0]
+            loss = patch_losses(network, single, c.loss_l1_weight, c.loss_ssim_weight, display)[0]
             return loss, loss.detach()
 
         weights = {name: p.detach() for name, p in layers.items()}
