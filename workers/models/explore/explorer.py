@@ -283,7 +283,8 @@ class Explorer:
 
     def targets(self, patches: list[Batch]) -> np.ndarray:
         """f(u) = loss(u) x ||Adam step of the layers for u's gradient|| of each patch with the current
-        weights (Sec. 5.4); the loss alone before the trainer's Adam is attached.
+        weights (Sec. 5.4), the loss taken in `target_space`; the loss alone before the trainer's Adam
+        is attached.
 
         The step is that of the layers' weights (`PixelGenerator.layers`: the thesis's network); the hash
         grid's table, our addition, is held fixed and its features are inputs here. Its autograd Function
