@@ -223,7 +223,8 @@ class ExploreConfig(TrainedKindConfig):
     # bench_explore, decayed rate, 300 CPU s, averaged DSSIM over uniform's in the same run, at the end /
     # over the second half (explore24): mirror_variable seed 3 1.07 / 1.19 (log1p 1.22 / 1.15, separate
     # run), seed 4 0.97 / 1.02 (log1p 1.22 / 1.21, same run), MAPE 0.82 and 0.92; cornell_variable seed 3
-    # 0.73 / 0.77 (log1p 0.68 / 0.70). Better on mirror, not past the 25% margin; not yet the default
+    # 0.73 / 0.77 (log1p 0.68 / 0.70); mirror_room_variable seed 3 1.20 / 1.17 (log1p 1.01 / 1.02,
+    # separate run). Better on mirror_variable, worse on the 8-dimension room: an option, not the default
     target_space: Literal["log1p", "display"] = Field(
         "log1p", description="f's loss on log1p radiance (the training loss's) or on the sRGB images shown"
     )
