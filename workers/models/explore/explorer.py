@@ -75,9 +75,11 @@ def patch_losses(
     """Per patch [N]: mean over pixels of w_1 |log1p L - log1p L_ref| + w_s (1 - SSIM) ([code]: 2 and 1);
     `display`: of the sRGB images a preview shows instead of log1p radiance."""
     prediction = model(batch["features"], batch["emission"])
-    reference = torch.log1p(batch["target"].clamp_min(0.0))
+    target = batch["target"].clamp_min(0.0)
     if display:
-        prediction, reference = srgb_encode(torch.expm1(prediction)), srgb_encode(torch.expm1(reference))
+        prediction, reference = srgb_encode(torch.expm1(prediction)), srgb_encode(target)
+    else:
+        reference = torch.log1p(target)
     loss = l1_weight * (prediction - reference).abs().mean(dim=(1, 2, 3))
     if ssim_weight:
         loss = loss + ssim_weight * (1 - ssim_map(prediction, reference)).mean(dim=(1, 2, 3))
