@@ -9,7 +9,8 @@ chains are measured apart from the schedule). All are measured every `EVAL_EVERY
 (evaluation excluded) at the same 8 fixed hard configurations (`HARD`: the variable that carries the
 scene's hardest effect at its hard end, the sphere near a mirror finish, the box by the mirror; the others
 seeded uniform draws) against `REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third
-table and plotted to out/bench-explore-<scene>-<seed>.png. The notes give each arm's ratio to the uniform
+table and plotted to out/bench-explore-<scene>-<seed>.png; out/bench-explore-<scene>-<seed>-maps.png shows
+the frames at the end and where in them each arm's DSSIM lies (`_error_maps`). The notes give each arm's ratio to the uniform
 arms at the end of the budget and as the mean over the second half of the curve (`late_mean`).
 
 Each run is measured twice: its weights as they are, and the explorer's exponential average of them
@@ -54,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from PIL import Image
 
 from tests.bench.common import BenchSection
 from workers.models.explore import KIND
@@ -68,6 +70,8 @@ from workers.models.explore.explorer import Explorer
 from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchSource, PatchSourceConfig
 from workers.nn.metrics import dssim
+from workers.nn.ssim import ssim_map
+from workers.nn.tonemap import srgb_encode
 from workers.render.render import RenderSettings, render
 from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.samplers import InProcessRenders
@@ -139,6 +143,7 @@ BASELINES = ("uniform", "uniform_schedule")
 # cornell_variable at 300 CPU s, seed 3, was 0.85 over the second half; decayed, 0.68 at the end (explore24)
 DECAY = os.environ.get("EXPLORE_BENCH_DECAY", "cosine")
 DECAY_FLOOR = 0.05
+MAP_WHITE = 0.2  # the per-pixel DSSIM drawn white in the error maps (`_error_maps`)
 
 
 def hard_configurations(scene: str, count: int, seed: int) -> np.ndarray:
@@ -268,20 +273,56 @@ def run() -> list[BenchSection]:
                         late = late_mean(curves[arm], key) / late_mean(curves[baseline], key)
                         ratios.setdefault((arm, baseline, key, second_half), []).append(late)
             _plot(scene, seed, curves)
+            models = {
+                arm: _averaged_model(config, sources[scene], results[scene, arm, seed][1]) for arm in RUN
+            }
+            _error_maps(
+                scene, seed, models, tracers[scene], vectors[scene], references[scene], sources[scene]
+            )
         for (arm, baseline, key, when), values in ratios.items():
             comparison.notes.append(
                 f"{scene}: {arm}/{baseline} {key} {when} each, seeds {list(SEEDS)}: "
                 + " ".join(f"{v:.3f}" for v in values)
                 + f" (mean {np.mean(values):.3f})"
             )
-        model = PixelGenerator.of(config, sources[scene].dimensions)
-        model.load_state_dict(results[scene, RUN[0], SEEDS[0]][1])
+        model = _averaged_model(config, sources[scene], results[scene, RUN[0], SEEDS[0]][1])
         rows = _frame_rows(
             scene, model, tracers[scene], vectors[scene], references[scene], sources[scene].box, config
         )
         for row in rows:
             frames.add(**row)
     return [comparison, frames, curves_section]
+
+
+def _averaged_model(config, source: PatchSource, state: dict[str, torch.Tensor]) -> PixelGenerator:
+    model = PixelGenerator.of(config, source.dimensions)
+    model.load_state_dict(state)
+    return model
+
+
+def _error_maps(scene, seed, models, tracers, vectors, references, source) -> None:
+    """out/bench-explore-<scene>-<seed>-maps.png, a row per configuration: the reference, each arm's
+    measured frame (sRGB, in `RUN`'s order), then each arm's per-pixel DSSIM, white at `MAP_WHITE`, over
+    the window-centres SSIM covers (its 11-pixel window leaves out a 5-pixel border, black here)."""
+    rows = []
+    for tracer, v, reference in zip(tracers, vectors, references, strict=True):
+        camera = tracer.scene.spec.camera
+        frames = [
+            network_image(m, tracer, camera, source.box, v, SIZE, SIZE, ANTIALIASING)[0]
+            for m in models.values()
+        ]
+        encoded = [srgb_encode(torch.from_numpy(image)) for image in (reference, *frames)]
+        maps = []
+        for frame in encoded[1:]:
+            error = (1 - ssim_map(encoded[0], frame).mean(-1)) / 2
+            border = (SIZE - error.shape[0]) // 2
+            maps.append(
+                torch.nn.functional.pad(error / MAP_WHITE, (border,) * 4)[..., None].expand(-1, -1, 3)
+            )
+        rows.append(torch.cat([*encoded, *maps], dim=1))
+    grid = (torch.cat(rows).clamp(0, 1) * 255).round().to(torch.uint8).numpy()
+    scale = 4  # 32^2 frames are too small to see
+    Image.fromarray(grid.repeat(scale, 0).repeat(scale, 1)).save(f"out/bench-explore-{scene}-{seed}-maps.png")
 
 
 def _frame_rows(scene, model, tracers, vectors, references, box, config) -> list[dict]:
