@@ -41,7 +41,11 @@ class ExploreConfig(TrainedKindConfig):
     # 0.65x with one backward pass per patch (explore5, explore6). With the rate decayed over the budget
     # as a job's is (explore24; 300 CPU s, averaged weights at the end, seeds 3 / 4 / 5): DSSIM 0.68 /
     # 0.76 / 0.80 on cornell_variable (MAPE 0.97 / 0.92 / 0.94), 1.22 / 1.15 / 1.07 on mirror_variable
-    # (MAPE 0.93 / 0.90 / 0.90), 1.01 / 1.06 on the 8-dimension mirror_room_variable (MAPE 0.93 / 0.91)
+    # (MAPE 0.93 / 0.90 / 0.90), 1.01 / 1.06 on the 8-dimension mirror_room_variable (MAPE 0.93 / 0.91).
+    # At 900 CPU s on mirror_variable (explore25, seeds 3 / 4): 0.97 / 0.90 at the end (MAPE 0.97 / 0.85),
+    # 1.18 / 1.09 over the second half: uniform's averaged DSSIM stops falling at ~0.03 from 450 s (seed
+    # 3: 0.0306, 0.0329, 0.0275, 0.0299 every 150 s), as the thesis's uniform does (Table 5.3), while
+    # active's keeps falling (0.0443, 0.0384, 0.0305, 0.0289)
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
