@@ -9,9 +9,10 @@ chains are measured apart from the schedule). All are measured every `EVAL_EVERY
 (evaluation excluded) at the same 8 fixed hard configurations (`HARD`: the variable that carries the
 scene's hardest effect at its hard end, the sphere near a mirror finish, the box by the mirror; the others
 seeded uniform draws) against `REFERENCE_SPP` references: DSSIM and MAPE. The curves are in the third
-table and plotted to out/bench-explore-<scene>-<seed>.png; out/bench-explore-<scene>-<seed>-maps.png shows
-the frames at the end and where in them each arm's DSSIM lies (`_error_maps`). The notes give each arm's ratio to the uniform
-arms at the end of the budget and as the mean over the second half of the curve (`late_mean`).
+table and plotted to out/bench-explore-<scene>-<seed>.png; out/bench-explore-<scene>-<seed>-maps.png
+shows the frames at the end and where in them each arm's DSSIM lies (`_error_maps`). The notes give each
+arm's ratio to the uniform arms at the end of the budget and as the mean over the second half of the
+curve (`late_mean`).
 
 Each run is measured twice: its weights as they are, and the explorer's exponential average of them
 (`average_decay`, about the last 50 steps; the average is what a job saves). At a constant rate
