@@ -45,7 +45,9 @@ class ExploreConfig(TrainedKindConfig):
     # At 900 CPU s on mirror_variable (explore25, seeds 3 / 4): 0.97 / 0.90 at the end (MAPE 0.97 / 0.85),
     # 1.18 / 1.09 over the second half: uniform's averaged DSSIM stops falling at ~0.03 from 450 s (seed
     # 3: 0.0306, 0.0329, 0.0275, 0.0299 every 150 s), as the thesis's uniform does (Table 5.3), while
-    # active's keeps falling (0.0443, 0.0384, 0.0305, 0.0289)
+    # active's keeps falling (0.0443, 0.0384, 0.0305, 0.0289). At 1800 CPU s (seed 4): 0.96 at the end
+    # (0.0257 / 0.0267; MAPE 0.94), 1.09 over the second half: uniform stops at ~0.027 from 900 s, and
+    # active reaches about that level rather than falling past it
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
