@@ -485,7 +485,12 @@ def cornell_variable() -> SceneSpec:
 @builtin
 def mirror_variable() -> SceneSpec:
     """A box moving in front of a mirror in a Cornell room, seen at an angle (thesis Fig. 5.6): glossy
-    reflections and shadows of a moving object, and the light's x; 3 dimensions."""
+    reflections and shadows of a moving object, and the light's x; 3 dimensions.
+
+    The mirror shows the room's open front: black (below 1% linear) in a third of the window centres SSIM
+    weighs in `bench_explore`'s 32^2 frames, where every network trained there leaves a dim haze of a few
+    thousandths, small in the log1p training loss and magnified by sRGB; that haze is most of both arms'
+    DSSIM there (the bench's error maps, explore25)."""
     walls = [o for o in cornell_walls() if o.name != "back"]
     mirror = SceneObject(
         name="mirror",
