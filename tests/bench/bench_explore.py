@@ -60,6 +60,7 @@ from PIL import Image
 
 from tests.bench.common import BenchSection
 from workers.models.explore import KIND
+from workers.models.explore.config import ExploreConfig
 from workers.models.explore.evaluate import (
     ANTIALIASING,
     RGSS,
@@ -176,7 +177,7 @@ def train_for(
     their average) measured every EVAL_EVERY seconds, the trained weights and the explorer's figures (runs
     in a process of its own)."""
     torch.set_num_threads(1)
-    config = KIND.resolve_config("default", _merged(OVERRIDES, ARMS[arm]))
+    config = _arm_config(arm)
     spec = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin(scene)), config), seed)
     source = spec.build()
     tracers = [source.tracer.at(v) for v in vectors]
@@ -274,9 +275,7 @@ def run() -> list[BenchSection]:
                         late = late_mean(curves[arm], key) / late_mean(curves[baseline], key)
                         ratios.setdefault((arm, baseline, key, second_half), []).append(late)
             _plot(scene, seed, curves)
-            models = {
-                arm: _averaged_model(config, sources[scene], results[scene, arm, seed][1]) for arm in RUN
-            }
+            models = {arm: _averaged_model(arm, sources[scene], results[scene, arm, seed][1]) for arm in RUN}
             _error_maps(
                 scene, seed, models, tracers[scene], vectors[scene], references[scene], sources[scene]
             )
@@ -286,17 +285,23 @@ def run() -> list[BenchSection]:
                 + " ".join(f"{v:.3f}" for v in values)
                 + f" (mean {np.mean(values):.3f})"
             )
-        model = _averaged_model(config, sources[scene], results[scene, RUN[0], SEEDS[0]][1])
+        model = _averaged_model(RUN[0], sources[scene], results[scene, RUN[0], SEEDS[0]][1])
         rows = _frame_rows(
-            scene, model, tracers[scene], vectors[scene], references[scene], sources[scene].box, config
-        )
+            scene, model, tracers[scene], vectors[scene], references[scene], sources[scene].box,
+            _arm_config(RUN[0]),
+        )  # fmt: skip
         for row in rows:
             frames.add(**row)
     return [comparison, frames, curves_section]
 
 
-def _averaged_model(config, source: PatchSource, state: dict[str, torch.Tensor]) -> PixelGenerator:
-    model = PixelGenerator.of(config, source.dimensions)
+def _arm_config(arm: str) -> ExploreConfig:
+    """The default preset with OVERRIDES and the arm's changes."""
+    return KIND.resolve_config("default", _merged(OVERRIDES, ARMS[arm]))
+
+
+def _averaged_model(arm: str, source: PatchSource, state: dict[str, torch.Tensor]) -> PixelGenerator:
+    model = PixelGenerator.of(_arm_config(arm), source.dimensions)
     model.load_state_dict(state)
     return model
 
@@ -308,10 +313,12 @@ def _error_maps(scene, seed, models, tracers, vectors, references, source) -> No
     rows = []
     for tracer, v, reference in zip(tracers, vectors, references, strict=True):
         camera = tracer.scene.spec.camera
-        frames = [
-            network_image(m, tracer, camera, source.box, v, SIZE, SIZE, ANTIALIASING)[0]
-            for m in models.values()
-        ]
+        frames = []
+        for arm, model in models.items():
+            bounces = _arm_config(arm).mirror_bounces
+            frames.append(
+                network_image(model, tracer, camera, source.box, v, SIZE, SIZE, ANTIALIASING, bounces)[0]
+            )
         encoded = [srgb_encode(torch.from_numpy(image)) for image in (reference, *frames)]
         maps = []
         for frame in encoded[1:]:
