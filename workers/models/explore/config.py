@@ -102,7 +102,11 @@ class ExploreConfig(TrainedKindConfig):
     # whose mirror shows plain walls (explore14; bench_explore 300 CPU s, 8192-spp references, averaged
     # DSSIM over the second half): uniform 0.040 with it, 0.037 without (seed 3, separate runs); active
     # with it 0.070 / 0.064 (seeds 3 / 4), 1.73 / 1.51 times uniform with it (1.41 / 1.06 without, explore13).
-    # The chains still sat on the top centre a quarter of the time (36% without): see target_pixel_samples
+    # The chains still sat on the top centre a quarter of the time (36% without): see target_pixel_samples.
+    # With the decayed rate (explore25; 300 CPU s, seed 3, both arms with it): uniform 0.0443, active 0.0683
+    # (1.54). The bench's error maps show why both lose: through the mirror the rays escape the open room,
+    # and an escaped ray's G-buffers are all zeros (no w_o, no environment radiance), so the network
+    # paints that third of the view a flat grey it cannot learn away instead of the exact black
     mirror_bounces: int = Field(0, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
     # A patch's G-buffers describe its pixels' centres, its area-sampled targets the pixels' areas: at an
