@@ -310,15 +310,14 @@ def _error_maps(scene, seed, models, tracers, vectors, references, source) -> No
     """out/bench-explore-<scene>-<seed>-maps.png, a row per configuration: the reference, each arm's
     measured frame (sRGB, in `RUN`'s order), then each arm's per-pixel DSSIM, white at `MAP_WHITE`, over
     the window-centres SSIM covers (its 11-pixel window leaves out a 5-pixel border, black here)."""
+    bounces = {arm: _arm_config(arm).mirror_bounces for arm in models}
     rows = []
     for tracer, v, reference in zip(tracers, vectors, references, strict=True):
         camera = tracer.scene.spec.camera
-        frames = []
-        for arm, model in models.items():
-            bounces = _arm_config(arm).mirror_bounces
-            frames.append(
-                network_image(model, tracer, camera, source.box, v, SIZE, SIZE, ANTIALIASING, bounces)[0]
-            )
+        frames = [
+            network_image(model, tracer, camera, source.box, v, SIZE, SIZE, ANTIALIASING, bounces[arm])[0]
+            for arm, model in models.items()
+        ]
         encoded = [srgb_encode(torch.from_numpy(image)) for image in (reference, *frames)]
         maps = []
         for frame in encoded[1:]:
