@@ -10,6 +10,10 @@ and the buffers describe the surface it reaches, up to `mirror_bounces` times. `
 of the mirrors' specular colours along the way (the conductor's Fresnel term, `bsdfs.conductor`), so a
 pixel's radiance is `throughput` times the radiance leaving the buffers' surface towards the last mirror:
 a network reads an ordinary surface there and does not have to learn the reflection.
+
+A ray that escapes (directly or through mirrors) has no surface: its buffers are zeros but for `emission`,
+the environment's radiance along it, which is the pixel's exact radiance (over `throughput`). A network
+reading these buffers passes it through rather than learning the background.
 """
 
 from __future__ import annotations
@@ -34,14 +38,15 @@ def is_mirror(material: spec.Material) -> bool:
 
 @dataclass
 class GBuffers:
-    """Per-pixel first-hit attributes (H, W, C) float32; zeros where the ray escaped (`hit` False)."""
+    """Per-pixel first-hit attributes (H, W, C) float32; zeros where the ray escaped (`hit` False), but for
+    `emission`: there the environment's radiance along the escaped ray."""
 
     position: np.ndarray
     normal: np.ndarray  # shading normal
     wo: np.ndarray  # unit direction from the hit back to the camera
     albedo: np.ndarray
     roughness: np.ndarray  # (H, W, 1): GGX alpha, 1 for Lambertian surfaces
-    emission: np.ndarray  # radiance emitted towards the camera (or the last mirror)
+    emission: np.ndarray  # radiance emitted towards the camera (or the last mirror), or the environment's
     hit: np.ndarray  # (H, W) bool
     throughput: np.ndarray  # (H, W, 3): the mirrors' colours the pixel sees the surface through (1: none)
 
@@ -74,6 +79,9 @@ def primary_gbuffers(
             directions = _through_mirrors(tracer, mirrors, rec, directions, throughput)
     h, w = y1 - y0, (x1 - x0) * len(offsets)
     hit = rec.hit[:, None]
+    emission = np.where(hit, rec.emission, 0.0)
+    escaped = np.flatnonzero(~rec.hit)
+    emission[escaped] = tracer.lights.environment_lookup(directions[escaped])[0]
 
     def image(values: np.ndarray) -> np.ndarray:
         return np.where(hit, values, 0.0).reshape(h, w, -1).astype(np.float32)
@@ -84,7 +92,7 @@ def primary_gbuffers(
         wo=image(-directions),
         albedo=image(rec.albedo),
         roughness=image(rec.roughness[:, None]),
-        emission=image(rec.emission),
+        emission=emission.reshape(h, w, 3).astype(np.float32),
         hit=rec.hit.reshape(h, w),
         throughput=throughput.reshape(h, w, 3).astype(np.float32),
     )

@@ -1,5 +1,6 @@
 """Per-pixel network inputs from G-buffers (App. A.5 [code]): position normalised to [0, 1] by the scene's
-box, shading normal as n/2 + 1/2, w_o, albedo, roughness (13 channels), then v repeated per pixel.
+box, shading normal as n/2 + 1/2, w_o, albedo, roughness (13 channels), then v repeated per pixel. A pixel
+whose ray escaped has all 13 zero (`network.escaped`).
 
 One function builds them for training patches and for inference frames, so the channel order cannot
 differ between the two (the authors' validation loader ordered buffers differently from the renderer).
@@ -13,6 +14,7 @@ from workers.render.gbuffer import GBuffers
 
 BUFFER_CHANNELS = 13  # position 3, normal 3, w_o 3, albedo 3, roughness 1
 POSITION = slice(0, 3)
+NORMAL = slice(3, 6)  # n/2 + 1/2 of a unit n: never all zero, so all zero marks an escaped ray
 
 
 def pixel_features(buffers: GBuffers, box: np.ndarray, v: np.ndarray) -> np.ndarray:

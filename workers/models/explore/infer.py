@@ -9,9 +9,9 @@ itself a variable is set through its values; otherwise `params.camera` overrides
 fields.
 
 `query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
-albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, which the network sees as
-zeros as in a frame) and a scene vector per row, normalised: the radiance leaving each surface towards
-w_o. A caller that follows mirrors into its buffers (`mirror_bounces`) multiplies it by their colours.
+albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, whose radiance is their
+`emission`, the environment's along the ray, as in a frame) and a scene vector per row, normalised: the
+radiance leaving each surface towards w_o. A caller that follows mirrors into its buffers (`mirror_bounces`) multiplies it by their colours.
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ Position alone goes through the first layer; each of the `depth` hidden layers t
 concatenated with the raw buffers and v again (skip connections at every layer); a linear layer gives
 log1p of the radiance leaving the first hit. Pixels are independent, so a network trained on patches
 renders any resolution. Emission is passed through [code]: where log1p(E) > 1 the output is E itself,
-elsewhere the prediction plus log1p(E).
+elsewhere the prediction plus log1p(E). A pixel whose ray escaped is its emission alone, the environment's
+exact radiance (`gbuffer.primary_gbuffers`): the network neither learns the background nor trains on it.
 
 Optionally the first layer also reads a multiresolution hash grid of the normalised position (instant-ngp;
 not in the thesis, whose 8 x 512 network trains for ~2 x 10^5 steps): what does not vary with v is
@@ -19,11 +20,16 @@ import torch
 from torch import Tensor, nn
 
 from workers.models.explore.config import ExploreConfig
-from workers.models.explore.features import BUFFER_CHANNELS, POSITION
+from workers.models.explore.features import BUFFER_CHANNELS, NORMAL, POSITION
 from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.nn.mlp import make_activation
 
 BRIGHT_EMITTER = 1.0  # log1p radiance above which an emitter's pixel is its emission alone [code]
+
+
+def escaped(features: Tensor) -> Tensor:
+    """[..., 1] bool: the pixels whose ray escaped, whose buffers `pixel_features` left all zero."""
+    return (features[..., NORMAL] == 0).all(dim=-1, keepdim=True)
 
 
 class PixelGenerator(nn.Module):
@@ -50,7 +56,8 @@ class PixelGenerator(nn.Module):
         return torch.cat([position, self.grid(position)], dim=-1)
 
     def forward(self, features: Tensor, emission: Tensor, encoded: Tensor | None = None) -> Tensor:
-        """log1p radiance [..., 3] of pixels with `features` [..., 13 + K] and first-hit `emission`;
+        """log1p radiance [..., 3] of pixels with `features` [..., 13 + K] and `emission` (first hit's, or
+        the environment's for escaped rays);
         `encoded`: the first layer's input if already computed (`encode_position`), e.g. held constant."""
         if encoded is None:
             encoded = self.encode_position(features[..., POSITION])
@@ -58,7 +65,7 @@ class PixelGenerator(nn.Module):
         for layer in self.hidden:
             h = self.activation(layer(torch.cat([h, features], dim=-1)))
         emitted = torch.log1p(emission)
-        passthrough = (emitted > BRIGHT_EMITTER).any(dim=-1, keepdim=True)
+        passthrough = (emitted > BRIGHT_EMITTER).any(dim=-1, keepdim=True) | escaped(features)
         return torch.where(passthrough, emitted, self.output(h) + emitted)
 
     def layers(self) -> dict[str, nn.Parameter]:
