@@ -11,7 +11,8 @@ fields.
 `query`: radiance for per-pixel G-buffers the caller computed (world position, shading normal, w_o,
 albedo, roughness, emission, and optionally `hit`: rows whose ray escaped, whose radiance is their
 `emission`, the environment's along the ray, as in a frame) and a scene vector per row, normalised: the
-radiance leaving each surface towards w_o. A caller that follows mirrors into its buffers (`mirror_bounces`) multiplies it by their colours.
+radiance leaving each surface towards w_o. A caller that follows mirrors into its buffers
+(`mirror_bounces`) multiplies it by their colours.
 """
 
 from __future__ import annotations
