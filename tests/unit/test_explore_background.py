@@ -1,8 +1,9 @@
-"""Rays that escape, directly or through a mirror, show the environment: their G-buffers carry its radiance
-along the ray, the explore network passes it through whatever its weights, and so frames of any network
-show the background exactly as path tracing does, at every rotation of the environment. Before this, an
-escaped pixel's buffers were all zero and the network painted the background a constant it had to learn
-(a flat grey in the mirror of `mirror_variable` with `mirror_bounces`)."""
+"""Camera rays that escape show the environment: their G-buffers carry its radiance along the ray, the
+explore network passes it through whatever its weights, and so frames of any network show the background
+exactly as path tracing does, at every rotation of the environment. A mirror whose reflection escapes
+emits the environment it reflects. Before this, an escaped pixel's buffers were all zero and the network
+painted the background a constant it had to learn (a flat grey in the mirror of `mirror_variable` with
+`mirror_bounces`, where reflections escaped the room)."""
 
 from __future__ import annotations
 
@@ -74,17 +75,17 @@ def test_escaped_pixels_of_frames_are_the_environment_path_tracing_sees(source, 
     camera = tracer.scene.spec.camera
     pinhole = PinholeCamera(camera, SIZE, SIZE)
     plain, followed = primary_gbuffers(tracer, pinhole), primary_gbuffers(tracer, pinhole, mirror_bounces=1)
-    through_mirror = plain.hit & ~followed.hit
-    assert (~plain.hit).sum() > 20 and through_mirror.sum() > 5  # the sky around the room and in the mirror
+    background = ~plain.hit
+    np.testing.assert_array_equal(followed.hit, plain.hit)
+    in_mirror = (followed.emission != plain.emission).any(axis=-1)  # the mirror, emitting the sky it shows
+    assert background.sum() > 20 and in_mirror.sum() > 5
     frame, _ = network_image(random_network(source), tracer, camera, source.box, v, SIZE, SIZE, 1, 1)
     exact = traced_through_centres(tracer, pinhole)
-    background = ~followed.hit
     assert exact[background].min() > 0.05  # a lit sky, not the black a zero-buffer network could match
     np.testing.assert_allclose(frame[background], exact[background], rtol=1e-4, atol=1e-6)
-    np.testing.assert_allclose(
-        followed.emission[through_mirror] * followed.throughput[through_mirror], exact[through_mirror],
-        rtol=1e-4,
-    )  # fmt: skip
+    # a perfect mirror adds nothing to the sky it reflects: its emission is the pixel's radiance
+    np.testing.assert_array_equal(followed.throughput[in_mirror], 1.0)
+    np.testing.assert_allclose(followed.emission[in_mirror], exact[in_mirror], rtol=1e-4)
 
 
 def test_the_sky_turns_with_its_variable(source):
@@ -97,7 +98,7 @@ def test_the_sky_turns_with_its_variable(source):
 
 
 def test_the_network_passes_escaped_pixels_through_and_learns_nothing_from_them(source):
-    request = PatchRequest(tuple(at(0.3)), 32, 4, 4, seed=3)  # the sky, the room and the mirror
+    request = PatchRequest(tuple(at(0.3)), 32, 4, 4, seed=3)  # the sky around the room, and the room
     patch = source.render(request)
     model = random_network(source)
     prediction = model(patch["features"], patch["emission"])

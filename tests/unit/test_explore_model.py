@@ -222,7 +222,7 @@ def test_patches_and_frames_through_mirrors_demodulate_and_remodulate():
     plain, followed = (s.render(request) for s in sources)
     ratio = plain["target"] / followed["target"].clamp_min(1e-12)
     mirrored = ~torch.isclose(plain["features"], followed["features"]).all(dim=-1)
-    assert mirrored.float().mean() > 0.5
+    assert mirrored.float().mean() > 0.3  # the room in the mirror (the rest of it shows the open front)
     lit = mirrored & (plain["target"] > 0).all(dim=-1)
     torch.testing.assert_close(ratio[lit], torch.full_like(ratio[lit], 0.9))
     torch.testing.assert_close(plain["target"][~mirrored], followed["target"][~mirrored])

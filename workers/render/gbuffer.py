@@ -11,9 +11,10 @@ of the mirrors' specular colours along the way (the conductor's Fresnel term, `b
 pixel's radiance is `throughput` times the radiance leaving the buffers' surface towards the last mirror:
 a network reads an ordinary surface there and does not have to learn the reflection.
 
-A ray that escapes (directly or through mirrors) has no surface: its buffers are zeros but for `emission`,
-the environment's radiance along it, which is the pixel's exact radiance (over `throughput`). A network
-reading these buffers passes it through rather than learning the background.
+A camera ray that escapes has no surface: its buffers are zeros but for `emission`, the environment's
+radiance along it, which is the pixel's exact radiance. A network reading these buffers passes it through
+rather than learning the background. (A mirror's reflection that escapes leaves the mirror in the
+buffers: `_through_mirrors`.)
 """
 
 from __future__ import annotations
@@ -102,9 +103,12 @@ def _through_mirrors(
     tracer: PathTracer, mirrors: np.ndarray, rec: SurfaceRecords, directions: np.ndarray,
     throughput: np.ndarray,
 ) -> np.ndarray:  # fmt: skip
-    """Replace, in place, the records of rays that hit a mirror (`mirrors[material id]`, not emitting) by
-    those of their reflection about the shading normal, multiplying `throughput` by the mirror's colour;
-    the rays' new directions."""
+    """Replace, in place, the records of rays that hit a mirror (`mirrors[material id]`, not emitting) and
+    whose reflection about the shading normal reaches a surface by that surface's, multiplying `throughput`
+    by the mirror's colour; the rays' new directions. A reflection that escapes keeps the mirror as the
+    pixel's surface, emitting the environment it reflects (its colour times the radiance along the
+    reflection): what a near-mirror's GGX tail adds there (a few thousandths where `mirror_variable`'s
+    mirror shows the room's open front) is the network's to learn from the mirror's own buffers."""
     mirror = rec.hit & mirrors[np.maximum(rec.material_id, 0)] & ~rec.emission.any(axis=1)
     rows = np.flatnonzero(mirror)
     if len(rows) == 0:
@@ -112,10 +116,13 @@ def _through_mirrors(
     d, n = directions[rows], rec.shading_normal[rows]
     reflected = d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n  # w_r = d - 2 (d . n) n
     origins = tracer.offset(rec.position[rows], rec.geometric_normal[rows], reflected)
-    throughput[rows] *= rec.albedo[rows]
     seen = tracer.first_hits(origins, reflected)
+    escaped = rows[~seen.hit]
+    rec.emission[escaped] = rec.albedo[escaped] * tracer.lights.environment_lookup(reflected[~seen.hit])[0]
+    rows, reflected = rows[seen.hit], reflected[seen.hit]
+    throughput[rows] *= rec.albedo[rows]
     for field in fields(rec):
-        getattr(rec, field.name)[rows] = getattr(seen, field.name)
+        getattr(rec, field.name)[rows] = getattr(seen, field.name)[seen.hit]
     directions = directions.copy()
     directions[rows] = reflected
     return directions
