@@ -54,13 +54,17 @@ def test_the_uniform_baseline_is_planned_at_twice_the_training_time():
 
 def test_mirrors_are_reported_learned_or_followed():
     scene = SceneRef(get_builtin("mirror_variable"))
-    learned = {item.name: item for item in KIND.plan(scene, CONFIG).items}["mirrors"]
+    learned = KIND.plan(scene, KIND.resolve_config("quick", {"mirror_bounces": 0}))
+    learned = {item.name: item for item in learned.items}["mirrors"]
     assert learned.choice == "learned by the network" and learned.reason.startswith("mirror:")
-    followed = KIND.plan(scene, KIND.resolve_config("quick", {"mirror_bounces": 1}))
+    followed = KIND.plan(scene, CONFIG)  # the default follows one bounce
     assert {item.name: item.choice for item in followed.items}["mirrors"].startswith("followed")
     assert "mirrors" not in {
         item.name for item in KIND.plan(SceneRef(get_builtin("cornell_moving_light")), CONFIG).items
     }
+    # a sphere whose roughness variable reaches a mirror's finish is followed at that end
+    varied = {item.name: item for item in KIND.plan(SceneRef(get_builtin("cornell_variable")), CONFIG).items}
+    assert varied["mirrors"].reason.startswith("sphere:")
 
 
 def test_an_uploaded_scene_plans_and_renders_patches_from_its_stored_files(tmp_path, monkeypatch):

@@ -487,10 +487,12 @@ def mirror_variable() -> SceneSpec:
     """A box moving in front of a mirror in a Cornell room, seen at an angle (thesis Fig. 5.6): glossy
     reflections and shadows of a moving object, and the light's x; 3 dimensions.
 
-    The mirror shows the room's open front: black (below 1% linear) in a third of the window centres SSIM
-    weighs in `bench_explore`'s 32^2 frames, where every network trained there leaves a dim haze of a few
-    thousandths, small in the log1p training loss and magnified by sRGB; that haze is most of both arms'
-    DSSIM there (the bench's error maps, explore25)."""
+    The mirror shows the room's open front: a third of the window centres SSIM weighs in `bench_explore`'s
+    32^2 frames, dark but for what the mirror's GGX tail (alpha 0.01) reflects of the lit room, 1-5
+    thousandths of linear radiance, strongest around the light's reflection. sRGB magnifies errors there
+    (12.92x below 0.0031): networks that learned the reflection had most of their DSSIM there (the bench's
+    error maps, explore25), and G-buffers that follow the mirror must keep the mirror where its
+    reflection escapes, so the network can learn that glow (`gbuffer._through_mirrors`, explore26)."""
     walls = [o for o in cornell_walls() if o.name != "back"]
     mirror = SceneObject(
         name="mirror",

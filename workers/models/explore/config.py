@@ -98,16 +98,19 @@ class ExploreConfig(TrainedKindConfig):
     resolution_every: int = Field(200, ge=1, description="iterations between resolution steps")
     # The hybrid of thesis Fig. 5.10: G-buffers traced through up to this many mirrors (near-smooth
     # conductors, `workers.render.gbuffer`), so the network learns the surfaces a mirror shows rather than
-    # the reflection; 0 learns every path, as the thesis's method does. It did not pay on mirror_variable,
-    # whose mirror shows plain walls (explore14; bench_explore 300 CPU s, 8192-spp references, averaged
-    # DSSIM over the second half): uniform 0.040 with it, 0.037 without (seed 3, separate runs); active
-    # with it 0.070 / 0.064 (seeds 3 / 4), 1.73 / 1.51 times uniform with it (1.41 / 1.06 without, explore13).
-    # The chains still sat on the top centre a quarter of the time (36% without): see target_pixel_samples.
-    # With the decayed rate (explore25; 300 CPU s, seed 3, both arms with it): uniform 0.0443, active 0.0683
-    # (1.54). The bench's error maps show why both lose: through the mirror the rays escape the open room,
-    # and an escaped ray's G-buffers are all zeros (no w_o, no environment radiance), so the network
-    # paints that third of the view a flat grey it cannot learn away instead of the exact black
-    mirror_bounces: int = Field(0, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
+    # the reflection; 0 learns every path, as the thesis's main method does. Until explore26 it did not pay
+    # on mirror_variable (uniform 0.0443, active 0.0683 against about 0.031 and 0.046 without; 300 CPU s,
+    # seed 3, averaged DSSIM at the end): a reflection that escaped the open room left all-zero buffers,
+    # which the network painted a flat grey. Now a camera ray that escapes shows the environment exactly
+    # and a mirror whose reflection escapes stays in the buffers, so the network learns what its GGX tail
+    # adds there (1-5 thousandths, the dark third of the view that dominated both arms' DSSIM). bench_explore
+    # 300 CPU s, averaged DSSIM at the end, active / uniform, both arms with it (explore26): mirror_variable
+    # seed 3 0.0195 / 0.0209 (0.94; 1.00 over the second half), seed 4 0.0280 / 0.0221 (1.27; 1.17);
+    # cornell_variable, whose sphere is a mirror only below roughness 0.05, seed 4 0.0157 / 0.0204 (0.77;
+    # 0.76 without, explore24). On the mirror scene (seed 3) uniform's DSSIM falls by a third (0.031 to
+    # 0.021) and active's by more than half (0.046 to 0.0195), so it is the default; whether the chains beat
+    # uniform there still depends on the seed
+    mirror_bounces: int = Field(1, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
     # A patch's G-buffers describe its pixels' centres, its area-sampled targets the pixels' areas: at an
     # edge (the light's, which moves with v) the target mixes surfaces the buffers do not show, an error

@@ -20,6 +20,7 @@ from workers.render.variable_tracer import VariableTracer
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.errors import SceneError
 from workers.scene.reference import SceneRef
+from workers.scene.spec import RoughnessVariable, SceneSpec
 from workers.scene.variable_scene import CompiledVariableScene
 from workers.scene.variables import dimension_labels, variable_slices
 
@@ -57,6 +58,20 @@ def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: s
     return bool(difference > SEEN_DIFFERENCE * max(0.5 * (images[0].mean() + images[1].mean()), 1e-12))
 
 
+def mirror_objects(spec: SceneSpec) -> list[str]:
+    """The objects whose material is a mirror (`gbuffer.is_mirror`) as given or at the smooth end of a
+    roughness variable (cornell_variable's sphere below roughness 0.05)."""
+    smoothest = {}
+    for variable in spec.variables:
+        if isinstance(variable, RoughnessVariable):
+            smoothest[variable.material] = min(variable.min, variable.max)
+    materials = {
+        name: m.model_copy(update={"roughness": smoothest[name]}) if name in smoothest else m
+        for name, m in spec.materials.items()
+    }
+    return [o.name for o in spec.objects if is_mirror(materials[o.material])]
+
+
 def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
     spec = scene.spec
     if not spec.variables:
@@ -84,7 +99,7 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
             reason=f"no variable moves {', '.join(static)}",
         )
     )
-    mirrors = [o.name for o in spec.objects if is_mirror(spec.materials[o.material])]
+    mirrors = mirror_objects(spec)
     if mirrors:
         items.append(
             PlanItem(
