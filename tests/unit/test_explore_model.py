@@ -167,7 +167,8 @@ def test_the_targets_are_each_patchs_loss_times_its_adam_step_of_the_layers():
         ).mean().backward()
         adam.step()
     adam.zero_grad(set_to_none=True)
-    explorer = Explorer(QUICK.model_copy(update={"loss_ssim_weight": 1.0}), K, model, 0)
+    log1p = {"loss_ssim_weight": 1.0, "target_space": "log1p"}  # f on the training loss
+    explorer = Explorer(QUICK.model_copy(update=log1p), K, model, 0)
     assert np.allclose(
         explorer.targets(patches),
         [float(patch_losses(model, {k: v[None] for k, v in p.items()}, 2.0)[0].detach()) for p in patches],
