@@ -241,7 +241,8 @@ class ExploreConfig(TrainedKindConfig):
     # With the mirror followed into the G-buffers (mirror_bounces, explore26; same bench, averaged DSSIM at
     # the end, active over uniform, display / log1p): mirror_variable seed 3 0.89 / 0.94 and seed 4 0.92 /
     # 1.27 (uniform from separate runs); cornell_variable seed 3 0.61 and seed 4 0.84 / 0.77 (same runs);
-    # mirror_room_variable seed 3 0.99 / 1.02 (same run). The chains then beat uniform on every scene and
+    # mirror_room_variable seed 3 0.99 / 1.02 (same run). Seed 5 with both defaults: mirror_variable 0.89
+    # (1.02 over the second half), cornell_variable 0.77. The chains then beat uniform on every scene and
     # seed measured, so it is the default; in log1p radiance f no longer sees the glow a near-mirror adds
     # to the dark third of mirror_variable's view, where active's error lay on seed 4 (the error maps)
     # The training loss's SSIM term on the displayed images too (its L1 still on log1p; both arms, f the
