@@ -107,9 +107,9 @@ class ExploreConfig(TrainedKindConfig):
     # 300 CPU s, averaged DSSIM at the end, active / uniform, both arms with it (explore26): mirror_variable
     # seed 3 0.0195 / 0.0209 (0.94; 1.00 over the second half), seed 4 0.0280 / 0.0221 (1.27; 1.17);
     # cornell_variable, whose sphere is a mirror only below roughness 0.05, seed 4 0.0157 / 0.0204 (0.77;
-    # 0.76 without, explore24). On the mirror scene (seed 3) uniform's DSSIM falls by a third (0.031 to
-    # 0.021) and active's by more than half (0.046 to 0.0195), so it is the default; whether the chains beat
-    # uniform there still depends on the seed
+    # 0.68-0.80 over seeds 3-5 without, explore24). On the mirror scene (seed 3) uniform's DSSIM falls by a
+    # third (0.031 to 0.021) and active's by more than half (0.046 to 0.0195), so it is the default; with f
+    # on log1p radiance whether the chains beat uniform there depended on the seed (see target_space)
     mirror_bounces: int = Field(1, ge=0, le=8, description="mirrors the G-buffers follow (0: none)")
     spp: int = Field(32, ge=1, le=1 << 16, description="path samples per pixel of a training patch")
     # A patch's G-buffers describe its pixels' centres, its area-sampled targets the pixels' areas: at an
