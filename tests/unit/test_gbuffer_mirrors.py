@@ -80,6 +80,18 @@ def test_rough_conductors_are_not_followed():
     np.testing.assert_array_equal(followed.position, primary_gbuffers(tracer, camera).position)
 
 
+def test_a_mirror_whose_reflection_escaped_is_not_traced_again(tracer, camera, monkeypatch):
+    """One flat mirror: after its reflection, no ray meets a mirror again, whatever `mirror_bounces`."""
+    once = primary_gbuffers(tracer, camera, mirror_bounces=1)
+    traced = []
+    first_hits = tracer.first_hits
+    monkeypatch.setattr(tracer, "first_hits", lambda o, d: traced.append(len(o)) or first_hits(o, d))
+    thrice = primary_gbuffers(tracer, camera, mirror_bounces=3)
+    assert len(traced) == 2, traced  # the camera's rays, then the mirror's reflections
+    for name in NAMES:
+        np.testing.assert_array_equal(getattr(thrice, name), getattr(once, name), err_msg=name)
+
+
 def test_a_window_is_the_crop_of_the_full_frame_through_mirrors(tracer, camera):
     window = (3, 2, 17, 15)
     full, crop = (primary_gbuffers(tracer, camera, w, mirror_bounces=2) for w in (None, window))

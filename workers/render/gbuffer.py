@@ -76,8 +76,9 @@ def primary_gbuffers(
     throughput = np.ones((len(directions), 3))
     if mirror_bounces:
         mirrors = np.array([is_mirror(m) for m in tracer.scene.materials])  # by material id
+        settled = np.zeros(len(directions), bool)
         for _ in range(mirror_bounces):
-            directions = _through_mirrors(tracer, mirrors, rec, directions, throughput)
+            directions = _through_mirrors(tracer, mirrors, rec, directions, throughput, settled)
     h, w = y1 - y0, (x1 - x0) * len(offsets)
     hit = rec.hit[:, None]
     emission = np.where(hit, rec.emission, 0.0)
@@ -101,15 +102,16 @@ def primary_gbuffers(
 
 def _through_mirrors(
     tracer: PathTracer, mirrors: np.ndarray, rec: SurfaceRecords, directions: np.ndarray,
-    throughput: np.ndarray,
+    throughput: np.ndarray, settled: np.ndarray,
 ) -> np.ndarray:  # fmt: skip
-    """Replace, in place, the records of rays that hit a mirror (`mirrors[material id]`, not emitting) and
-    whose reflection about the shading normal reaches a surface by that surface's, multiplying `throughput`
-    by the mirror's colour; the rays' new directions. A reflection that escapes keeps the mirror as the
-    pixel's surface, emitting the environment it reflects (its colour times the radiance along the
-    reflection): what a near-mirror's GGX tail adds there (a few thousandths where `mirror_variable`'s
-    mirror shows the room's open front) is the network's to learn from the mirror's own buffers."""
-    mirror = rec.hit & mirrors[np.maximum(rec.material_id, 0)] & ~rec.emission.any(axis=1)
+    """Replace, in place, the records of rays that hit a mirror (`mirrors[material id]`, not emitting, not
+    `settled`) and whose reflection about the shading normal reaches a surface by that surface's,
+    multiplying `throughput` by the mirror's colour; the rays' new directions. A reflection that escapes
+    keeps the mirror as the pixel's surface, emitting the environment it reflects (its colour times the
+    radiance along the reflection): what a near-mirror's GGX tail adds there (a few thousandths where
+    `mirror_variable`'s mirror shows the room's open front) is the network's to learn from the mirror's
+    own buffers. Such rays are marked `settled`, so later bounces do not trace them again."""
+    mirror = rec.hit & mirrors[np.maximum(rec.material_id, 0)] & ~rec.emission.any(axis=1) & ~settled
     rows = np.flatnonzero(mirror)
     if len(rows) == 0:
         return directions
@@ -118,6 +120,7 @@ def _through_mirrors(
     origins = tracer.offset(rec.position[rows], rec.geometric_normal[rows], reflected)
     seen = tracer.first_hits(origins, reflected)
     escaped = rows[~seen.hit]
+    settled[escaped] = True
     rec.emission[escaped] = rec.albedo[escaped] * tracer.lights.environment_lookup(reflected[~seen.hit])[0]
     rows, reflected = rows[seen.hit], reflected[seen.hit]
     throughput[rows] *= rec.albedo[rows]
