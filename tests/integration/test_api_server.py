@@ -20,6 +20,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+import ray
 import uvicorn
 from sqlalchemy import create_engine, text
 
@@ -162,7 +163,9 @@ def events(
         assert response.status_code == 200, response.read()
         assert response.headers["content-type"].startswith("text/event-stream")
         for line in response.iter_lines():  # a keep-alive comment arrives at least every 15 s
-            assert time.monotonic() < deadline, f"no final state within {timeout} s; events so far: {parsed}"
+            assert time.monotonic() < deadline, (
+                f"no final state within {timeout} s; events so far: {parsed}; {ray_state()}"
+            )
             if line == "":
                 if "data" in fields:
                     event = json.loads(fields["data"])
@@ -173,6 +176,18 @@ def events(
                 name, _, value = line.partition(":")
                 fields[name] = value.removeprefix(" ")
     return parsed
+
+
+def ray_state() -> str:
+    """What this process's Ray cluster holds, for the message of a test whose job made no progress: a
+    job waits without end for sampler CPUs that something earlier kept."""
+    if not ray.is_initialized():
+        return "Ray is not initialised in this process"
+    reservations = {k: (v["state"], v["bundles"]) for k, v in ray.util.placement_group_table().items()}
+    return (
+        f"Ray resources {ray.cluster_resources()}, available {ray.available_resources()}, "
+        f"placement groups {reservations}"
+    )
 
 
 def wait_for(client: httpx.Client, job_id: str, states: set[str], timeout: float = 180) -> dict:

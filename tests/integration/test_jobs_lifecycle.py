@@ -4,12 +4,21 @@ failure, pagination and filters, and resuming an event stream with Last-Event-ID
 from __future__ import annotations
 
 import json
+import time
 
 import pytest
 import ray
 
 from tests.integration import test_api_server as api
-from tests.integration.test_api_server import FINAL, QUICK_RENDER, events, problem_of, submit, wait_for
+from tests.integration.test_api_server import (
+    FINAL,
+    QUICK_RENDER,
+    events,
+    problem_of,
+    ray_state,
+    submit,
+    wait_for,
+)
 from workers.driver.jobs import NAMESPACE, actor_name
 from workers.scene.builtin import get_builtin
 
@@ -17,10 +26,12 @@ database, server, client = api.database, api.server, api.client  # fixtures
 LONG_RENDER = {**QUICK_RENDER, "config": {"spp": 1 << 16}, "force": True}  # many passes: runs for minutes
 
 
-def first_event(client, job_id: str, kind: str) -> dict:
+def first_event(client, job_id: str, kind: str, timeout: float = 240) -> dict:
     """Read the job's stream until its first event of `kind` (then drop the connection)."""
+    deadline = time.monotonic() + timeout
     with client.stream("GET", f"/v1/jobs/{job_id}/events", timeout=120) as response:
-        for line in response.iter_lines():
+        for line in response.iter_lines():  # a keep-alive comment arrives at least every 15 s
+            assert time.monotonic() < deadline, f"no {kind} event within {timeout} s; {ray_state()}"
             if line.startswith("data:"):
                 event = json.loads(line.removeprefix("data:"))
                 assert event["type"] == kind or event["data"].get("state") not in FINAL, event

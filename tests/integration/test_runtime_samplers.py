@@ -24,6 +24,21 @@ def assert_same_sequence(actual, expected) -> None:
         assert all(torch.equal(a[k], b[k]) for k in a), f"batch {index} differs"
 
 
+def kill_and_wait(actor: ray.actor.ActorHandle, deadline_s: float = 60.0) -> None:
+    """Kill `actor` and return once Ray reports it dead: `ray.kill` is asynchronous, and on a loaded
+    machine a request sent right after it could still be answered by the dying actor, so no replacement
+    would be needed and the test would measure the machine's load (seen in CI beside a benchmark)."""
+    ray.kill(actor, no_restart=True)
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        try:
+            ray.get(actor.produced.remote(), timeout=deadline_s)
+        except ray.exceptions.RayActorError:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the killed actor still answered after {deadline_s} s")
+
+
 def test_actors_produce_the_in_process_batches_in_order(ray_cluster):
     with SamplerPool(SPEC, actors=2, max_in_flight=3) as pool:
         batches = [next(pool) for _ in range(10)]
@@ -48,7 +63,7 @@ def test_a_killed_sampler_is_replaced_and_the_sequence_is_unchanged(ray_cluster)
     with SamplerPool(SPEC, actors=2, max_in_flight=4) as pool:
         batches = [next(pool) for _ in range(3)]
         victim = pool.actors[0]
-        ray.kill(victim, no_restart=True)
+        kill_and_wait(victim)
         batches += [next(pool) for _ in range(9)]
         assert pool.replacements == 1
         assert victim not in pool.actors
@@ -82,7 +97,7 @@ def test_training_survives_a_killed_sampler_with_identical_results(ray_cluster):
 
         def kill_a_sampler(event: Progress) -> None:
             if event.step == 4:
-                ray.kill(pool.actors[1], no_restart=True)
+                kill_and_wait(pool.actors[1])
 
         model, losses = fit(pool, kill_a_sampler)
         assert pool.replacements == 1
