@@ -47,7 +47,14 @@ class ExploreConfig(TrainedKindConfig):
     # 3: 0.0306, 0.0329, 0.0275, 0.0299 every 150 s), as the thesis's uniform does (Table 5.3), while
     # active's keeps falling (0.0443, 0.0384, 0.0305, 0.0289). At 1800 CPU s (seed 4): 0.96 at the end
     # (0.0257 / 0.0267; MAPE 0.94), 1.09 over the second half: uniform stops at ~0.027 from 900 s, and
-    # active reaches about that level rather than falling past it
+    # active reaches about that level rather than falling past it.
+    # All of the above predate `mirror_bounces` = 1 and `target_space` = display. With them, at 900 CPU s
+    # (explore27, seeds 3 / 4, averaged DSSIM at the end, active / uniform): mirror_variable 0.0200 /
+    # 0.0225 (0.89) and 0.0163 / 0.0196 (0.83), 0.86 / 0.83 over the second half, MAPE 0.72 / 0.74:
+    # uniform's DSSIM stays at 0.020-0.024 from 150 s on and its MAPE rises (seed 3: 0.100 to 0.117, the
+    # glow around the light's reflection in the mirror, the error maps' brightest spot), while active's
+    # keeps falling; cornell_variable 0.0117 / 0.0204 (0.58) and 0.0103 / 0.0173 (0.60), 0.61 / 0.66
+    # over the second half, MAPE 0.75 / 0.73
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
