@@ -179,8 +179,9 @@ def events(
 
 
 def ray_state() -> str:
-    """What this process's Ray cluster holds, for the message of a test whose job made no progress: a
-    job waits without end for sampler CPUs that something earlier kept."""
+    """What this process's Ray cluster holds, for the message of a test whose job made no progress (one
+    CI run beside a benchmark had three jobs in a row wait 240-600 s without a progress event; a job
+    waiting for sampler CPUs shows here what holds them)."""
     if not ray.is_initialized():
         return "Ray is not initialised in this process"
     reservations = {k: (v["state"], v["bundles"]) for k, v in ray.util.placement_group_table().items()}
