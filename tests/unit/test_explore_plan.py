@@ -52,6 +52,17 @@ def test_the_uniform_baseline_is_planned_at_twice_the_training_time():
     assert compared.estimated_seconds == pytest.approx(2 * alone.estimated_seconds)
 
 
+def test_the_estimate_counts_the_renders_that_reuse_leaves():
+    """p_s decides how many steps render patches: the paper's beta (p_s 0.99) renders a tenth as often as
+    the default's (0.9), and a beta of 30 (p_s 1 - 1e-13) only in the bootstrap."""
+    scene = SceneRef(get_builtin("cornell_moving_light"))
+    seconds = {
+        beta: KIND.plan(scene, KIND.resolve_config("default", {"reuse_beta": beta})).estimated_seconds
+        for beta in (2.2, 4.6, 30.0)
+    }
+    assert seconds[2.2] > seconds[4.6] > seconds[30.0]
+
+
 def test_mirrors_are_reported_learned_or_followed():
     scene = SceneRef(get_builtin("mirror_variable"))
     learned = KIND.plan(scene, KIND.resolve_config("quick", {"mirror_bounces": 0}))

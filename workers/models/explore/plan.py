@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from workers.models.explore.config import ExploreConfig
+from workers.models.explore.reuse import reuse_probability
 from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import is_mirror, primary_gbuffers
 from workers.render.render import RenderSettings, render
@@ -27,12 +28,16 @@ from workers.scene.variables import dimension_labels, variable_slices
 PROBE_SIZE = 16
 PROBE_SPP = 4
 SEEN_DIFFERENCE = 0.02  # relative mean absolute difference of the probe renders
-# Rough costs on the shared, loaded 2-core CPU: 128 `quick` patches (65k paths of depth 3) rendered in 2.7 s;
-# a training step of 8 8^2 patches through 32 x 2 took 15 ms, mostly fixed overhead; the network's
-# share grows with pixels x width x layers (128 x 4 on 16^2 patches: about 60 ms a step).
-SECONDS_PER_PATH_SEGMENT = 1.4e-5
-SECONDS_PER_STEP = 0.015
-SECONDS_PER_PIXEL_LAYER = 2e-8  # per pixel, per layer of width 128, forward and backward
+# CPU costs on this 2-core machine, one thread (explore27): a `default` patch (16^2 at 32 spp, depth 5)
+# rendered in 18 ms on cornell_variable, 15 ms on mirror_variable, a `quick` one (8^2 at 8 spp, depth 3)
+# in 4-7 ms, so about 6 ms a patch (G-buffers, the scene at v) plus 3e-7 s a path segment; an Adam step
+# of the default 128 x 4 network on 12 patches of 16^2 took 31 ms, 2e-6 s a pixel and layer of width
+# 128, the quick 32 x 2 on 6 of 8^2 1 ms. (Until explore27 the constants were 1.4e-5 s a segment, no
+# per-patch cost and 2e-8 s a pixel-layer: errors that cancelled while p_s was 0.99.)
+SECONDS_PER_PATCH = 6e-3
+SECONDS_PER_PATH_SEGMENT = 3e-7
+SECONDS_PER_STEP = 0.005
+SECONDS_PER_PIXEL_LAYER = 2e-6  # per pixel, per layer of width 128, forward and backward
 
 
 def visible_effect(tracer: VariableTracer, scene: CompiledVariableScene, name: str, where: slice) -> bool:
@@ -135,10 +140,13 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
         )
     )
     patches = config.chains * config.patch**2
-    render_seconds = patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT
+    render_seconds = (
+        config.chains * SECONDS_PER_PATCH + patches * config.spp * config.max_depth * SECONDS_PER_PATH_SEGMENT
+    )
     # a generation renders the chains' patches and evaluates f on two patches per chain; reuse is one
-    # step (p_s is about 0.99 after the bootstrap, App. A.7)
-    generation_share = min(0.02 + config.bootstrap / max(config.train.steps, 1), 1.0)
+    # step, with probability p_s after the bootstrap (Eq. 5.4; taken at equal losses)
+    generated = 1 - reuse_probability(0.0, 0.0, config.reuse_beta)
+    generation_share = min(generated + config.bootstrap / max(config.train.steps, 1), 1.0)
     network = SECONDS_PER_PIXEL_LAYER * patches * (config.mlp.depth + 1) * config.mlp.width / 128
     step = SECONDS_PER_STEP + network
     seconds = config.train.steps * (generation_share * (render_seconds + 2 * network) + step)
