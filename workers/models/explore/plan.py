@@ -32,9 +32,10 @@ SEEN_DIFFERENCE = 0.02  # relative mean absolute difference of the probe renders
 # rendered in 18 ms on cornell_variable, 15 ms on mirror_variable, a `quick` one (8^2 at 8 spp, depth 3)
 # in 4-7 ms, so about 6 ms a patch (G-buffers, the scene at v) plus 3e-7 s a path segment; an Adam step
 # of the default 128 x 4 network on 12 patches of 16^2 took 31 ms, 2e-6 s a pixel and layer of width
-# 128, the quick 32 x 2 on 6 of 8^2 1 ms, while a quick job's 1000 steps took 3.6 s in all (the explorer's
-# own work, about 5 ms a step, is the rest). (Until explore27 the constants were 1.4e-5 s a segment, no
-# per-patch cost and 2e-8 s a pixel-layer: errors that cancelled while p_s was 0.99.)
+# 128, the quick 32 x 2 on 6 of 8^2 1 ms, while a quick job's 1000 steps took 3.6 s in all: the explorer's
+# own work is most of a small step (SECONDS_PER_STEP rounds it up to 5 ms). (Until explore27 the
+# constants were 1.4e-5 s a segment, no per-patch cost and 2e-8 s a pixel-layer: errors that cancelled
+# while p_s was 0.99.)
 SECONDS_PER_PATCH = 6e-3
 SECONDS_PER_PATH_SEGMENT = 3e-7
 SECONDS_PER_STEP = 0.005
