@@ -54,8 +54,9 @@ class ExploreConfig(TrainedKindConfig):
     # 0.0225 (0.89) and 0.0163 / 0.0196 (0.83), 0.86 / 0.83 over the second half, MAPE 0.72 / 0.74:
     # uniform's DSSIM stays at 0.020-0.024 from 150 s on and its MAPE rises (seed 3: 0.100 to 0.117, the
     # glow around the light's reflection in the mirror, the error maps' brightest spot), while active's
-    # keeps falling; cornell_variable 0.0117 / 0.0204 (0.58) and 0.0103 / 0.0173 (0.60), 0.61 / 0.66
-    # over the second half, MAPE 0.75 / 0.73
+    # keeps falling; seed 5 0.0171 / 0.0186 (0.92; 1.01 over the second half, MAPE 0.87).
+    # cornell_variable 0.0117 / 0.0204 (0.58) and 0.0103 / 0.0173 (0.60), 0.61 / 0.66 over the second
+    # half, MAPE 0.75 / 0.73
     exploration: Literal["active", "uniform"] = Field(
         ACTIVE, description="active: greedy chains on loss x Adam step (Sec. 5.4); uniform: the baseline"
     )
