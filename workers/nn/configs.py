@@ -11,7 +11,7 @@ network's description round-trips through JSON (job submissions, artifact manife
   derives with `build_on(geometry)`. `HashGridConfig` is a table plus its own lattice.
 - `MLPConfig` is a fully connected network of `width` x `depth` hidden units.
 
-`extra="forbid"` makes a misspelt key an error naming it.
+Each is a `StrictModel`: a misspelt key is an error naming it.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from workers.nn.encodings.composite import SharedInputsEncoding
 from workers.nn.encodings.fourier import FourierFeatures, octave_frequencies
@@ -28,15 +28,12 @@ from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.one_blob import OneBlob
 from workers.nn.encodings.spherical_harmonics import MAX_DEGREE, SphericalHarmonics
 from workers.nn.mlp import ACTIVATIONS, MLP
+from workers.scene.strict import StrictModel
 
 Activation = Literal[tuple(ACTIVATIONS)]  # the names `workers.nn.mlp.make_activation` knows
 
 
-class _Part(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class HashTableConfig(_Part):
+class HashTableConfig(StrictModel):
     """The feature table of a multiresolution hash grid (instant-ngp): F features per vertex and T = 2^k
     rows per level; levels with more vertices than T hash into it."""
 
@@ -82,7 +79,7 @@ class HashGridConfig(HashTableConfig):
         )
 
 
-class SphericalHarmonicsConfig(_Part):
+class SphericalHarmonicsConfig(StrictModel):
     """Real spherical harmonics of directions up to `degree`: (degree + 1)^2 features."""
 
     type: Literal["spherical_harmonics"] = "spherical_harmonics"
@@ -94,7 +91,7 @@ class SphericalHarmonicsConfig(_Part):
         return SphericalHarmonics(self.degree)
 
 
-class FrequencyConfig(_Part):
+class FrequencyConfig(StrictModel):
     """NeRF's positional encoding: sin and cos of base * 2^k x_i for k < n_frequencies (and x itself)."""
 
     type: Literal["frequency"] = "frequency"
@@ -108,7 +105,7 @@ class FrequencyConfig(_Part):
         )
 
 
-class OneBlobConfig(_Part):
+class OneBlobConfig(StrictModel):
     """A soft one-hot of each coordinate in [0, 1] over `n_bins` bins (Müller et al. 2019)."""
 
     type: Literal["one_blob"] = "one_blob"
@@ -118,7 +115,7 @@ class OneBlobConfig(_Part):
         return OneBlob(n_input_dims, self.n_bins)
 
 
-class SharedInputsConfig(_Part):
+class SharedInputsConfig(StrictModel):
     """One `encoding` shared by `n_inputs` points packed side by side (Weier et al. 2023, Sec. 4.3)."""
 
     type: Literal["shared_inputs"] = "shared_inputs"
@@ -140,7 +137,7 @@ EncodingConfig = Annotated[
 SharedInputsConfig.model_rebuild()
 
 
-class MLPConfig(_Part):
+class MLPConfig(StrictModel):
     """`depth` hidden layers of `width` units with `activation` (He-initialised), then a linear output
     layer and `output_activation`."""
 

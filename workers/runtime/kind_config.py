@@ -1,6 +1,6 @@
 """What every kind's config has, under the same names: how many sampler actors, GPUs, and, for a kind that
 trains, the training loop and the report's sample counts. A kind's config subclasses one of these and adds
-its method's knobs; `extra="forbid"` makes a misspelt field an error naming it.
+its method's knobs; every part is a `StrictModel`, so a misspelt key at any depth is an error naming it.
 
 A nested part given as a dict (in a preset, an override or the constructor) changes only the keys it
 names in the kind's default for that field: `{"grid": {"log2_table_size": 14}}` keeps the kind's grid
@@ -11,15 +11,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
 
 from workers.runtime.contract import merge_nested
 from workers.runtime.training import TrainConfig
+from workers.scene.strict import StrictModel
 
 
-class KindConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
+class KindConfig(StrictModel):
     samplers: int = Field(1, ge=0, le=1024, description="Ray sampler actors; 0 makes batches in the driver")
     num_gpus: float = Field(
         0, ge=0, le=64, description="GPUs for the driver (used when the cluster has them)"

@@ -25,6 +25,7 @@ from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.samplers import BatchStream
 from workers.runtime.sources import Batch
+from workers.scene.strict import StrictModel
 
 LossFunction = Callable[[torch.nn.Module, Batch], torch.Tensor]
 MAIN_PHASE = "main"  # the one phase of `train`
@@ -57,7 +58,7 @@ class TrainingDiverged(RuntimeError):
         self.tensor = tensor
 
 
-class Schedule(BaseModel):
+class Schedule(StrictModel):
     """Learning rate against step: linear warmup, then constant, exponential decay or cosine decay."""
 
     lr: float = Field(1e-3, gt=0)
@@ -80,7 +81,7 @@ class Schedule(BaseModel):
         return self.lr
 
 
-class OptimizerConfig(BaseModel):
+class OptimizerConfig(StrictModel):
     """One Adam's knobs: its learning-rate schedule, moment decays, weight decay and gradient clipping."""
 
     schedule: Schedule = Schedule()
@@ -102,7 +103,7 @@ class TrainConfig(OptimizerConfig):
     """
 
     steps: int = Field(1000, ge=1, le=10_000_000)
-    optimizers: dict[str, OptimizerConfig] = {}
+    optimizers: dict[str, OptimizerConfig] = Field(default_factory=dict)
     mixed_precision: bool = True  # honoured on CUDA only; CPU runs stay in float32
     checkpoint_every: int = Field(500, ge=1, le=10_000_000)
     progress_every: int = Field(10, ge=1, le=10_000_000)

@@ -16,7 +16,6 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
-    BaseModel,
     ConfigDict,
     Field,
     FiniteFloat,
@@ -24,6 +23,8 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+
+from workers.scene.strict import StrictModel
 
 Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 NonNegRGB = tuple[
@@ -39,10 +40,10 @@ Albedo = tuple[
 Roughness = Annotated[FiniteFloat, Field(ge=0, le=1, description="GGX alpha")]
 
 
-class Model(BaseModel):
+class Model(StrictModel):
     """Base: unknown fields are errors, so typos are caught at upload."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(frozen=True)
 
 
 # --------------------------------------------------------------------------- transforms

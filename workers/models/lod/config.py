@@ -10,19 +10,18 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from workers.nn.configs import HashTableConfig, MLPConfig
 from workers.nn.encodings.grid import GridGeometry
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
+from workers.scene.strict import StrictModel
 
 
-class NetworkConfig(BaseModel):
+class NetworkConfig(StrictModel):
     """One of the asset's networks: a hash table on the lattice the LoDs derive (one level per octave from
     the coarsest LoD's resolution, scale 2, plus `extra_levels` finer than LoD 0) and a ReLU MLP."""
-
-    model_config = ConfigDict(extra="forbid")
 
     grid: HashTableConfig = HashTableConfig(features_per_level=4, log2_table_size=19)
     mlp: MLPConfig = MLPConfig(width=128, depth=4)

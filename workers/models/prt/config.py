@@ -9,26 +9,25 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from workers.nn.configs import HashGridConfig, MLPConfig, SphericalHarmonicsConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
+from workers.scene.strict import StrictModel
 
 FRAME_SPP = (4, 8, 16, 32, 64)
 
 
-class LightingConfig(BaseModel):
+class LightingConfig(StrictModel):
     """Where training lightings come from (a fresh one every step, Sec. 5) and which are held out.
 
     Each step draws a procedural `sky` (random sun) or `studio` (random softboxes) or one of the
     `train_hdris`, turned about the vertical by a random angle. Held-out lightings are the `test_hdris`
     and procedural maps from a seed stream training never draws from."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    train_hdris: list[str] = ["courtyard", "city", "interior", "studio", "sunrise", "night"]
-    test_hdris: list[str] = ["sunset", "forest"]
+    train_hdris: list[str] = Field(["courtyard", "city", "interior", "studio", "sunrise", "night"])
+    test_hdris: list[str] = Field(["sunset", "forest"])
     # 0.75 (more suns in training: the held-out sky's sun is every model's worst lighting, glossy_row 18.8
     # dB indirect) gave glossy_row's far views 25.99 (29.67) [27.21 (30.64) _denoised] against 25.91 (29.48)
     # [27.11 (30.41)] at 0.5, all views -0.07 dB (prt16, seed 0, bench_prt's 1024-spp truth): within a
@@ -49,14 +48,12 @@ class LightingConfig(BaseModel):
         return self
 
 
-class CamerasConfig(BaseModel):
+class CamerasConfig(StrictModel):
     """Camera trajectories around the scene camera's target (Sec. 6: spheres/helices around the scene).
 
     Training views lie on a helix at the scene camera's distance; "near" test views are held-out points
     on the same helix, "far" test views lie on another one (`far_scale` times the distance, `far_lift`
     degrees higher); `train_band` spreads the training views over the band between the two helices."""
-
-    model_config = ConfigDict(extra="forbid")
 
     # More views at the same number of rows (prt7, default preset, held-out indirect against the 1024-spp
     # truth, all / far views; the network loses 2.5 dB from near to far views where nearest rows loses
