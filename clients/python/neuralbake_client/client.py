@@ -37,6 +37,7 @@ from neuralbake_client.models import (
     Progress,
     Token,
 )
+from neuralbake_client.references import artifact_id_of, job_id_of
 from neuralbake_client.retry import DEFAULT_RETRY, Retry
 
 if TYPE_CHECKING:
@@ -48,26 +49,12 @@ if TYPE_CHECKING:
     from neuralbake_client.transport_grpc import GrpcTransport
     from neuralbake_client.transport_http import HttpTransport
 
-JobRef = Job | str
-ArtifactRef = Job | Manifest | str
+JobRef = Job | Manifest | str  # a job, or an artifact (the job that made it): see `references`
+ArtifactRef = Job | Manifest | str  # an artifact or its digest, or a job (its artifact)
 SceneRef = str | os.PathLike | dict[str, Any]
 REST, GRPC = ("http", "https"), ("grpc", "grpcs")
 INFERENCE_PORTS = {"http": 8090, "https": 8090, "grpc": 50052, "grpcs": 50052}  # `nbake serve-inference`'s
 IMAGE_FORMATS = {"exr": "image/x-exr", "png": "image/png"}
-
-
-def job_id(job: JobRef) -> str:
-    return job.id if isinstance(job, Job) else job
-
-
-def artifact_id(artifact: ArtifactRef) -> str:
-    if isinstance(artifact, Manifest):
-        return artifact.artifact_id
-    if isinstance(artifact, Job):
-        if artifact.artifact_id is None:
-            raise NeuralbakeError(f"job {artifact.id} is {artifact.state} and has no artifact")
-        return artifact.artifact_id
-    return artifact
 
 
 def checked_scheme(url: str) -> str:
@@ -202,7 +189,17 @@ class Client:
         return self.retry.call(lambda: self.transport.submit(body, key))
 
     def get(self, job: JobRef) -> Job:
-        return self.retry.call(lambda: self.transport.get_job(job_id(job)))
+        """A job by its id, or the job that made an artifact (see `references`)."""
+        ident = self.job_id(job)
+        return self.retry.call(lambda: self.transport.get_job(ident))
+
+    def job_id(self, job: JobRef) -> str:
+        """The id of a job reference: a job, or an artifact (the job that made it)."""
+        return job_id_of(job, self.manifest)
+
+    def artifact_id(self, artifact: ArtifactRef) -> str:
+        """The id of an artifact reference: an artifact or its digest, or a job (its artifact)."""
+        return artifact_id_of(artifact, self.get)
 
     def list(
         self,
@@ -229,12 +226,13 @@ class Client:
 
     def cancel(self, job: JobRef) -> Job:
         """A queued job is cancelled at once; a running one stops within seconds (see `wait`)."""
-        return self.retry.call(lambda: self.transport.cancel(job_id(job)))
+        ident = self.job_id(job)
+        return self.retry.call(lambda: self.transport.cancel(ident))
 
     def events(self, job: JobRef, after: int = 0) -> Iterator[JobEvent]:
         """The job's events (state changes, progress, log lines) after `after`, ending with the final
         state; a dropped connection is resumed after the last event received."""
-        ident, delays = job_id(job), None
+        ident, delays = self.job_id(job), None
         while True:
             try:
                 for event in self.transport.events(ident, after):
@@ -268,7 +266,8 @@ class Client:
     # ------------------------------------------------------------------ artifacts
 
     def manifest(self, artifact: ArtifactRef) -> Manifest:
-        return self.retry.call(lambda: self.transport.manifest(artifact_id(artifact)))
+        ident = self.artifact_id(artifact)
+        return self.retry.call(lambda: self.transport.manifest(ident))
 
     def download(
         self,
@@ -316,7 +315,8 @@ class Client:
 
     def load(self, artifact: ArtifactRef) -> ModelInfo:
         """Fetch, verify and load the artifact's model now, so its first query does not wait for it."""
-        return self.retry.call(lambda: self.inference.load(artifact_id(artifact)))
+        ident = self.artifact_id(artifact)
+        return self.retry.call(lambda: self.inference.load(ident))
 
     def query(
         self,
@@ -326,7 +326,7 @@ class Client:
     ) -> QueryAnswer:
         """The kind's query: input arrays by name (e.g. `lsnif`: `origins`, `directions` (N, 3)), output
         arrays by name (`answer["hit"]`) and `answer.meta`. Concurrent queries are batched by the server."""
-        ident, body = artifact_id(artifact), json_value(params or {})
+        ident, body = self.artifact_id(artifact), json_value(params or {})
         return self.retry.call(lambda: self.inference.query(ident, body, arrays or {}))
 
     def render(
@@ -346,5 +346,5 @@ class Client:
         if image_format not in IMAGE_FORMATS:
             raise ValueError(f"image_format {image_format!r}: use {' or '.join(IMAGE_FORMATS)}")
         body = json_value({**(params or {}), **({"camera": camera} if camera is not None else {})})
-        ident, media_type = artifact_id(artifact), IMAGE_FORMATS[image_format]
+        ident, media_type = self.artifact_id(artifact), IMAGE_FORMATS[image_format]
         return self.retry.call(lambda: self.inference.render(ident, body, arrays or {}, media_type))

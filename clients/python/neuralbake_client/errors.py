@@ -18,7 +18,12 @@ class ApiError(NeuralbakeError):
 
     def __init__(self, status: int, title: str, detail: str, field: str | None = None, **extra: Any):
         self.status, self.title, self.detail, self.field, self.extra = status, title, detail, field, extra
-        super().__init__(f"{status} {title}: {detail}")
+        super().__init__(f"{status} {title}: {self.where}{detail}")
+
+    @property
+    def where(self) -> str:
+        """`field: ` when the detail does not already start with the field, so a message names it once."""
+        return f"{self.field}: " if self.field and not self.detail.startswith(self.field) else ""
 
     @property
     def problem(self) -> dict[str, Any]:

@@ -18,7 +18,6 @@ from neuralbake_client.cli.remote import (
     JsonOption,
     TokenOption,
     UrlOption,
-    artifact_of,
     connect,
     exit_with,
     remote_errors,
@@ -95,7 +94,7 @@ def jobs_command(
 
 
 def show_command(
-    job: Annotated[str, typer.Argument(help="A job id.")],
+    job: Annotated[str, typer.Argument(help="A job id, or an artifact id (its job).")],
     json_lines: JsonOption = False,
     url: UrlOption = None,
     token: TokenOption = None,
@@ -107,7 +106,7 @@ def show_command(
 
 
 def watch_command(
-    job: Annotated[str, typer.Argument(help="A job id.")],
+    job: Annotated[str, typer.Argument(help="A job id, or an artifact id (its job).")],
     json_lines: JsonOption = False,
     url: UrlOption = None,
     token: TokenOption = None,
@@ -119,7 +118,7 @@ def watch_command(
 
 
 def cancel_command(
-    job: Annotated[str, typer.Argument(help="A job id.")],
+    job: Annotated[str, typer.Argument(help="A job id, or an artifact id (its job).")],
     wait: Annotated[bool, typer.Option("--wait", help="Follow the job until it has stopped.")] = False,
     json_lines: JsonOption = False,
     url: UrlOption = None,
@@ -135,7 +134,9 @@ def cancel_command(
 
 
 def download_command(
-    artifact: Annotated[str, typer.Argument(help="An artifact id, or a job id (its artifact).")],
+    artifact: Annotated[
+        str, typer.Argument(help="An artifact id or its hex digest, or a job id (its artifact).")
+    ],
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write the files into.")],
     name: Annotated[list[str] | None, typer.Option("--name", help="Only this file; repeat.")] = None,
     json_lines: JsonOption = False,
@@ -145,7 +146,7 @@ def download_command(
     """Download an artifact's files (resuming partial ones, verifying sha256)."""
     out = Output(json_lines)
     with remote_errors(), connect(url, token) as client:
-        manifest = client.manifest(artifact_of(client, artifact))
+        manifest = client.manifest(artifact)
         try:
             entries = [manifest.file(n) for n in name] if name else manifest.files
         except KeyError as error:

@@ -17,14 +17,16 @@ from neuralbake_client.cli.remote import (
     JsonOption,
     TokenOption,
     UrlOption,
-    artifact_of,
     connect,
     exit_with,
     remote_errors,
 )
 
 ArtifactArgument = Annotated[
-    str, typer.Argument(metavar="ARTIFACT", help="An artifact id (sha256:...), or a job id (its artifact).")
+    str,
+    typer.Argument(
+        metavar="ARTIFACT", help="An artifact id (sha256:...) or its hex digest, or a job id (its artifact)."
+    ),
 ]
 InputOption = Annotated[
     list[str] | None,
@@ -54,7 +56,7 @@ def query_command(
         exit_with(USAGE, f"error: --output: {output} must end in .npz")
     out, params, arrays = Output(json_lines), parse_sets(set_ or []), read_inputs(input_ or [])
     with remote_errors(), connect(url, token, inference_url) as client:
-        answer = client.query(artifact_of(client, artifact), arrays, params)
+        answer = client.query(artifact, arrays, params)
     write_outputs(output, answer.arrays)
     shapes = {name: {"dtype": a.dtype.name, "shape": list(a.shape)} for name, a in answer.arrays.items()}
     if out.json:

@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
 SUCCEEDED, FAILED, USAGE, CANCELLED, UNREACHABLE = 0, 1, 2, 3, 4
 EXIT_BY_STATE = {"SUCCEEDED": SUCCEEDED, "FAILED": FAILED, "CANCELLED": CANCELLED}  # by JobState
-JOB_PREFIX = "job-"
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_CONFIG = Path("~/.config/nbake/config.toml")
 
@@ -92,16 +91,6 @@ def connect(url: str | None, token: str | None, inference_url: str | None = None
         exit_with(USAGE, f"error: --url: {error}")
 
 
-def artifact_of(client: Client, ref: str) -> str:
-    """An artifact id as given, or a job id's artifact."""
-    if not ref.startswith(JOB_PREFIX):
-        return ref
-    job = client.get(ref)
-    if job.artifact_id is None:
-        exit_with(USAGE, f"error: {ref} is {job.state} and has no artifact")
-    return job.artifact_id
-
-
 def exit_with(code: int, message: str) -> NoReturn:
     typer.echo(message, err=True)
     raise typer.Exit(code)
@@ -121,7 +110,6 @@ def remote_errors() -> Iterator[None]:
     try:
         yield
     except ApiError as error:
-        where = f"{error.field}: " if error.field and not error.detail.startswith(error.field) else ""
-        exit_with(exit_code(error), f"error: {where}{error.detail} ({error.status} {error.title})")
+        exit_with(exit_code(error), f"error: {error.where}{error.detail} ({error.status} {error.title})")
     except NeuralbakeError as error:
         exit_with(exit_code(error), f"error: {error}")

@@ -18,24 +18,23 @@ from neuralbake_client.cli.output import Output
 from neuralbake_client.cli.overrides import SetOption, parse_sets
 from neuralbake_client.cli.query import ArtifactArgument, InputOption
 from neuralbake_client.cli.remote import (
-    JOB_PREFIX,
     USAGE,
     InferenceUrlOption,
     JsonOption,
     TokenOption,
     UrlOption,
-    artifact_of,
     connect,
     exit_with,
     remote_errors,
 )
+from neuralbake_client.references import ARTIFACT_PREFIX, JOB_PREFIX, names_a_job, names_an_artifact
 
-ARTIFACT_PREFIX = "sha256:"
 IMAGE_FORMATS = {".exr": "exr", ".png": "png"}
 
 
-def names_an_artifact(target: str) -> bool:
-    return target.startswith((ARTIFACT_PREFIX, JOB_PREFIX)) and not Path(target).exists()
+def names_a_model(target: str) -> bool:
+    """A job or an artifact (`references`), unless a file of that name is there: a scene."""
+    return (names_a_job(target) or names_an_artifact(target)) and not Path(target).exists()
 
 
 def first_positional(args: list[str], takes_value: set[str]) -> str | None:
@@ -67,7 +66,7 @@ class SceneOrArtifact(TyperCommand):
             for name in p.opts
         }
         target = first_positional(args, takes_value)
-        if target is None or names_an_artifact(target):
+        if target is None or names_a_model(target):
             return super().make_context(info_name, args, parent, **extra)
         local = plugins.scene_render()
         if local is None:
@@ -129,8 +128,7 @@ def render_command(
     out, params, arrays = Output(json_lines), parse_sets(set_ or []), read_inputs(input_ or [])
     view = read_camera(camera) if camera is not None else None
     with remote_errors(), connect(url, token, inference_url) as client:
-        target = artifact_of(client, artifact)
-        image = client.render(target, view, params, arrays=arrays, image_format=image_format)
+        image = client.render(artifact, view, params, arrays=arrays, image_format=image_format)
     try:
         image.save(output)
     except OSError as error:
