@@ -6,17 +6,32 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 
-.PHONY: venv run test test-all bench lint clean proto test-packages
+.PHONY: venv lock run test test-all bench lint clean proto test-packages
 
 venv: $(STAMP)
 
-$(STAMP): pyproject.toml clients/python/pyproject.toml constraints.txt
+$(STAMP): requirements/dev.txt pyproject.toml clients/python/pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PIP) install -q --upgrade pip
-	$(PIP) install -q torch==2.13.0
-	$(PIP) install -q -e '.[dev]'
-	$(PIP) install -q -e clients/python
+	$(PIP) install -q pip==$(PIP_VERSION)
+	$(PIP) install -q torch==2.13.0 -r requirements/dev.txt
+	$(PIP) install -q --no-deps -e . -e clients/python
+	$(PIP) check
 	touch $(STAMP)
+
+## Every install path takes its versions from a lock in requirements/, written by pip-compile from the
+## pyproject.toml files: dev.txt (server, dev extra and client: `make venv` and CI), server.txt (server and client: the
+## images) and client.txt (a user's CI image), the last two constrained to dev.txt's versions. torch is left out of
+## all three: it is pinned above and in constraints.txt, and its wheel (CPU or CUDA) differs by machine.
+## Run `make lock` after editing a pyproject.toml (tests/unit/test_lock.py fails until you do); existing
+## pins are kept unless a requirement moves them: `make lock LOCK_FLAGS=--upgrade` takes the newest.
+PIP_VERSION := 26.3
+LOCK_FLAGS ?=
+COMPILE = $(PY) -m piptools compile -q --strip-extras --unsafe-package torch --no-emit-find-links \
+	--no-emit-index-url $(LOCK_FLAGS)
+lock: venv
+	$(COMPILE) --extra dev -o requirements/dev.txt pyproject.toml clients/python/pyproject.toml
+	$(COMPILE) -c requirements/dev.txt -o requirements/server.txt pyproject.toml clients/python/pyproject.toml
+	$(COMPILE) -c requirements/dev.txt -o requirements/client.txt clients/python/pyproject.toml
 
 ## The main job on the embedded default: nbake serve on a free port, a render job of cornell_box over
 ## HTTP with its progress, the artifact's files downloaded to out/run/, the server stopped.
