@@ -117,7 +117,7 @@ class InferenceService:
             answer = loaded.model.answer(operation, params, arrays)
         except ValueError as error:  # a kind refuses input it cannot answer (e.g. an unknown layer)
             field, colon, detail = str(error).partition(": ")  # "params.level: ..." names its field
-            if colon and field.startswith("params.") and " " not in field:
+            if colon and field.startswith(("params.", "arrays.")) and " " not in field:
                 raise InvalidQuery(detail, field) from None
             raise InvalidQuery(str(error)) from None
         if operation != RENDER:

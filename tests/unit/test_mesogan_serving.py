@@ -1,7 +1,8 @@
 """mesogan's plan and inference on an artifact (untrained weights: these check the plumbing, not quality):
 the plan names the covered surfaces and refuses unknown ones, `generate` windows tile seamlessly,
-`query` routes appearance to radiance only, `render` returns the requested frame, of the scene asked for
-(kept, built-in or uploaded) with the shell on the surfaces named."""
+`query` routes appearance to radiance only and tiled queries agree with one large one between texels,
+`render` returns the requested frame, of the scene asked for (kept, built-in or uploaded) with the shell
+on the surfaces named."""
 
 from __future__ import annotations
 
@@ -65,6 +66,37 @@ def test_generated_windows_tile_and_queries_route_appearance_to_radiance(loaded)
     assert np.array_equal(red["density"], green["density"]) and not np.allclose(red["rho"], green["rho"])
     with pytest.raises(ValueError, match=r"params\.size"):
         model.answer("generate", generate(size=(0, 4)), {})
+
+
+def tiled_and_whole(model, query, points: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """Density at `points` from the four windows of `half` texels around the origin, each point from the
+    window of its quadrant, and from one window of 2 * `half` holding them all."""
+    whole = model.answer("query", query(window=(-half, -half, 2 * half, 2 * half)), {"points": points})
+    tiled = np.empty_like(whole.arrays["density"])
+    for ox in (-half, 0):
+        for oy in (-half, 0):
+            mine = ((points[:, 0] >= 0) == (ox == 0)) & ((points[:, 1] >= 0) == (oy == 0))
+            tile = model.answer("query", query(window=(ox, oy, half, half)), {"points": points[mine]})
+            tiled[mine] = tile.arrays["density"]
+    return tiled, whole.arrays["density"]
+
+
+def test_tiled_queries_agree_with_one_large_query_between_texel_centres(loaded):
+    inference, model = loaded
+    query = inference.operations["query"].params
+    texel = model.config.texel
+    # Every 1/8 texel across both borders of four tiles, two texels either side of the corner they share,
+    # and along each tile's outer edge (which a point may touch).
+    across = np.arange(-16, 17) / 8 * texel
+    x, y = np.meshgrid(across, across, indexing="ij")
+    edge = np.full(9, 16 * texel)
+    outer = np.stack([np.r_[x.ravel(), edge, -edge], np.r_[y.ravel(), across[::4], across[::4]]], -1)
+    points = np.c_[outer, np.full(len(outer), 0.4)].astype(np.float32)
+    tiled, whole = tiled_and_whole(model, query, points, 16)
+    assert np.ptp(whole) > 0.05  # the density varies over these points
+    np.testing.assert_allclose(tiled, whole, rtol=0, atol=1e-5 * np.ptp(whole))
+    with pytest.raises(ValueError, match=r"^arrays\.points: points lie outside params\.window"):
+        model.answer("query", query(window=(0, 0, 4, 4)), {"points": points})
 
 
 def test_render_returns_the_requested_frame(loaded):

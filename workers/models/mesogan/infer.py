@@ -26,7 +26,7 @@ from workers.models.mesogan import artifact
 from workers.models.mesogan.covering import shell_aggregate
 from workers.models.mesogan.sampling import normalized_structure
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
-from workers.models.mesogan.volume import HEIGHT_TO_RADIANS, mip_stack, sample_mipmapped
+from workers.models.mesogan.volume import HEIGHT_TO_RADIANS
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.render.integrator import PathTracer
 from workers.runtime.view_render import (
@@ -71,7 +71,9 @@ class GenerateParams(Material):
 
 class QueryParams(Material):
     window: tuple[int, int, int, int] = Field(
-        (-64, -64, 128, 128), description="the plane window the points lie in: origin and size in texels"
+        (-64, -64, 128, 128),
+        description="the plane window the points lie in, edges included: origin and size in texels (any "
+        "windows of a seed answer a point alike, so tiles agree with one large window)",
     )
 
 
@@ -101,9 +103,12 @@ class MesoganModel:
                 return self._render(params, arrays.get(MESH))
             return self._query(params, arrays)
 
+    def _window(self, origin: tuple[int, int], size: tuple[int, int], field: str) -> Window:
+        if max(size) > MAX_WINDOW or min(size) < 1:
+            raise ValueError(f"{field}: a window is 1 to {MAX_WINDOW} texels per side, got {size}")
+        return Window(origin, size, self.config.texel)
+
     def _plane(self, params: Material, window: Window) -> torch.Tensor:
-        if max(window.size) > MAX_WINDOW or min(window.size) < 1:
-            raise ValueError(f"params.size: a window is 1 to {MAX_WINDOW} texels per side, got {window.size}")
         generator = torch.Generator().manual_seed(params.seed)
         latent = torch.randn(1, self.config.latent_dims, generator=generator).to(self.device)
         s = torch.tensor(normalized_structure(params.structure), dtype=torch.float32, device=self.device)[
@@ -113,19 +118,21 @@ class MesoganModel:
         return generate_planes(self.model, self.config, s, latent, noise, window)
 
     def _generate(self, params: GenerateParams) -> Answer:
-        window = Window(params.origin, params.size, self.config.texel)
+        window = self._window(params.origin, params.size, "params.size")
         plane = self._plane(params, window)[0].permute(1, 2, 0)
         return Answer({"plane": plane.float().cpu().numpy()}, {"texel": self.config.texel})
 
     def _query(self, params: QueryParams, arrays: dict[str, np.ndarray]) -> Answer:
         ox, oy, sx, sy = params.window
-        window = Window((ox, oy), (sx, sy), self.config.texel)
-        stack = mip_stack(self._plane(params, window), 1)
+        window = self._window((ox, oy), (sx, sy), "params.window")
         points = torch.from_numpy(arrays["points"].astype(np.float32))
         uv = window.uv(points[:, :2])
         if ((uv < 0) | (uv > 1)).any():
-            raise ValueError("inputs.points: points lie outside params.window")
-        features = sample_mipmapped(stack, uv[None], torch.zeros(1, len(points)))[0]
+            raise ValueError("arrays.points: points lie outside params.window")
+        # One texel of margin: a point near the window's edge reads the texels past it, as a larger
+        # window would, so tiled queries agree with one large query everywhere (`Window.bilinear`).
+        margin = window.widened(1)
+        features = margin.bilinear(self._plane(params, margin)[0], points[:, :2])
         height = points[:, 2].clamp(0, 1) * HEIGHT_TO_RADIANS
         density, hidden = self.model.decoder.density(features, height, torch.zeros_like(height))
         n = len(points)

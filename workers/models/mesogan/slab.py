@@ -50,6 +50,30 @@ class Window:
         uv = (xy - lo) / extent
         return uv.flip(-1)
 
+    def widened(self, margin: int) -> Window:
+        """This window with `margin` more texels of the lattice on every side."""
+        origin = (self.origin[0] - margin, self.origin[1] - margin)
+        return Window(origin, (self.size[0] + 2 * margin, self.size[1] + 2 * margin), self.texel)
+
+    def bilinear(self, plane: Tensor, xy: Tensor) -> Tensor:
+        """Features (N, C) of `plane` (C, H, W), this window's texels, at plane positions `xy` (N, 2),
+        interpolated on the infinite plane's own lattice: the four texels and their weights follow from a
+        position alone, never from the window, so every window holding them gives a point the same value
+        (tiles agree with one large window up to their borders, where `grid_sample` would clamp).
+        `ValueError` if a point's texels are not all in the window (widen it by one texel)."""
+        lattice = xy.double() / self.texel - 0.5  # texel centres at integers
+        low = lattice.floor()
+        weight = (lattice - low).to(plane.dtype)
+        index = low.long() - torch.tensor(self.origin)
+        if ((index < 0) | (index + 1 >= torch.tensor(self.size))).any():
+            raise ValueError("points need the texels around them: widen the window by one texel")
+        rows, cols = index[:, 0], index[:, 1]
+        texels = lambda i, j: plane[:, rows + i, cols + j].T  # noqa: E731
+        along = weight[:, :1]
+        return (texels(0, 0) * (1 - along) + texels(1, 0) * along) * (1 - weight[:, 1:]) + (
+            texels(0, 1) * (1 - along) + texels(1, 1) * along
+        ) * weight[:, 1:]
+
 
 def draw_noise(
     model: MesoGAN, config: MesoganConfig, count: int, seed: int | None = None
