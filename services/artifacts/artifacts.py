@@ -20,7 +20,7 @@ from fsspec.implementations.local import LocalFileSystem
 
 from services.artifacts.assets import asset_ids, load_asset
 from services.artifacts.digests import parse_digest
-from services.artifacts.manifest import FileEntry, Manifest, store_file
+from services.artifacts.manifest import MODEL_DIGEST, FileEntry, Manifest, model_digest, store_file
 from services.artifacts.paths import safe_relative_path
 from services.artifacts.store import BlobNotFound, BlobStore, indexed_digests, write_atomic
 
@@ -85,7 +85,8 @@ class ArtifactStore:
         annotations: dict[str, str] | None = None,
         created: datetime | None = None,
     ) -> Manifest:
-        """Store `files` (name -> (local path, media type or "" to infer)) and their manifest."""
+        """Store `files` (name -> (local path, media type or "" to infer)) and their manifest, annotated
+        with the model's digest (`manifest.model_digest`)."""
         entries = []
         for name, (path, media_type) in sorted(files.items()):
             clean = safe_relative_path(name)
@@ -101,7 +102,7 @@ class ArtifactStore:
             metrics=metrics,
             created=created or datetime.now(UTC),
             files=entries,
-            annotations=annotations or {},
+            annotations={MODEL_DIGEST: model_digest(entries), **(annotations or {})},
         )
         stored = self.blobs.put_bytes(manifest.canonical_bytes())
         assert stored == manifest.artifact_id, "the artifact id is the digest of the canonical manifest"

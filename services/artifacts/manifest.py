@@ -17,6 +17,10 @@ from services.artifacts.media_types import media_type_for
 from services.artifacts.store import BlobStore
 
 ARTIFACT_MEDIA_TYPE = "application/vnd.neuralbake.artifact.v1+json"
+# The pipeline's report files (`workers.runtime.report`): they hold measured timings, which differ between
+# runs of the same job, so the model digest leaves them out.
+MEASUREMENT_FILES = frozenset({"report.json", "speed_error.png"})
+MODEL_DIGEST = "model_digest"  # the annotation every published manifest carries
 _PLACEHOLDER_ID = "sha256:" + "0" * 64
 
 
@@ -45,6 +49,14 @@ def store_file(blobs: BlobStore, name: str, path: str | Path, media_type: str = 
     return FileEntry(
         name=name, media_type=media_type or media_type_for(name), digest=digest, size=blobs.size(digest)
     )
+
+
+def model_digest(files: list[FileEntry]) -> str:
+    """The digest of an artifact's model: its file entries but `MEASUREMENT_FILES`. The artifact id also
+    covers the job, its time and its (timed) metrics; equal jobs (kind, scene, config, seed, code) store
+    equal models, and this is what says so."""
+    kept = [entry.model_dump(mode="json") for entry in files if entry.name not in MEASUREMENT_FILES]
+    return digest_json(sorted(kept, key=lambda entry: entry["name"]))
 
 
 class ContentAddressed(BaseModel):

@@ -8,7 +8,7 @@ import pytest
 
 from services.artifacts.artifacts import ArtifactNotFound, ArtifactStore, FileNotFoundInArtifact
 from services.artifacts.assets import Asset, save_asset
-from services.artifacts.manifest import store_file
+from services.artifacts.manifest import MEASUREMENT_FILES, MODEL_DIGEST, store_file
 from services.artifacts.store import BlobCorrupted, BlobStore
 
 CREATED = datetime(2025, 1, 2, 3, 4, 5, 678901, tzinfo=UTC)
@@ -77,6 +77,19 @@ def test_artifact_ids_are_stable_for_equal_content_and_change_with_it(store, out
     (outputs / "render.exr").write_bytes(b"other pixels")
     assert publish(store, outputs).artifact_id != first.artifact_id
     assert len(store.artifact_ids()) == 3
+
+
+def test_the_model_digest_covers_every_file_but_the_reports_measurements(store, outputs):
+    """Two runs of one job differ in their report's timings, their job, time and metrics, not their model."""
+    first = publish(store, outputs).annotations[MODEL_DIGEST]
+    (outputs / "report.json").write_text('{"psnr": 40.0, "seconds_per_frame": 0.2}')
+    again = publish(store, outputs, job_id="job-2", metrics={"seconds": 1.6}, created=CREATED + timedelta(1))
+    assert again.annotations[MODEL_DIGEST] == first
+    (outputs / "render.exr").write_bytes(b"other pixels")
+    assert publish(store, outputs).annotations[MODEL_DIGEST] != first
+    from workers.runtime.report import MEDIA_TYPES  # the report's own files are the measurements
+
+    assert set(MEDIA_TYPES) == MEASUREMENT_FILES
 
 
 def test_a_tampered_manifest_is_detected(store, outputs):
