@@ -19,7 +19,7 @@ from services.api.grpc.auth import TokenAuth, principal
 from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.server import GrpcServer
 from services.inference import images
-from services.inference.errors import MalformedBody
+from services.inference.errors import MalformedBody, UnsupportedOperation
 from services.inference.service import ModelInfo, server_timing
 from services.inference.state import InferenceState
 from services.inference.wire import ArrayHeader, array_bytes, decode_array
@@ -77,11 +77,15 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
         return inference_pb2.LoadModelResponse(model=_model(self.service.served(artifact_id).info()))
 
     def Query(self, request, context):
+        """Any operation that answers arrays, as REST's `:{operation}` (`query` by default)."""
         self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
+        operation = request.operation or QUERY
+        if operation == RENDER:
+            raise UnsupportedOperation("render answers an image: call Render", "operation")
         params = json_format.MessageToDict(request.params)
         arrays = _arrays(request.arrays)
         size = request.ByteSize()
-        with self.service.answering(request.artifact_id, QUERY, params, arrays, size) as (served, answer):
+        with self.service.answering(request.artifact_id, operation, params, arrays, size) as (served, answer):
             return inference_pb2.QueryResponse(
                 artifact_id=request.artifact_id,
                 kind=served.loaded.kind,

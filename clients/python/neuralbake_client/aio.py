@@ -111,6 +111,9 @@ class AsyncClient:
     ) -> QueryAnswer:
         return await asyncio.to_thread(self.sync.query, artifact, arrays, params)
 
+    async def generate(self, artifact: ArtifactRef, params: dict[str, Any] | None = None) -> QueryAnswer:
+        return await asyncio.to_thread(self.sync.generate, artifact, params)
+
     async def render(
         self, artifact: ArtifactRef, camera: Mapping[str, Any] | None = None, params=None, **options: Any
     ) -> RenderedImage:

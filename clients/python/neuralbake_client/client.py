@@ -110,7 +110,7 @@ def json_value(value: Any) -> Any:
 class Client:
     """The neuralbake job service and its inference service. Use as a context manager (or call `close()`).
 
-    `inference_url` is where `query`, `render`, `load` and `models` go (default: see
+    `inference_url` is where `query`, `generate`, `render`, `load` and `models` go (default: see
     `default_inference_url`).
     """
 
@@ -328,6 +328,13 @@ class Client:
         arrays by name (`answer["hit"]`) and `answer.meta`. Concurrent queries are batched by the server."""
         ident, body = self.artifact_id(artifact), json_value(params or {})
         return self.retry.call(lambda: self.inference.query(ident, body, arrays or {}))
+
+    def generate(self, artifact: ArtifactRef, params: dict[str, Any] | None = None) -> QueryAnswer:
+        """The kind's `generate` (`mesogan`: the feature plane of a window of its infinite texture,
+        `answer["plane"]` (H, W, C) with `answer.meta["texel"]`, from `params` `origin` and `size` in texels,
+        `structure` and `seed`): windows of one seed agree on their overlap, so they tile."""
+        ident, body = self.artifact_id(artifact), json_value(params or {})
+        return self.retry.call(lambda: self.inference.query(ident, body, {}, operation="generate"))
 
     def render(
         self,

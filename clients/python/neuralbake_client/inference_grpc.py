@@ -54,11 +54,18 @@ class GrpcInference:
         response, _ = self._call(self.stub.LoadModel, inference_pb2.LoadModelRequest(artifact_id=artifact_id))
         return ModelInfo.model_validate(as_dict(response.model))
 
-    def query(self, artifact_id: str, params: dict[str, Any], arrays: Mapping[str, ArrayLike]) -> QueryAnswer:
+    def query(
+        self,
+        artifact_id: str,
+        params: dict[str, Any],
+        arrays: Mapping[str, ArrayLike],
+        operation: str = "query",
+    ) -> QueryAnswer:
         request = inference_pb2.QueryRequest(
             artifact_id=artifact_id,
             params=struct(params),
             arrays=[_array_message(name, array) for name, array in arrays.items()],
+            operation=operation,
         )
         response, _ = self._call(self.stub.Query, request)
         answer = {a.name: from_bytes(a.dtype, list(a.shape), a.data) for a in response.arrays}

@@ -28,10 +28,16 @@ class HttpInference:
     def load(self, artifact_id: str) -> ModelInfo:
         return ModelInfo.model_validate(self.http.send("POST", f"/v1/models/{artifact_id}:load").json())
 
-    def query(self, artifact_id: str, params: dict[str, Any], arrays: Mapping[str, ArrayLike]) -> QueryAnswer:
+    def query(
+        self,
+        artifact_id: str,
+        params: dict[str, Any],
+        arrays: Mapping[str, ArrayLike],
+        operation: str = "query",
+    ) -> QueryAnswer:
         response = self.http.send(
             "POST",
-            f"/v1/artifacts/{artifact_id}:query",
+            f"/v1/artifacts/{artifact_id}:{operation}",
             content=encode_binary({"params": params}, arrays),
             headers={"Content-Type": OCTET_STREAM, "Accept": OCTET_STREAM},
         )

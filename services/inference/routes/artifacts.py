@@ -1,4 +1,5 @@
-"""Queries and renders of an artifact, by id. Bodies are JSON (arrays base64) or binary (a JSON header
+"""An artifact's operations, by id: those that answer arrays (`:query`, `mesogan`'s `:generate`) and
+`:render`, which answers an image. Bodies are JSON (arrays base64) or binary (a JSON header
 line, then raw arrays); see `services.inference.wire` for the format, also documented in OpenAPI.
 
 A query holds its memory (the service's reading pool for its body, then its working memory) until its
@@ -25,7 +26,7 @@ from services.inference import images, wire
 from services.inference.errors import MalformedBody
 from services.inference.service import InferenceService, server_timing
 from services.inference.state import StateDep
-from workers.models.registry import QUERY, RENDER
+from workers.models.registry import RENDER
 
 router = APIRouter(prefix="/v1/artifacts", tags=["inference"])
 ERRORS = {**PROBLEM_RESPONSES, 503: {"description": "No answer within the request timeout; retry"}}
@@ -78,42 +79,6 @@ def _parse(body: bytes, content_type: str | None) -> tuple[dict[str, Any], dict[
     return parsed.params, wire.decode_json(parsed)
 
 
-@router.post(
-    "/{artifact_id}:query",
-    responses={
-        200: {
-            "description": "The output arrays, in the request's format (or `Accept`)",
-            "content": {
-                "application/json": {"schema": wire.self_contained_schema(wire.QueryResult)},
-                wire.OCTET_STREAM: {
-                    "schema": {"type": "string", "format": "binary", "description": BINARY_DOC}
-                },
-            },
-        },
-        **ERRORS,
-    },
-    openapi_extra={
-        "requestBody": {
-            "required": True,
-            "description": "Kind-specific: `lsnif` takes `origins` and `directions` (N, 3) world-space rays; "
-            "`render` takes optional `pixels` (N, 2) as (x, y) and `params.layers`.",
-            "content": BODY_CONTENT,
-        }
-    },
-)
-async def query(artifact_id: str, request: Request, state: StateDep, principal: CanRead) -> Response:
-    """Batched kind-specific queries: concurrent requests for one model are merged into one call."""
-    await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
-    service = state.service
-    content_type, accept = request.headers.get("content-type"), request.headers.get("accept", "")
-    binary = wire.OCTET_STREAM in accept or (_is_binary(content_type) and "json" not in accept)
-
-    def answer(held: ExitStack, body: bytes) -> Response:
-        return _answer_query(service, held, artifact_id, body, content_type, binary)
-
-    return await _respond(service, request, answer)
-
-
 async def _respond(
     service: InferenceService, request: Request, answer: Callable[[ExitStack, bytes], Response]
 ) -> Response:
@@ -141,10 +106,11 @@ async def _respond(
     return _Held(response, held.close)
 
 
-def _answer_query(
+def _answer_arrays(
     service: InferenceService,
     held: ExitStack,
     artifact_id: str,
+    operation: str,
     body: bytes,
     content_type: str | None,
     binary: bool,
@@ -152,7 +118,7 @@ def _answer_query(
     """Off the event loop: decoding, the model and encoding, in the service's working memory (entered
     into `held`, so it lasts until the answer is sent)."""
     params, arrays = _parse(body, content_type)
-    served, answer = held.enter_context(service.answering(artifact_id, QUERY, params, arrays, len(body)))
+    served, answer = held.enter_context(service.answering(artifact_id, operation, params, arrays, len(body)))
     head = {"artifact_id": artifact_id, "kind": served.loaded.kind, "meta": answer.meta}
     if binary:
         return Response(wire.encode_binary(head, answer.arrays), media_type=wire.OCTET_STREAM)
@@ -191,5 +157,48 @@ async def render(artifact_id: str, request: Request, state: StateDep, principal:
         _, answer = held.enter_context(service.answering(artifact_id, RENDER, params, arrays, len(body)))
         data = images.encode(answer.arrays["image"], media_type)
         return Response(data, media_type=media_type, headers={"Server-Timing": server_timing(answer)})
+
+    return await _respond(service, request, answer)
+
+
+# After `:render`, which answers an image: routes match in the order they are added.
+@router.post(
+    "/{artifact_id}:{operation}",
+    responses={
+        200: {
+            "description": "The output arrays, in the request's format (or `Accept`)",
+            "content": {
+                "application/json": {"schema": wire.self_contained_schema(wire.QueryResult)},
+                wire.OCTET_STREAM: {
+                    "schema": {"type": "string", "format": "binary", "description": BINARY_DOC}
+                },
+            },
+        },
+        **ERRORS,
+    },
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "description": "Kind-specific: `lsnif`'s query takes `origins` and `directions` (N, 3) "
+            "world-space rays; `render`'s takes optional `pixels` (N, 2) as (x, y) and `params.layers`; "
+            "`mesogan`'s `generate` takes only `params` (`origin`, `size`, `structure`, `seed`).",
+            "content": BODY_CONTENT,
+        }
+    },
+)
+async def operate(
+    artifact_id: str, operation: str, request: Request, state: StateDep, principal: CanRead
+) -> Response:
+    """An operation of the artifact's kind that answers arrays: `query` (every served kind has one), or
+    another the model lists under `/v1/models` (`mesogan`: `generate`, a window of its feature plane);
+    an image is `:render`. Concurrent queries of one model are merged into one call where the kind
+    allows."""
+    await run_in_threadpool(state.tenancy.artifact, principal, artifact_id)  # another tenant's: 404
+    service = state.service
+    content_type, accept = request.headers.get("content-type"), request.headers.get("accept", "")
+    binary = wire.OCTET_STREAM in accept or (_is_binary(content_type) and "json" not in accept)
+
+    def answer(held: ExitStack, body: bytes) -> Response:
+        return _answer_arrays(service, held, artifact_id, operation, body, content_type, binary)
 
     return await _respond(service, request, answer)

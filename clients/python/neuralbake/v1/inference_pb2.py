@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import struct_pb2 as google_dot_protobuf_dot_struct__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1dneuralbake/v1/inference.proto\x12\rneuralbake.v1\x1a\x1cgoogle/protobuf/struct.proto\"A\n\x05\x41rray\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\r\n\x05\x64type\x18\x02 \x01(\t\x12\r\n\x05shape\x18\x03 \x03(\x03\x12\x0c\n\x04\x64\x61ta\x18\x04 \x01(\x0c\"]\n\x05Model\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12\x12\n\noperations\x18\x03 \x03(\t\x12\r\n\x05\x62ytes\x18\x04 \x01(\x03\x12\x0e\n\x06\x64\x65vice\x18\x05 \x01(\t\"\x13\n\x11ListModelsRequest\":\n\x12ListModelsResponse\x12$\n\x06models\x18\x01 \x03(\x0b\x32\x14.neuralbake.v1.Model\"\'\n\x10LoadModelRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\"8\n\x11LoadModelResponse\x12#\n\x05model\x18\x01 \x01(\x0b\x32\x14.neuralbake.v1.Model\"r\n\x0cQueryRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\'\n\x06params\x18\x02 \x01(\x0b\x32\x17.google.protobuf.Struct\x12$\n\x06\x61rrays\x18\x03 \x03(\x0b\x32\x14.neuralbake.v1.Array\"\x7f\n\rQueryResponse\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12%\n\x04meta\x18\x03 \x01(\x0b\x32\x17.google.protobuf.Struct\x12$\n\x06\x61rrays\x18\x04 \x03(\x0b\x32\x14.neuralbake.v1.Array\"\x87\x01\n\rRenderRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\'\n\x06params\x18\x02 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x12\n\nmedia_type\x18\x03 \x01(\t\x12$\n\x06\x61rrays\x18\x04 \x03(\x0b\x32\x14.neuralbake.v1.Array\"2\n\x0eRenderResponse\x12\x12\n\nmedia_type\x18\x01 \x01(\t\x12\x0c\n\x04\x64\x61ta\x18\x02 \x01(\x0c\x32\xc0\x02\n\x10InferenceService\x12Q\n\nListModels\x12 .neuralbake.v1.ListModelsRequest\x1a!.neuralbake.v1.ListModelsResponse\x12N\n\tLoadModel\x12\x1f.neuralbake.v1.LoadModelRequest\x1a .neuralbake.v1.LoadModelResponse\x12\x42\n\x05Query\x12\x1b.neuralbake.v1.QueryRequest\x1a\x1c.neuralbake.v1.QueryResponse\x12\x45\n\x06Render\x12\x1c.neuralbake.v1.RenderRequest\x1a\x1d.neuralbake.v1.RenderResponseb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1dneuralbake/v1/inference.proto\x12\rneuralbake.v1\x1a\x1cgoogle/protobuf/struct.proto\"A\n\x05\x41rray\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\r\n\x05\x64type\x18\x02 \x01(\t\x12\r\n\x05shape\x18\x03 \x03(\x03\x12\x0c\n\x04\x64\x61ta\x18\x04 \x01(\x0c\"]\n\x05Model\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12\x12\n\noperations\x18\x03 \x03(\t\x12\r\n\x05\x62ytes\x18\x04 \x01(\x03\x12\x0e\n\x06\x64\x65vice\x18\x05 \x01(\t\"\x13\n\x11ListModelsRequest\":\n\x12ListModelsResponse\x12$\n\x06models\x18\x01 \x03(\x0b\x32\x14.neuralbake.v1.Model\"\'\n\x10LoadModelRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\"8\n\x11LoadModelResponse\x12#\n\x05model\x18\x01 \x01(\x0b\x32\x14.neuralbake.v1.Model\"\x85\x01\n\x0cQueryRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\'\n\x06params\x18\x02 \x01(\x0b\x32\x17.google.protobuf.Struct\x12$\n\x06\x61rrays\x18\x03 \x03(\x0b\x32\x14.neuralbake.v1.Array\x12\x11\n\toperation\x18\x04 \x01(\t\"\x7f\n\rQueryResponse\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12%\n\x04meta\x18\x03 \x01(\x0b\x32\x17.google.protobuf.Struct\x12$\n\x06\x61rrays\x18\x04 \x03(\x0b\x32\x14.neuralbake.v1.Array\"\x87\x01\n\rRenderRequest\x12\x13\n\x0b\x61rtifact_id\x18\x01 \x01(\t\x12\'\n\x06params\x18\x02 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x12\n\nmedia_type\x18\x03 \x01(\t\x12$\n\x06\x61rrays\x18\x04 \x03(\x0b\x32\x14.neuralbake.v1.Array\"2\n\x0eRenderResponse\x12\x12\n\nmedia_type\x18\x01 \x01(\t\x12\x0c\n\x04\x64\x61ta\x18\x02 \x01(\x0c\x32\xc0\x02\n\x10InferenceService\x12Q\n\nListModels\x12 .neuralbake.v1.ListModelsRequest\x1a!.neuralbake.v1.ListModelsResponse\x12N\n\tLoadModel\x12\x1f.neuralbake.v1.LoadModelRequest\x1a .neuralbake.v1.LoadModelResponse\x12\x42\n\x05Query\x12\x1b.neuralbake.v1.QueryRequest\x1a\x1c.neuralbake.v1.QueryResponse\x12\x45\n\x06Render\x12\x1c.neuralbake.v1.RenderRequest\x1a\x1d.neuralbake.v1.RenderResponseb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -44,14 +44,14 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_LOADMODELREQUEST']._serialized_end=360
   _globals['_LOADMODELRESPONSE']._serialized_start=362
   _globals['_LOADMODELRESPONSE']._serialized_end=418
-  _globals['_QUERYREQUEST']._serialized_start=420
-  _globals['_QUERYREQUEST']._serialized_end=534
-  _globals['_QUERYRESPONSE']._serialized_start=536
-  _globals['_QUERYRESPONSE']._serialized_end=663
-  _globals['_RENDERREQUEST']._serialized_start=666
-  _globals['_RENDERREQUEST']._serialized_end=801
-  _globals['_RENDERRESPONSE']._serialized_start=803
-  _globals['_RENDERRESPONSE']._serialized_end=853
-  _globals['_INFERENCESERVICE']._serialized_start=856
-  _globals['_INFERENCESERVICE']._serialized_end=1176
+  _globals['_QUERYREQUEST']._serialized_start=421
+  _globals['_QUERYREQUEST']._serialized_end=554
+  _globals['_QUERYRESPONSE']._serialized_start=556
+  _globals['_QUERYRESPONSE']._serialized_end=683
+  _globals['_RENDERREQUEST']._serialized_start=686
+  _globals['_RENDERREQUEST']._serialized_end=821
+  _globals['_RENDERRESPONSE']._serialized_start=823
+  _globals['_RENDERRESPONSE']._serialized_end=873
+  _globals['_INFERENCESERVICE']._serialized_start=876
+  _globals['_INFERENCESERVICE']._serialized_end=1196
 # @@protoc_insertion_point(module_scope)

@@ -78,7 +78,8 @@ class InferenceServiceServicer:
         raise NotImplementedError('Method not implemented!')
 
     def Query(self, request, context):
-        """Kind-specific batched queries (`lsnif`: world-space rays; `render`: stored layers).
+        """Kind-specific operations that answer arrays: batched queries (`lsnif`: world-space rays; `render`:
+        stored layers) or another operation the model lists (`mesogan`: `generate`), by `operation`.
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')

@@ -1,0 +1,132 @@
+"""A `mesogan` artifact as users reach it: `nbake serve-inference` in its own process serving an artifact
+placed in its store by hand (untrained weights: the plumbing, not quality). `generate`, which
+`/v1/models` lists, answers over REST (JSON and binary), gRPC and the SDK on both transports, equal to the
+kind's `infer` in this process; an operation the kind lacks is a 400 naming those it has. Tiled `query`
+windows agree with one large window between texel centres, through the service as a user tiles them."""
+
+from __future__ import annotations
+
+import base64
+from collections.abc import Iterator
+from pathlib import Path
+
+import grpc
+import numpy as np
+import pytest
+import torch
+from google.protobuf import struct_pb2
+from neuralbake.v1 import inference_pb2, inference_pb2_grpc
+from neuralbake_client import Client
+
+from services.artifacts.artifacts import ArtifactStore
+from services.artifacts.store import BlobStore
+from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
+from tests.integration.test_api_server import TOKENS
+from tests.integration.test_grpc_server import details, rpc_error
+from tests.integration.test_inference_server import Server, install_tokens, start_server
+from workers.models.mesogan import KIND, artifact
+from workers.models.mesogan.networks import MesoGAN
+from workers.models.registry import get_inference
+from workers.scene.builtin import get_builtin
+
+WINDOW = {"origin": [-3, 5], "size": [12, 7], "seed": 4, "structure": {"length": 0.5}}
+AUTH = (("authorization", f"Bearer {TOKENS['read']}"),)
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory) -> Iterator[tuple[Server, str, Path]]:
+    """The server, the artifact's id and its folder."""
+    data_dir = tmp_path_factory.mktemp("mesogan-inference")
+    folder = tmp_path_factory.mktemp("artifact")
+    config = KIND.resolve_config("quick", {})
+    torch.manual_seed(0)
+    files = artifact.save(folder, config, MesoGAN(config), get_builtin("fur_ball"))
+    store = ArtifactStore(BlobStore(str(data_dir / "store")), str(data_dir / "store"))
+    manifest = store.publish(
+        files, kind="mesogan", job_id="by-hand", scene_hash="", config={}, code_version="", metrics={}
+    )
+    install_tokens(data_dir)
+    running = start_server(data_dir, [])
+    try:
+        yield running, manifest.artifact_id, folder
+    finally:
+        running.stop()
+
+
+def in_process(folder: Path, operation: str, params: dict, arrays: dict | None = None):
+    inference = get_inference("mesogan")
+    typed = inference.operations[operation].params.model_validate(params)
+    return inference.load(folder, "cpu").answer(operation, typed, arrays or {})
+
+
+def test_generate_is_served_over_rest_grpc_and_the_sdk(served):
+    server, artifact_id, folder = served
+    expected = in_process(folder, "generate", WINDOW)
+    plane = expected.arrays["plane"]
+    assert plane.shape == (12, 7, KIND.resolve_config("quick", {}).plane_channels)
+
+    with server.client() as client:
+        loaded = client.post(f"/v1/models/{artifact_id}:load").json()
+        assert loaded["operations"] == ["generate", "query", "render"]
+        as_json = client.post(f"/v1/artifacts/{artifact_id}:generate", json={"params": WINDOW})
+        assert as_json.status_code == 200, as_json.text
+        body = as_json.json()
+        assert body["kind"] == "mesogan" and body["meta"] == expected.meta
+        encoded = body["arrays"]["plane"]
+        decoded = np.frombuffer(base64.b64decode(encoded["data"]), encoded["dtype"]).reshape(encoded["shape"])
+        np.testing.assert_array_equal(decoded, plane)
+        binary = client.post(
+            f"/v1/artifacts/{artifact_id}:generate",
+            content=encode_binary({"params": WINDOW}, {}),
+            headers={"Content-Type": OCTET_STREAM},
+        )
+        np.testing.assert_array_equal(decode_binary(binary.content)[1]["plane"], plane)
+
+        empty = client.post(f"/v1/artifacts/{artifact_id}:generate", json={"params": {"size": [0, 4]}})
+        assert empty.status_code == 422 and empty.json()["field"] == "params.size", empty.text
+        unknown = client.post(f"/v1/artifacts/{artifact_id}:grow", json={})
+        problem = unknown.json()
+        assert unknown.status_code == 400 and unknown.headers["content-type"] == "application/problem+json"
+        assert "does not support grow (it supports: generate, query, render)" in problem["detail"], problem
+
+    with grpc.insecure_channel(server.grpc_target) as channel:
+        stub = inference_pb2_grpc.InferenceServiceStub(channel)
+        params = struct_pb2.Struct()
+        params.update(WINDOW)
+        request = inference_pb2.QueryRequest(artifact_id=artifact_id, params=params, operation="generate")
+        (array,) = stub.Query(request, metadata=AUTH, timeout=60).arrays
+        answer = np.frombuffer(array.data, array.dtype).reshape(tuple(array.shape))
+        np.testing.assert_array_equal(answer, plane)
+        request.operation = "render"
+        refused = rpc_error(stub.Query, request, metadata=AUTH, timeout=60)
+        assert (
+            refused.code() == grpc.StatusCode.INVALID_ARGUMENT
+            and details(refused)["violation"] == "operation"
+        )
+
+    for url in (server.url, f"grpc://{server.grpc_target}"):
+        with Client(url, TOKENS["read"], inference_url=url) as sdk:
+            generated = sdk.generate(artifact_id, WINDOW)
+            assert generated.kind == "mesogan" and generated.meta == expected.meta, url
+            np.testing.assert_array_equal(generated["plane"], plane, err_msg=url)
+
+
+def test_tiled_queries_through_the_service_agree_with_one_large_query(served):
+    server, artifact_id, _ = served
+    texel = KIND.resolve_config("quick", {}).texel
+    # Two windows side by side (x in [-8, 0) and [0, 8) texels) and one over both; points every 1/8 texel
+    # across their common border, on three rows.
+    x, y = np.meshgrid(np.arange(-24, 24) / 8 * texel, np.array([-1.3, 0.2, 2.9]) * texel, indexing="ij")
+    points = np.stack([x.ravel(), y.ravel(), np.full(x.size, 0.6)], -1).astype(np.float32)
+    right = points[:, 0] >= 0
+    with Client(server.url, TOKENS["read"], inference_url=server.url) as sdk:
+
+        def density(window: list[int], mine: np.ndarray) -> np.ndarray:
+            params = {"window": window, "seed": 2}
+            return sdk.query(artifact_id, {"points": points[mine]}, params)["density"]
+
+        whole = density([-8, -4, 16, 8], np.ones(len(points), bool))
+        tiled = np.empty_like(whole)
+        tiled[~right], tiled[right] = density([-8, -4, 8, 8], ~right), density([0, -4, 8, 8], right)
+    assert np.ptp(whole) > 0.05
+    np.testing.assert_allclose(tiled, whole, rtol=0, atol=1e-5 * np.ptp(whole))
