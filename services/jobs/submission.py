@@ -103,6 +103,8 @@ class Submitter:
         except ValueError as error:
             raise InvalidInput(str(error), "config") from None
         scene = self.scenes.resolve(request.scene, principal)
+        # the identity hashes the validated config, not the request: an unknown key was refused above, so
+        # none is dropped to make this submission equal to an earlier job's
         resolved = config.model_dump(mode="json")
         code = code_version()
         key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
