@@ -57,6 +57,14 @@ class SceneRef:
         """What identifies the compiled scene: the spec's JSON (the folder is part of the cache key)."""
         return hashlib.sha256(self.spec.model_dump_json().encode()).hexdigest()
 
+    @property
+    def files_key(self) -> str | None:
+        """What identifies the files the spec's paths name: the stored files' key, or the local folder
+        (with `content_key`, the key of anything built from the scene)."""
+        if self.folder is None:
+            return None if self.stored is None else f"stored:{self.stored.key}"
+        return str(self.folder)
+
     def object_triangles(self) -> list[int]:
         """Each object's triangles per placement, counted from its description without building it (a
         mesh file is read and checked): what a plan needs, cheap enough for the API process."""
@@ -66,14 +74,13 @@ class SceneRef:
             counts.append(
                 known
                 if known is not None
-                else shape_mesh(obj.shape, f"objects[{i}].shape", self.folder).num_triangles
+                else shape_mesh(obj.shape, f"objects[{i}].shape", self.local_folder()).num_triangles
             )
         return counts
 
     def compiled(self) -> CompiledScene:
         """The scene's triangles, compiled at most once per process for equal content and files."""
-        files = f"stored:{self.stored.key}" if self.stored is not None and self.folder is None else None
-        key = (self.content_key, files or (None if self.folder is None else str(self.folder)))
+        key = (self.content_key, self.files_key)
         with _cache_lock:
             scene = _cache.get(key)
         if scene is None:

@@ -118,12 +118,12 @@ TRACING_FIELDS = {
 
 
 def tracing_key(what: str, scene: SceneRef, config: PrtConfig, seed: int) -> tuple:
-    return (what, scene.content_key, str(scene.folder), config.model_dump_json(include=TRACING_FIELDS), seed)
+    return (what, scene.content_key, scene.files_key, config.model_dump_json(include=TRACING_FIELDS), seed)
 
 
 def transport_tracer(scene: SceneRef, config: PrtConfig) -> PathTracer:
     """The scene under a white cube map: the tracer every row is binned from (built once per process)."""
-    key = ("tracer", scene.content_key, str(scene.folder), config.cube_size)
+    key = ("tracer", scene.content_key, scene.files_key, config.cube_size)
     return cached(key, lambda: relit_tracer(scene.compiled(), uniform_cube(config.cube_size)))
 
 
