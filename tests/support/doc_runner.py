@@ -6,9 +6,10 @@
   the environment's; no `NBAKE_*` variable or config file of the machine leaks in.
 - **Server.** A `nbake serve ...` line starts the file's server in the background (its output goes to
   `serve.log` in the folder). A file without one gets `DEFAULT_SERVE` before its first block that runs,
-  and `NBAKE_URL`, `NBAKE_TOKEN` and `NBAKE_INFERENCE_URL` naming it. The documented ports (REST 8080,
-  gRPC 50051, inference 8090 and 50052) are rewritten in every block to free ones, which the server
-  is given as flags. The server stops when the file is done.
+  and `NBAKE_URL` and `NBAKE_TOKEN` naming it. The documented ports (REST 8080, gRPC 50051, inference
+  8090 and 50052) are rewritten in every block to free ones, which the server is given as flags; as the
+  inference service's default port is the SDK's, not the docs', `NBAKE_INFERENCE_URL` always names it.
+  The server stops when the file is done.
 - **Shell blocks.** Each command (a line; `\\` continues it) runs in bash with `-e -o pipefail` and must
   exit 0; variables it exports carry over to the next ones.
 - **Python blocks** run as a script in a subprocess with the same environment and must exit 0.
@@ -83,6 +84,7 @@ class DocRun:
         self.env |= {
             "PATH": f"{bin_dir}:{self.env.get('PATH', '')}",
             "NBAKE_CONFIG": str(folder / "none.toml"),
+            "NBAKE_INFERENCE_URL": f"http://127.0.0.1:{self.ports['inference-port']}",
         }
         self.values: dict[str, str] = {}
         self.server: subprocess.Popen | None = None
@@ -163,11 +165,7 @@ class DocRun:
 
     def urls(self) -> dict[str, str]:
         token = (self.folder / "nbake-data" / "admin-token").read_text().strip()
-        return {
-            "NBAKE_URL": f"http://127.0.0.1:{self.ports['port']}",
-            "NBAKE_TOKEN": token,
-            "NBAKE_INFERENCE_URL": f"http://127.0.0.1:{self.ports['inference-port']}",
-        }
+        return {"NBAKE_URL": f"http://127.0.0.1:{self.ports['port']}", "NBAKE_TOKEN": token}
 
     def serve(self, command: str, block: Block) -> None:
         """Start the documented `nbake serve` with this run's ports; wait until it and its inference
