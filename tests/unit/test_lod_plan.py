@@ -88,7 +88,8 @@ def test_plan_counts_parameters_like_the_built_networks():
     result = plan(SceneRef(scene), config)
     assert result.estimated_seconds > 0
     assert "32^3, 16^3, 8^3" in result.summary
-    assert [i.name for i in result.items] == ["ground", "sponge", "LoD 0", "LoD 1", "LoD 2", "networks"]
+    names = ["ground", "sponge", "LoD 0", "LoD 1", "LoD 2", "networks", "fixed costs"]
+    assert [i.name for i in result.items] == names
 
 
 def test_config_rejects_bad_resolutions():

@@ -36,7 +36,8 @@ def test_the_plan_names_the_surfaces_and_refuses_unknown_ones():
     scene = SceneRef(get_builtin("fur_ball"))
     config = KIND.resolve_config("quick", {})
     plan = KIND.plan(scene, config)
-    surfaces, plane, networks = plan.items
+    surfaces, plane, networks, fixed = plan.items
+    assert fixed.name == "fixed costs"
     assert surfaces.choice == "fur" and "1280 triangles" in surfaces.reason
     assert f"shell of height {config.shell_height:g}" in surfaces.reason
     # the ball's UV square spans 6.6 slab heights: 27 texels of 0.25, and training's mip depth

@@ -19,6 +19,7 @@ from workers.render.gbuffer import is_mirror, primary_gbuffers
 from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
 from workers.scene.errors import SceneError
 from workers.scene.reference import SceneRef
 from workers.scene.spec import RoughnessVariable, SceneSpec
@@ -161,6 +162,13 @@ def plan(scene: SceneRef, config: ExploreConfig) -> Plan:
             )
         )
         seconds *= 2
+    pixels, others = config.preview_size**2, config.evaluation_configurations - 1
+    view = report_view(pixels, config.evaluation_spp, config.reference_spp, config.max_depth)
+    # the other configurations' references, which the network is measured against too
+    references = Evaluation(pixels, others * config.reference_spp, config.max_depth, others)
+    fixed = fixed_costs(scene, config, (view, references))
+    items.append(fixed.item())
+    seconds += fixed.seconds
     summary = (
         f"{spec.dimensions} dimension(s), {len(spec.variables)} variable(s); {config.exploration} exploration"
     )

@@ -17,6 +17,7 @@ import numpy as np
 from workers.models.lod.config import LodConfig, NetworkConfig
 from workers.render.voxels import padded_bounds
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
 from workers.scene.errors import SceneError
 from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
@@ -171,6 +172,17 @@ def plan(scene: SceneRef, config: LodConfig) -> Plan:
     seconds = config.train.steps * config.batch_size / TRAINING_SAMPLES_PER_SECOND
     voxel_bound = sum(min(r**3, 8 * asset.triangles) for r in resolutions)  # occupied <= all, <= ~8 per tri
     seconds += voxel_bound * config.threshold_samples / THRESHOLD_SAMPLES_PER_SECOND
+    camera, height = scene.spec.camera, config.evaluation_max_height  # each LoD's image is at most this high
+    pixels = height * round(height * camera.width / camera.height)
+    # every LoD is rendered with and without light sampling and timed, against a reference of its size
+    lods = Evaluation(
+        pixels, len(levels) * (3 * config.evaluation_spp + config.reference_spp), 8, 4 * len(levels)
+    )
+    fixed = fixed_costs(
+        scene, config, (report_view(pixels, config.evaluation_spp, config.reference_spp), lods)
+    )
+    items.append(fixed.item())
+    seconds += fixed.seconds
     summary = (
         f"{len(asset.names)} object(s), {asset.triangles:,} triangles, "
         f"{asset.mesh_bytes / 1e6:.2f} MB of mesh; {len(levels)} LoD(s) "

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 from workers.models.lsnif.config import LsnifConfig
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import fixed_costs, report_view
 from workers.scene.reference import SceneRef
 
 LSNIF = "lsnif"
@@ -63,5 +64,9 @@ def plan(scene: SceneRef, config: LsnifConfig) -> Plan:
     )
     instances = sum(c.instances for c in trained)
     on_embree = len(choices) - len(trained)
+    fixed = fixed_costs(
+        scene, config, (report_view(config.preview_size**2, config.evaluation_spp, config.reference_spp),)
+    )
+    items.append(fixed.item())
     summary = f"{len(trained)} network(s) for {instances} instance(s); {on_embree} object(s) on Embree"
-    return Plan(items=items, estimated_seconds=seconds, summary=summary)
+    return Plan(items=items, estimated_seconds=seconds + fixed.seconds, summary=summary)

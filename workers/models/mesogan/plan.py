@@ -13,6 +13,7 @@ from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.covering import build_shell, covering
 from workers.models.mesogan.sampling import cone_radius, widest_footprint
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import fixed_costs, report_view
 from workers.scene.reference import SceneRef
 
 SECONDS_PER_IMAGE = 0.5  # path tracing one training view (quick sizes, one idle core)
@@ -47,6 +48,9 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
     pixels = config.image_size**2
     seconds = config.pool * SECONDS_PER_IMAGE * pixels / 256 * config.training_spp / 8
     seconds += config.train.steps * config.batch_size * SECONDS_PER_STEP_PER_VIEW * pixels / 256
+    view = report_view(config.preview_size**2, config.evaluation_spp, config.reference_spp, config.max_depth)
+    fixed = fixed_costs(scene, config, (view,))
+    seconds += fixed.seconds
     items = [
         PlanItem(
             name="surfaces",
@@ -70,6 +74,7 @@ def plan(scene: SceneRef, config: MesoganConfig) -> Plan:
             ),
             reason=f"{config.train.steps} GAN steps of {config.batch_size} views of {config.image_size}^2",
         ),
+        fixed.item(),
     ]
     summary = (
         f"{config.material} shell over {len(cover.triangles)} triangles, plane {cover.resolution}^2; "

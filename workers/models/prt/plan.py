@@ -15,13 +15,15 @@ from workers.models.prt.config import PrtConfig
 from workers.models.prt.data import scene_box
 from workers.models.prt.probe import probe_objects
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import fixed_costs, report_view
 from workers.scene.reference import SceneRef
 
 # Measured on this 2-core CPU (prt17, one thread, beside two default jobs): a default job's 147k
 # rows at 128 spp took 0.54-0.62 CPU s a view, 96 views, ~320k binned paths a second. (The figures before,
 # 40k paths and 90k pairs a second, were taken under a load of ~15 with older code: a default job's plan
-# said 5000 s for a job of ~600.) Fixed costs are not counted (loading the scene, the probe, a step's own
-# overhead): a quick job planned at 0.6 s took 14 s through `nbake serve`, 6 of them before its rows.
+# said 5000 s for a job of ~600.) A job's fixed costs are `fixed_costs`'s; the probe and a step's own
+# overhead are not counted: a quick job planned at 0.6 s took 14 s through `nbake serve`, 6 of them before
+# its rows.
 PATHS_PER_SECOND = 300_000.0
 # Pixel-wavelet pairs through f per second at M = 16, forward and backward: a default step (128 pixels x
 # 96 wavelets, each pair at M = 64 costing 1.86 of one at M = 16, `_pair_cost`) took 16.8 CPU ms on one
@@ -101,6 +103,11 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
         * (config.train_top_wavelets + config.train_uniform_wavelets)
     )
     seconds = paths / PATHS_PER_SECOND + pairs * _pair_cost(config) / STEP_PAIRS_PER_SECOND
+    frame_spp = config.evaluation_spp or sum(config.frame_spp_choices)  # every count tried is rendered
+    view = report_view(config.image_size**2, frame_spp, config.reference_spp, config.max_depth)
+    fixed = fixed_costs(scene, config, (view,))
+    items.append(fixed.item())
+    seconds += fixed.seconds
     modelled = sum(c.modelled for c in choices)
     summary = f"indirect light of {modelled} of {len(choices)} objects under any lighting; {rows} rows"
     return Plan(items=items, estimated_seconds=seconds, summary=summary)

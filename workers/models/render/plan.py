@@ -6,6 +6,7 @@ from workers.models.render.config import RenderConfig
 from workers.render.camera import PinholeCamera
 from workers.render.render import MAX_PATHS_PER_ITEM, plan_render
 from workers.runtime.contract import Plan, PlanItem
+from workers.runtime.fixed_costs import fixed_costs
 from workers.scene.reference import SceneRef
 from workers.scene.spec import AggregateMaterial
 
@@ -63,5 +64,7 @@ def plan(scene: SceneRef, config: RenderConfig) -> Plan:
                 "process that renders (the driver or each actor) loads its model once",
             )
         )
+    fixed = fixed_costs(scene, config)
+    items.append(fixed.item())
     summary = f"render {config.width}x{config.height} at {config.spp} spp in {passes * tiles} items"
-    return Plan(items=items, estimated_seconds=seconds, summary=summary)
+    return Plan(items=items, estimated_seconds=seconds + fixed.seconds, summary=summary)
