@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from pydantic import ValidationError
 
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.infer import uploaded_mesh
@@ -155,6 +156,11 @@ def test_render_covers_an_uploaded_mesh_with_its_uvs(loaded, tmp_path):
     assert np.isfinite(image).all() and image.max() > 0
     # the same world size over 4 times the UV span: the plane is laid over the UVs, at 1/4 the resolution
     assert large_uvs.meta["plane_resolution"] < small.meta["plane_resolution"]
+    # Without UVs (all zero) the mesh is box-projected; the shell's height may follow the mesh's size.
+    bare = render(model, inference, {"mesh": square(1.0, 0.0)}, shell_height_relative=0.05)
+    assert np.isfinite(bare.arrays["image"]).all() and bare.arrays["image"].max() > 0
+    with pytest.raises(ValidationError, match="at most one of `shell_height`"):
+        render(model, inference, shell_height=0.1, shell_height_relative=0.05)
     with pytest.raises(ValueError, match=r"arrays\.mesh: expected"):
         render(model, inference, {"mesh": square(1.0, 1.0)[..., :5]})
     with pytest.raises(ValueError, match=r"params\.scene"):

@@ -268,7 +268,39 @@ class AggregateMaterial(Model):
         return artifact
 
 
-class MesoganMaterial(AggregateMaterial):
+class ShellHeight(Model):
+    """The height of a shell over surfaces: `shell_height` in world units, or `shell_height_relative`, a
+    fraction of the bounding-box diagonal of the surfaces it covers, which scales with the object (a scan
+    in millimetres or in metres); neither: the artifact's own, in world units."""
+
+    shell_height: Annotated[FiniteFloat, Field(gt=0, description="world units")] | None = None
+    shell_height_relative: (
+        Annotated[
+            FiniteFloat,
+            Field(gt=0, le=1, description="a fraction of the covered surfaces' bounding-box diagonal"),
+        ]
+        | None
+    ) = None
+
+    @field_validator("shell_height_relative")
+    @classmethod
+    def _one_height(cls, relative: float | None, info: ValidationInfo) -> float | None:
+        if relative is not None and info.data.get("shell_height") is not None:
+            raise ValueError("give at most one of `shell_height` (world units) and `shell_height_relative`")
+        return relative
+
+    def world_height(self, diagonal: float, default: float) -> float:
+        """The height in world units over surfaces whose bounding box has this `diagonal`."""
+        if self.shell_height_relative is not None:
+            return self.shell_height_relative * diagonal
+        return self.shell_height or default
+
+    def height_field(self) -> str:
+        """The field that sets the height (the world-units one when neither is given)."""
+        return "shell_height_relative" if self.shell_height_relative is not None else "shell_height"
+
+
+class MesoganMaterial(ShellHeight, AggregateMaterial):
     """A trained `mesogan` model's generated fur, grass or carpet on a shell over the surfaces (Diolatzis
     2022, Sec. 6.2.8; `workers.models.mesogan.material`), its artifact named by `path` or `artifact`; the
     parameters left out are the artifact's own (those its job rendered)."""
@@ -277,7 +309,6 @@ class MesoganMaterial(AggregateMaterial):
     structure: Structure | None = None
     appearance: Appearance | None = None
     seed: Annotated[int, Field(ge=0, description="which instance of the distribution")] = 0
-    shell_height: Annotated[FiniteFloat, Field(gt=0, description="world units")] | None = None
 
 
 Material = Annotated[

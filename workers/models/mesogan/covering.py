@@ -1,8 +1,10 @@
 """A scene's surfaces covered by the material: the shell over them, the generated plane laid over their
-UVs, and, for comparison, the same surfaces covered by real strand geometry.
+UVs (a box projection where a mesh has none, `atlas`), and, for comparison, the same surfaces covered by
+real strand geometry.
 
 The plane spans the UV square; its size in slab heights is the surfaces' world size per UV unit
-(sqrt(world area / UV area)) over the shell height, so a texel has the size it had in training.
+(sqrt(world area / UV area)) over the shell height, so a texel has the size it had in training. The shell
+height is given in world units or relative to the covered surfaces' size (`ShellHeight`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 import torch
 
 from workers.models.mesogan.aggregate import NeuralMaterial, ShellAggregate
+from workers.models.mesogan.atlas import laid_out, uv_areas
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import SKIN, cone_radius, normalized_structure
@@ -24,7 +27,7 @@ from workers.scene.compile import CompiledScene, ObjectGeometry
 from workers.scene.errors import SceneError
 from workers.scene.mesoscale import grow_on_triangles
 from workers.scene.shapes import MeshData
-from workers.scene.spec import Appearance, Camera, Diffuse, Structure
+from workers.scene.spec import Appearance, Camera, Diffuse, ShellHeight, Structure
 
 MAX_PLANE = 4096  # texels per side of a generated plane
 
@@ -32,8 +35,23 @@ MAX_PLANE = 4096  # texels per side of a generated plane
 @dataclass(frozen=True)
 class Covering:
     triangles: np.ndarray  # indices into the compiled scene
+    uvs: np.ndarray  # (T, 3, 2) the triangles' UVs, or their box projection (`atlas.laid_out`)
     plane_units: float  # slab heights per UV unit
     resolution: int  # texels per side of the plane over the UV square
+
+
+def covered_triangles(
+    scene: CompiledScene, surfaces: list[str], field: str = "config.surfaces"
+) -> np.ndarray:
+    """The triangles whose material is one of `surfaces`; `SceneError` naming `field` if none match."""
+    names = [n for n in surfaces if n in scene.material_names]
+    if not names:
+        raise SceneError(
+            field,
+            f"no scene material is named {surfaces}; the scene's materials are {scene.material_names}",
+        )
+    ids = [scene.material_names.index(n) for n in names]
+    return np.flatnonzero(np.isin(scene.material_ids, ids))
 
 
 def covering(
@@ -44,29 +62,27 @@ def covering(
     field: str = "config.surfaces",
 ) -> Covering:
     """The covered triangles and the plane they imply; `SceneError` naming `field` if none match."""
-    names = [n for n in surfaces if n in scene.material_names]
-    if not names:
-        raise SceneError(
-            field,
-            f"no scene material is named {surfaces}; the scene's materials are {scene.material_names}",
-        )
-    ids = [scene.material_names.index(n) for n in names]
-    triangles = np.flatnonzero(np.isin(scene.material_ids, ids))
-    uv = scene.uvs[triangles].astype(np.float64)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    triangles = covered_triangles(scene, surfaces, field)
+    uvs = laid_out(scene.uvs[triangles], scene.positions[triangles], scene.object_ids[triangles])
+    uv_area = uv_areas(uvs).sum()
     if uv_area <= 0:
-        raise SceneError(field, f"surfaces {names} have no UVs: the plane needs a UV layout")
+        raise SceneError(field, f"the surfaces {surfaces} cover no area")
     plane_units = math.sqrt(scene.areas[triangles].sum() / uv_area) / shell_height
     resolution = int(min(MAX_PLANE, max(8, math.ceil(plane_units / texel))))
-    return Covering(triangles, plane_units, resolution)
+    return Covering(triangles, uvs, plane_units, resolution)
+
+
+def shell_height(scene: CompiledScene, triangles: np.ndarray, height: ShellHeight, default: float) -> float:
+    """`height` in world units over `triangles` (`ShellHeight`), the artifact's `default` if unset."""
+    corners = scene.positions[triangles].reshape(-1, 3).astype(np.float64)
+    return height.world_height(float(np.linalg.norm(np.ptp(corners, 0))), default)
 
 
 def build_shell(
     scene: CompiledScene, cover: Covering, height: float, field: str = "config.shell_height"
 ) -> Shell:
     t = cover.triangles
-    return Shell(scene.positions[t], scene.shading_normals[t], scene.uvs[t], height, field=field)
+    return Shell(scene.positions[t], scene.shading_normals[t], cover.uvs, height, field=field)
 
 
 def neural_material(
@@ -99,16 +115,17 @@ def shell_aggregate(
     structure: Structure,
     appearance: Appearance,
     seed: int,
-    shell_height: float,
+    height: ShellHeight,
     view: Camera,
     fields: tuple[str, str],
 ) -> ShellAggregate:
-    """The material of the instance `seed` on a shell of `shell_height` over the scene's `surfaces` (by
-    material name), as the path tracer's aggregate for paths starting at the camera `view`: what the
-    kind's `:render` and a scene's mesogan material (`material`) draw. SceneErrors name `fields` (the
-    surfaces' and the shell height's)."""
-    cover = covering(scene, surfaces, shell_height, config.texel, field=fields[0])
-    shell = build_shell(scene, cover, shell_height, field=fields[1])
+    """The material of the instance `seed` on a shell of `height` (the artifact's if unset) over the
+    scene's `surfaces` (by material name), as the path tracer's aggregate for paths starting at the camera
+    `view`: what the kind's `:render` and a scene's mesogan material (`material`) draw. SceneErrors name
+    `fields`: the surfaces', and the prefix of the shell height's (`params.`)."""
+    world = shell_height(scene, covered_triangles(scene, surfaces, fields[0]), height, config.shell_height)
+    cover = covering(scene, surfaces, world, config.texel, field=fields[0])
+    shell = build_shell(scene, cover, world, field=fields[1] + height.height_field())
     material = neural_material(model, config, cover, structure, appearance, seed)
     return ShellAggregate(shell, material, config.samples_per_ray, cone_radius(view.fov, view.height))
 

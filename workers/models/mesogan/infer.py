@@ -40,7 +40,16 @@ from workers.scene.builtin import get_builtin
 from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.portable import framing_camera, load_scene, neutral_scene
-from workers.scene.spec import Appearance, Camera, Diffuse, MeshShape, SceneObject, SphereShape, Structure
+from workers.scene.spec import (
+    Appearance,
+    Camera,
+    Diffuse,
+    MeshShape,
+    SceneObject,
+    ShellHeight,
+    SphereShape,
+    Structure,
+)
 
 GENERATE = "generate"
 MAX_WINDOW = 2048
@@ -77,7 +86,7 @@ class QueryParams(Material):
     )
 
 
-class RenderParams(ViewRender, Material):
+class RenderParams(ViewRender, Material, ShellHeight):
     scene: str | None = Field(
         None, description="a built-in scene's name, rendered instead of the one the artifact keeps"
     )
@@ -154,7 +163,7 @@ class MesoganModel:
         camera = params.camera.over(scene.spec.camera)
         aggregate = shell_aggregate(
             scene, surfaces, self.model, config, params.structure, params.appearance, params.seed,
-            config.shell_height, camera, ("params.surfaces", "config.shell_height"),
+            params, camera, ("params.surfaces", "params."),
         )  # fmt: skip
         image = render_view(PathTracer(scene, aggregate=aggregate), params, camera).image
         return Answer({"image": image}, {"plane_resolution": aggregate.material.window.size[0]})

@@ -5,7 +5,8 @@ registers it under its name (`KIND.materials`, `workers.render.aggregate_materia
 
 The artifact is the folder `path` names, relative to the scene file, or the stored `artifact` a server job
 fetched (`aggregate_materials.artifact_source`); structure, appearance and shell height left out are the
-artifact's own (what its job rendered).
+artifact's own (what its job rendered); the shell height may be relative to the covered surfaces' size
+(`workers.scene.spec.ShellHeight`).
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Came
         material.structure or config.structure,
         material.appearance or config.appearance,
         material.seed,
-        material.shell_height or config.shell_height,
+        material,
         view,
-        (f"materials.{name}", f"materials.{name}.shell_height"),
+        (f"materials.{name}", f"materials.{name}."),
     )
