@@ -4,11 +4,11 @@
 given structure parameters and seed, so a client can tile or cache it: windows of one seed agree on
 their overlap.
 `query`: density and rho at slab points (plane x, y and height in slab heights) of the seed's plane,
-with light and view directions in the tangent frame (z up).
+with light and view directions in the tangent frame (z up); any window holding a point answers it alike.
 `render`: a scene with the material on its named surfaces (`params.surfaces`), for the given structure,
-appearance, seed and camera, path-traced with the neural shell. The scene is the one the artifact keeps, a
-built-in one (`params.scene`), an uploaded mesh with UVs (`arrays.mesh`, under the neutral sky) or a
-sphere under the neutral sky.
+appearance, seed, shell height (`ShellHeight`) and camera, path-traced with the neural shell. The scene is
+the one the artifact keeps, a built-in one (`params.scene`), an uploaded mesh (`arrays.mesh`, under the
+neutral sky; all-zero UVs are box-projected, `atlas`) or a sphere under the neutral sky.
 """
 
 from __future__ import annotations
