@@ -128,6 +128,18 @@ def test_download_verifies_resumes_and_skips(client, finished, tmp_path):
     assert kept.skipped
 
 
+def test_a_job_and_its_artifact_are_named_alike_by_every_call(client, finished, tmp_path):
+    """A job (id or `Job`) and its artifact (id, bare digest or `Manifest`) name each other everywhere."""
+    manifest = client.manifest(finished)
+    digest = manifest.artifact_id.removeprefix("sha256:")
+    for ref in (finished, finished.id, manifest.artifact_id, digest, manifest):
+        assert client.manifest(ref) == manifest
+        assert client.get(ref).id == finished.id
+        assert list(client.events(ref))[-1].state == JobState.SUCCEEDED
+    (file,) = client.download(finished.id, tmp_path, ["preview.png"])
+    assert file.entry == manifest.file("preview.png")
+
+
 def test_rest_and_grpc_show_a_job_the_same_way(served, finished):
     with Client(served.url, TOKENS["read"]) as rest, Client(served.grpc_url, TOKENS["read"]) as rpc:
         over_rest, over_grpc = rest.get(finished.id), rpc.get(finished.id)
