@@ -1,11 +1,13 @@
 """A `mesogan` artifact as users reach it: `nbake serve-inference` in its own process serving an artifact
 placed in its store by hand (untrained weights: the plumbing, not quality). `generate`, which
-`/v1/models` lists, answers over REST (JSON and binary), gRPC and the SDK on both transports, equal to the
-kind's `infer` in this process; an operation the kind lacks is a 400 naming those it has. Tiled `query`
-windows agree with one large window between texel centres, through the service as a user tiles them."""
+`/v1/models` lists, answers over REST (JSON and binary), gRPC and the SDK (both transports, and async),
+equal to the kind's `infer` in this process; an operation the kind lacks is a 400 naming those it has.
+Tiled `query` windows agree with one large window between texel centres, through the service as a user
+tiles them."""
 
 from __future__ import annotations
 
+import asyncio
 import base64
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,7 +18,7 @@ import pytest
 import torch
 from google.protobuf import struct_pb2
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
-from neuralbake_client import Client
+from neuralbake_client import AsyncClient, Client
 
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
@@ -109,6 +111,12 @@ def test_generate_is_served_over_rest_grpc_and_the_sdk(served):
             generated = sdk.generate(artifact_id, WINDOW)
             assert generated.kind == "mesogan" and generated.meta == expected.meta, url
             np.testing.assert_array_equal(generated["plane"], plane, err_msg=url)
+
+    async def generate_async():
+        async with AsyncClient(server.url, TOKENS["read"], inference_url=server.url) as sdk:
+            return await sdk.generate(artifact_id, WINDOW)
+
+    np.testing.assert_array_equal(asyncio.run(generate_async())["plane"], plane)
 
 
 def test_tiled_queries_through_the_service_agree_with_one_large_query(served):
