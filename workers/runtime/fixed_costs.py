@@ -21,16 +21,19 @@ from workers.runtime.report import PATH_TRACING_SPP
 from workers.scene.reference import SceneRef
 
 # Scheduler to the kind's first line: Ray starts the driver actor's worker process, which imports the
-# driver, NumPy, Numba and Embree (a warm `render` job's first log came 2-3 s after RUNNING).
-DRIVER_START_S = 2.5
-# `import torch` and the training runtime in a fresh process, paid by a kind that trains and by each
-# sampler actor (4-5 s in a fresh interpreter beside other jobs, 2.5 s on an idle core).
-TORCH_IMPORT_S = 2.5
+# driver, torch (the runtime's batch streams need it), Numba and Embree: a warm `render` job's first log
+# came 3.2 s after RUNNING (load 1.5).
+DRIVER_START_S = 3.0
+# A kind that trains imports its networks and the training runtime too: in fresh interpreters, importing
+# `lsnif`'s or `lod`'s method took 1.4-1.6x `render`'s run.
+TRAINING_IMPORT_S = 2.0
 # Loading the machine's cached Numba kernels into a process on its first render (compiling them is
 # once per machine and is not counted): the first 8x8 1-spp render in a fresh process, less a second.
 KERNEL_LOAD_S = 1.5
-# A sampler actor's own start beyond its imports: Ray placing and starting the actor, and its handshake.
-SAMPLER_START_S = 1.0
+# A sampler actor's start: Ray placing the job's reservation and starting the actor's process, which
+# imports torch and the path tracer (a quick `render` with one actor took 9-11 s more than without, at
+# load 9, kernel load and compile included).
+SAMPLER_START_S = 4.0
 # Compiling a scene: flattening its triangles and building Embree's BVH (menger_sponge, 36k triangles:
 # 0.5 s; fur_patch, 96k: 1.4 s).
 SCENE_S_PER_TRIANGLE = 1.5e-5
@@ -102,7 +105,6 @@ def fixed_costs(scene: SceneRef, config: BaseModel, evaluation: tuple[Evaluation
     """The fixed costs of running `config` on `scene`: `evaluation` is the path tracing its kind does to
     measure the model (`report_view` for the shared report's view, plus the kind's own)."""
     trains = isinstance(config, TrainedKindConfig)
-    imports = TORCH_IMPORT_S if trains else 0.0
     triangles = sum(
         count * len(obj.instances or [None])
         for obj, count in zip(scene.spec.objects, scene.object_triangles(), strict=True)
@@ -110,15 +112,15 @@ def fixed_costs(scene: SceneRef, config: BaseModel, evaluation: tuple[Evaluation
     folder = scene.local_folder()
     scene_bytes = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) if folder else 0
     compile_s = triangles * SCENE_S_PER_TRIANGLE + scene_bytes * SCENE_S_PER_BYTE
-    # sampler actors start side by side, each importing, compiling the scene and loading the kernels
-    # itself, while the driver waits for them all
+    # sampler actors start side by side, each compiling the scene and loading the kernels itself, while
+    # the driver waits for them all
     samplers = config.samplers > 0
     segments = sum(e.segments for e in evaluation)
     return FixedCosts(
-        handoff=DRIVER_START_S + imports,
+        handoff=DRIVER_START_S + (TRAINING_IMPORT_S if trains else 0.0),
         scene=compile_s * (2 if samplers else 1),
         kernels=KERNEL_LOAD_S * (2 if samplers else 1),
-        samplers=SAMPLER_START_S + imports if samplers else 0.0,
+        samplers=SAMPLER_START_S if samplers else 0.0,
         evaluation=segments * PATH_SEGMENT_S + sum(e.images for e in evaluation) * IMAGE_S,
         report=REPORT_S if trains else 0.0,
         triangles=triangles,
