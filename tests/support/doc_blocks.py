@@ -36,7 +36,7 @@ class Block:
     reason: str = ""
 
     def __str__(self) -> str:
-        return f"{self.path.name}:{self.line} ({self.language or 'text'})"
+        return f"{self.path.parent.name}/{self.path.name}:{self.line} ({self.language or 'text'})"
 
 
 def marker(path: Path, line: int, text: str, language: str) -> dict:
