@@ -18,7 +18,7 @@ import itertools
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from concurrent.futures import Future
 from dataclasses import dataclass
 
@@ -39,23 +39,39 @@ class _Request:
     future: Future
 
     @property
-    def rows(self) -> int:
-        return len(next(iter(self.arrays.values()))) if self.arrays else 0
+    def per_call(self) -> list[str]:
+        return [name for name in self.arrays if self.spec.inputs[name].per_call]
 
-    def key(self) -> tuple[str, str, tuple[str, ...]]:
-        """Requests merge only with equal parameters and the same inputs (optional ones may be absent)."""
-        return self.operation, self.params.model_dump_json(), tuple(sorted(self.arrays))
+    @property
+    def rows(self) -> int:
+        return next((len(a) for name, a in self.arrays.items() if self.spec.inputs[name].rows), 0)
+
+    def key(self) -> tuple[str, str, tuple[str, ...], int]:
+        """Requests merge only with equal parameters and the same inputs (optional ones may be absent), and
+        one carrying a `per_call` input (its own environment map) with none."""
+        alone = id(self) if self.per_call else 0
+        return self.operation, self.params.model_dump_json(), tuple(sorted(self.arrays)), alone
 
 
 def in_chunks(
-    run: Callable[[dict[str, np.ndarray]], Answer], arrays: dict[str, np.ndarray], rows: int, chunk_rows: int
+    run: Callable[[dict[str, np.ndarray]], Answer],
+    arrays: dict[str, np.ndarray],
+    rows: int,
+    chunk_rows: int,
+    per_call: Collection[str] = (),
 ) -> Answer:
-    """`run` on at most `chunk_rows` rows at a time, outputs concatenated (meta: the first chunk's, as every
-    chunk of a row-independent operation says the same)."""
+    """`run` on at most `chunk_rows` rows at a time, each chunk with the whole of the `per_call` inputs,
+    outputs concatenated (meta: the first chunk's, as every chunk of a row-independent operation says the
+    same)."""
     if rows <= chunk_rows:
         return run(arrays)
     parts = [
-        run({name: array[start : start + chunk_rows] for name, array in arrays.items()})
+        run(
+            {
+                name: array if name in per_call else array[start : start + chunk_rows]
+                for name, array in arrays.items()
+            }
+        )
         for start in range(0, rows, chunk_rows)
     ]
     merged = {name: np.concatenate([p.arrays[name] for p in parts]) for name in parts[0].arrays}
@@ -153,7 +169,7 @@ class Batcher:
                     if len(batch) == 1
                     else {name: np.concatenate([r.arrays[name] for r in batch]) for name in first.arrays}
                 )
-                answers = _split(in_chunks(run, merged, sum(rows), self.chunk_rows), rows)
+                answers = _split(in_chunks(run, merged, sum(rows), self.chunk_rows, first.per_call), rows)
         except Exception as error:  # every request of the batch learns why
             for request in batch:
                 request.future.set_exception(error)

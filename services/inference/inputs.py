@@ -55,7 +55,7 @@ def checked_arrays(
             checked[name] = _checked_array(name, arrays[name], spec)
         elif spec.required:
             raise InvalidQuery(f"missing: this operation needs {name} {_shape_text(spec)}", f"arrays.{name}")
-    rows = {len(a) for name, a in checked.items() if operation.inputs[name].shape[:1] == (None,)}
+    rows = {len(a) for name, a in checked.items() if operation.inputs[name].rows}
     if len(rows) > 1:
         raise InvalidQuery(f"the arrays disagree on their number of rows ({sorted(rows)})", "arrays")
     if rows and rows.pop() > max_rows:

@@ -176,7 +176,7 @@ class InferenceService:
         """The working memory a request will need, from its shapes alone (nothing converted or run yet);
         RequestTooLarge naming its row input when that is more than the whole budget."""
         known = {name: array for name, array in arrays.items() if name in spec.inputs}
-        row_inputs = [a for n, a in known.items() if spec.inputs[n].shape[:1] == (None,) and a.ndim]
+        row_inputs = [a for n, a in known.items() if spec.inputs[n].rows and a.ndim]
         rows = max((len(a) for a in row_inputs), default=0)  # a 0-d array is refused by its shape check
         converted = sum(a.size * np.dtype(spec.inputs[n].dtype).itemsize for n, a in known.items())
         per_call = spec.call_bytes + min(rows, self.settings.chunk_rows) * spec.activation_row_bytes

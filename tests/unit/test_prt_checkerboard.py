@@ -87,11 +87,12 @@ def test_a_checkerboard_frame_is_the_network_at_its_shaded_pixels_and_their_mean
     inputs = _plane()
     inputs.kd = rng.uniform(0, 1, (H * W, 3))  # a different value at every pixel
     box, objects, cube = np.array([[-1.0] * 3, [1.0] * 3]), np.array([0]), rng.uniform(0, 1, (6, 4, 4, 3))
-    every = predict_indirect(model, inputs, box, objects, cube, 8, "area")
-    half = predict_indirect(model, inputs, box, objects, cube, 8, "area", (H, W))
+    every, pairs = predict_indirect(model, inputs, box, objects, cube, 8, "area")
+    half, half_pairs = predict_indirect(model, inputs, box, objects, cube, 8, "area", (H, W))
     shaded = _even()
     np.testing.assert_allclose(half[shaded], every[shaded], rtol=1e-5, atol=1e-7)
     board = checkerboard(inputs, inputs.modelled(objects), H, W)
     expected = board.fill(np.where(shaded[:, None], every, 0))
     np.testing.assert_allclose(half, expected, rtol=1e-5, atol=1e-7)
     assert not np.allclose(half[~shaded], every[~shaded])  # filled, not evaluated
+    assert (pairs, half_pairs) == (8 * H * W, 8 * int(board.shaded.sum()))  # the frame's counted cost

@@ -233,7 +233,7 @@ def test_pixels_that_see_the_environment_get_no_indirect_light():
         object_id=np.array([0, -1, 0, -1, 1, 0]),
     )  # fmt: skip
     box = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
-    out = predict_indirect(model, inputs, box, np.array([0]), np.ones((6, 4, 4, 3)), 8, "area")
+    out, _ = predict_indirect(model, inputs, box, np.array([0]), np.ones((6, 4, 4, 3)), 8, "area")
     assert (out[[1, 3]] == 0).all()  # the environment, seen directly: masked
     assert (out[4] == 0).all()  # an object left to direct light
     assert (out[[0, 2, 5]] != 0).any(axis=1).all()
@@ -401,8 +401,8 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one(monkeypatch, sam
     tracer = relit_tracer(compile_scene(spec), uniform_cube(4))
     camera = spec.camera.model_copy(update={"width": 24, "height": 24})
     inputs = surface_inputs(tracer, *pixel_rays(camera))
-    raw, denoised = (direct_light(tracer, camera, inputs, 8, 0, 1, d) for d in (False, True))
-    reference = direct_light(tracer, camera, inputs, 512, 1, 1, False)
+    raw, denoised = (direct_light(tracer, camera, inputs, 8, 0, 1, d)[0] for d in (False, True))
+    reference, _ = direct_light(tracer, camera, inputs, 512, 1, 1, False)
     hit = inputs.hit.reshape(24, 24)
     filtered = interior(hit, inputs.object_id.reshape(24, 24))
     error = lambda image: float(((image - reference)[filtered] ** 2).mean())  # noqa: E731

@@ -25,11 +25,11 @@ def test_a_convex_object_alone_is_left_to_direct_light_and_the_plan_says_why():
     assert plan.summary.startswith("indirect light of 0 of 1 objects") and plan.estimated_seconds > 0
 
 
-def test_the_plan_says_the_default_job_times_its_frame_and_a_fixed_count_is_kept():
+def test_the_plan_says_the_default_job_counts_its_frame_s_cost_and_a_fixed_count_is_kept():
     kind = get_kind("prt")
-    timed = plan_items(kind, "default", {})["frame"]
-    assert timed.choice == "direct light at 4, 8, 16, 32, 64 spp, timed"
-    assert "beats path tracing" in timed.reason
+    counted = plan_items(kind, "default", {})["frame"]
+    assert counted.choice == "direct light at 4, 8, 16, 32, 64 spp, counted"
+    assert "beats path tracing" in counted.reason and "not time" in counted.reason
     fixed = plan_items(kind, "default", {"evaluation_spp": 8, "checkerboard": False})["frame"]
     assert fixed.choice == "direct light at 8 spp" and fixed.reason.endswith("the network at every pixel")
 

@@ -62,11 +62,19 @@ QUERY, RENDER = "query", "render"
 @dataclass(frozen=True)
 class ArraySpec:
     """One input array of an operation: the dtype it is converted to and its shape, `None` where any
-    length goes. Axis 0 is the row axis that dynamic batching concatenates along."""
+    length goes. Axis 0 is the row axis that dynamic batching concatenates along, unless `per_call`: an
+    input the whole call shares (an environment map beside a batched query's points), which is never
+    split or merged, and a request carrying one runs alone."""
 
     dtype: str
     shape: tuple[int | None, ...]
     required: bool = True
+    per_call: bool = False
+
+    @property
+    def rows(self) -> bool:
+        """Whether axis 0 counts rows: any length, and not `per_call`."""
+        return self.shape[:1] == (None,) and not self.per_call
 
 
 @dataclass(frozen=True)

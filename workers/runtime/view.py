@@ -31,6 +31,7 @@ class PathTracedView:
     tracer: PathTracer | None = field(default=None, repr=False)  # built on first use when not given
     _images: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
     _seconds: dict[int, list[float]] = field(default_factory=dict, repr=False)  # every render's, per spp
+    _rays: dict[int, int] = field(default_factory=dict, repr=False)
     _reference: np.ndarray | None = field(default=None, repr=False)
     _warm: bool = field(default=False, repr=False)
 
@@ -53,8 +54,14 @@ class PathTracedView:
                 self._warm = True
             result = render(self._path_tracer(), self.at(spp))
             self._images.setdefault(spp, result.image)
+            self._rays.setdefault(spp, result.rays_traced)
             seconds.append(result.seconds)
         return TimedImage(f"{spp} spp", self._images[spp], statistics.median(seconds))
+
+    def rays(self, spp: int) -> int:
+        """The rays the view's frame at `spp` traced: its cost counted, the same on every machine and load."""
+        self.frame(spp)
+        return self._rays[spp]
 
     def curve_spp(self) -> list[int]:
         """The curve's sample counts: `PATH_TRACING_SPP` below the reference's spp."""

@@ -17,6 +17,9 @@ from workers.runtime.training import Schedule, TrainConfig
 from workers.scene.strict import StrictModel
 
 FRAME_SPP = (4, 8, 16, 32, 64)
+# A fixed price keeps the frame's choice the same on any machine and load; an AMD EPYC on one thread traces
+# a report view's ray in 1.9-2.2 us and runs a default network's FLOP in 0.16 ns (bfloat16 products).
+FLOPS_PER_RAY = 12_000.0
 
 
 class LightingConfig(StrictModel):
@@ -442,8 +445,8 @@ class PrtConfig(TrainedKindConfig):
     #   16 denoised, checkerboard           1.58 / 1.00   1.27 / 0.41
     # 32 raw on a checkerboard is the one setting under 1 by PSNR on both scenes and by FLIP on one, with
     # the lowest geometric mean by FLIP (1.25; 8 raw 1.42), and its frames are the cleanest of these (32.0
-    # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs, so since prt20 the job times its
-    # own (None, `frame_spp`): the weights stay the seed's alone, the frame's count is the machine's choice.
+    # / 31.5 dB against 25.4 / 27.7 at 8 spp). Each scene's best differs, so since prt20 the job chooses its
+    # own (None, `frame_spp`); since issue 49 by counted cost, not time, so that it is the job's alone.
     # prt20 (seed 0, quiet AMD EPYC, prt16's kind of machine; default jobs, the job's log or bench_prt's
     # timing table, `PRT_BENCH_ABLATION_STEPS=0 python -m tests.bench bench_prt`): env_lit_objects chose 16
     # spp in each of three jobs, its equal-time ratio against the report's 1 / 4 / 16 / 64-spp curve 0.87-0.99
@@ -456,8 +459,15 @@ class PrtConfig(TrainedKindConfig):
         None,
         ge=1,
         le=65536,
-        description="the artifact's frame: its direct light's spp (before any filter); None: the job times "
-        "4 to 64 on the report's view and takes the one that beats path tracing by most (`frame_spp`)",
+        description="the artifact's frame: its direct light's spp (before any filter); None: the job tries "
+        "4 to 64 on the report's view and takes the one that beats path tracing by most at equal counted "
+        "cost (`frame_spp`)",
+    )
+    flops_per_ray: float = Field(
+        FLOPS_PER_RAY,
+        gt=0,
+        description="choosing the artifact's frame by counted cost (`frame_spp`): the network FLOPs that "
+        "cost as much as one traced ray",
     )
     denoise_direct: bool = Field(
         False, description="the artifact's frame: filter its direct light (G-buffer-guided à-trous, `frame`)"

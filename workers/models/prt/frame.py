@@ -22,7 +22,7 @@ from workers.models.prt.selection import run_time_selection
 from workers.models.prt.views import pixel_rays
 from workers.render.denoise import LUMINANCE, Guides, atrous
 from workers.render.integrator import PathTracer
-from workers.render.render import RenderSettings, render
+from workers.render.render import RenderResult, RenderSettings, render
 from workers.scene.spec import Camera
 
 DIRECT_DEPTH = 2  # camera segment + one bounce: emitters seen, NEE and BSDF-sampled escapes at the first hit
@@ -37,6 +37,8 @@ class Frame:
     indirect: np.ndarray
     seconds: float  # the whole frame
     network_seconds: float  # selection and network only
+    rays: int  # traced: the G-buffer's and the direct light's (counted, the same on any machine)
+    network_flops: int  # f's products over the shaded pixel-wavelet pairs (`PrtNetwork.pair_flops`)
 
 
 def predict_indirect(
@@ -48,23 +50,24 @@ def predict_indirect(
     k: int,
     weighting: str,
     checkerboard: tuple[int, int] | None = None,
-) -> np.ndarray:
+) -> tuple[np.ndarray, int]:
     """Indirect radiance (N, 3) float32 of every pixel under `cube`: 0 where the camera ray escapes and on
-    objects not modelled. With `checkerboard` the frame's (height, width), the network shades half of the
-    pixels and the rest are filled from their neighbours (`checkerboard`)."""
+    objects not modelled; and how many pixel-wavelet pairs the network shaded. With `checkerboard` the
+    frame's (height, width), the network shades half of the pixels and the rest are filled from their
+    neighbours (`checkerboard`)."""
     out = np.zeros((len(inputs.hit), 3), np.float32)
     modelled = inputs.modelled(objects)
     board = None if checkerboard is None else checkerboard_of(inputs, modelled, *checkerboard)
     seen = np.flatnonzero(modelled if board is None else board.shaded)
     if len(seen) == 0:
-        return out
+        return out, 0
     chosen = run_time_selection(cube, k, weighting)
     device = next(model.parameters()).device
     tensors = {name: t.to(device) for name, t in inputs.take(seen).tensors(box).items()}
     with torch.inference_mode():
         b = model(tensors, chosen.indices.to(device), chosen.values.float().to(device))
     out[seen] = b.float().cpu().numpy()
-    return out if board is None else board.fill(out)
+    return (out if board is None else board.fill(out)), len(seen) * len(chosen.indices)
 
 
 def guides_of(inputs: SurfaceInputs, camera: Camera) -> Guides:
@@ -91,22 +94,24 @@ def direct_light(
     seed: int,
     threads: int,
     denoise: bool,
-) -> np.ndarray:
-    """The direct light (H, W, 3) at `spp` paths per pixel, denoised or not."""
+) -> tuple[np.ndarray, int]:
+    """The direct light (H, W, 3) at `spp` paths per pixel, denoised or not, and the rays it traced."""
 
-    def half(samples: int, seed: int) -> np.ndarray:
+    def half(samples: int, seed: int) -> RenderResult:
         settings = RenderSettings(
             spp=samples, width=camera.width, height=camera.height, max_depth=DIRECT_DEPTH, seed=seed,
             threads=threads, sampler=SAMPLER,
         )  # fmt: skip
-        return render(tracer, settings, view=camera).image
+        return render(tracer, settings, view=camera)
 
     if not denoise or spp < 2:
-        return half(spp, seed)
+        whole = half(spp, seed)
+        return whole.image, whole.rays_traced
     first, second = half(spp // 2, seed), half(spp - spp // 2, seed + SECOND_HALF_SEED)
-    mean = (first * (spp // 2) + second * (spp - spp // 2)) / spp
-    variance = ((first - second) @ LUMINANCE) ** 2 / 4  # of the mean of two equal halves
-    return atrous(mean, guides_of(inputs, camera), variance=variance)
+    mean = (first.image * (spp // 2) + second.image * (spp - spp // 2)) / spp
+    variance = ((first.image - second.image) @ LUMINANCE) ** 2 / 4  # of the mean of two equal halves
+    image = atrous(mean, guides_of(inputs, camera), variance=variance)
+    return image, first.rays_traced + second.rays_traced
 
 
 def render_frame(
@@ -134,9 +139,12 @@ def render_frame(
     inputs = surface_inputs(tracer, origins, directions)
     network_start = time.perf_counter()
     shape = (camera.height, camera.width)
-    indirect = predict_indirect(
+    indirect, pairs = predict_indirect(
         model, inputs, box, objects, cube, k, weighting, shape if checkerboard else None
-    ).reshape(*shape, 3)
+    )
+    indirect = indirect.reshape(*shape, 3)
     network_seconds = time.perf_counter() - network_start
-    direct = direct_light(tracer, camera, inputs, spp, seed, threads, denoise)
-    return Frame(direct + indirect, direct, indirect, time.perf_counter() - start, network_seconds)
+    direct, rays = direct_light(tracer, camera, inputs, spp, seed, threads, denoise)
+    seconds = time.perf_counter() - start
+    flops = pairs * model.pair_flops()
+    return Frame(direct + indirect, direct, indirect, seconds, network_seconds, len(origins) + rays, flops)

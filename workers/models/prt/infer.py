@@ -6,12 +6,13 @@ lat-long map uploaded as the `environment` array; with `rotate` and `scale`) in,
 the K (`params.wavelets`) wavelets of the lighting, the network's indirect light and path-traced direct
 light at `params.spp` under the map itself (full resolution, importance-sampled), denoised if
 `params.denoise`; `params.checkerboard` runs the network at half the pixels. Each defaults to the
-artifact's frame (`evaluation_spp`, the count its job timed and kept unless its config fixed one;
+artifact's frame (`evaluation_spp`, the count its job chose by counted cost unless its config fixed one;
 `denoise_direct`; `checkerboard`): the frame its report times against path tracing. The service adds
 the frame time as `Server-Timing`.
 
 `query`: indirect radiance at given G-buffer points (world position, normal, direction towards the
-viewer, kd, ks, roughness) under a lighting: what a rasteriser needs to add the network's light itself.
+viewer, kd, ks, roughness) under a lighting, the same as `render`'s (an uploaded map too): what a
+rasteriser needs to add the network's light itself.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from workers.scene.spec import EnvironmentMap
 
 DEFAULT_LIGHTING = EnvironmentMap(builtin="courtyard")
 UPLOAD = "environment"
+ENVIRONMENT = ArraySpec("float32", (None, None, 3), required=False, per_call=True)  # a lat-long map
 MAX_UPLOAD_TEXELS = 4096 * 2048
 SERVED_WIDTH = 1024  # procedural maps are generated this wide; larger maps are box-filtered down to it
 # Working memory, estimated from the network's shapes (not measured): a query's output (12 bytes a point)
@@ -158,7 +160,7 @@ class PrtModel:
     def _query(self, params: PrtQuery, arrays: dict[str, np.ndarray]) -> Answer:
         from workers.models.prt.frame import predict_indirect
 
-        _, _, cube = self._lighting(params, None)
+        _, _, cube = self._lighting(params, arrays.get(UPLOAD))
         normal = _unit(arrays["normal"], "normal")
         towards_viewer = _unit(arrays["view"], "view")
         facing = np.sum(normal * towards_viewer, axis=1, keepdims=True)
@@ -177,7 +179,7 @@ class PrtModel:
         )
         objects = self.artifact.objects if "object" in arrays else np.array([-1])
         with torch_threads(1):
-            indirect = predict_indirect(
+            indirect, _ = predict_indirect(
                 self.model, inputs, self.artifact.box, objects, cube, self._k(params), self.config.selection
             )
         return Answer({"indirect": indirect}, {"wavelets": self._k(params)})
@@ -194,7 +196,7 @@ class PrtInference:
     operations: ClassVar[Mapping[str, Operation]] = {
         RENDER: Operation(
             params=PrtRender,
-            inputs={UPLOAD: ArraySpec("float32", (None, None, 3), required=False)},
+            inputs={UPLOAD: ENVIRONMENT},
             call_bytes=RENDER_WORKING_BYTES + TRANSPORT_BYTES,
         ),
         QUERY: Operation(
@@ -207,6 +209,7 @@ class PrtInference:
                 "ks": ArraySpec("float64", (None, 3)),
                 "roughness": ArraySpec("float64", (None,)),
                 "object": ArraySpec("int64", (None,), required=False),
+                UPLOAD: ENVIRONMENT,
             },
             batched=True,
             row_bytes=QUERY_ROW_BYTES,

@@ -46,6 +46,14 @@ class PrtNetwork(nn.Module):
         nn.init.zeros_(self.f.layers[-2].weight)
         self.bfloat16 = config.bfloat16_products
 
+    def pair_flops(self) -> int:
+        """Floating-point operations of one pixel-wavelet pair in `forward`: f's products from the h part of
+        its first layer on (the rest of that layer is once per pixel) and the pair's term of the sum over
+        wavelets. A frame's network cost in a unit that is the same on every machine (`frame_spp`)."""
+        linears = [layer for layer in self.f.layers if isinstance(layer, nn.Linear)]
+        first = self.grid.n_output_dims * linears[0].out_features
+        return 2 * (first + sum(layer.in_features * layer.out_features for layer in linears[1:]) + 3)
+
     def pixel_features(self, inputs: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
         """S(x) [P, M] and the rest of f's per-pixel inputs [P, F]."""
         spatial = self.grid(inputs["position"])

@@ -114,7 +114,7 @@ def plan(scene: SceneRef, config: PrtConfig) -> Plan:
 
 
 def frame_item(config: PrtConfig) -> PlanItem:
-    """The artifact's frame: the config's direct-light spp, or the counts the job will time (`frame_spp`)."""
+    """The artifact's frame: the config's direct-light spp, or the counts the job will try (`frame_spp`)."""
     shading = "half the pixels (checkerboard)" if config.checkerboard else "every pixel"
     how = f"{'denoised, ' if config.denoise_direct else ''}the network at {shading}"
     if config.evaluation_spp is not None:
@@ -126,9 +126,9 @@ def frame_item(config: PrtConfig) -> PlanItem:
     counts = ", ".join(map(str, config.frame_spp_choices))
     return PlanItem(
         name="frame",
-        choice=f"direct light at {counts} spp, timed",
+        choice=f"direct light at {counts} spp, counted",
         reason="the job keeps the count whose frame of the report's view beats path tracing by most at equal "
-        f"time, by FLIP and by PSNR (`frame_spp`); {how}",
+        f"cost (rays traced and network FLOPs, not time), by FLIP and by PSNR (`frame_spp`); {how}",
     )
 
 

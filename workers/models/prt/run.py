@@ -13,7 +13,7 @@ from workers.models.prt import artifact
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.evaluate import ReportView, held_out_cases, report_view, summarise
 from workers.models.prt.frame import Frame
-from workers.models.prt.frame_spp import best, frame_candidates
+from workers.models.prt.frame_spp import best, frame_candidates, timed
 from workers.models.prt.network import PrtNetwork
 from workers.models.prt.plan import parameter_counts
 from workers.models.prt.probe import probe_objects
@@ -90,16 +90,18 @@ class PrtMethod:
         report: ReportView,
         method_metrics: dict[str, float],
     ) -> tuple[Frame, float, PrtConfig]:
-        """The frame `frame_spp` chooses among the config's counts (one when the config fixes it), its
-        median time, and the config with its spp (the artifact's)."""
+        """The frame `frame_spp` chooses among the config's counts (one when the config fixes it) by their
+        counted cost, its median time (the report's), and the config with its spp (the artifact's)."""
         config: PrtConfig = ctx.config
         candidates = frame_candidates(model, box, objects, report, config, ctx.seed)
         for c in candidates:
             ctx.log(str(c))
-            method_metrics[f"frame_spp.{c.spp}.ratio_flip"] = c.ratio_flip
-            method_metrics[f"frame_spp.{c.spp}.ratio_psnr"] = c.ratio_psnr
+            method_metrics[f"frame_spp.{c.spp}.cost_rays"] = c.point.seconds_per_frame
+            method_metrics[f"frame_spp.{c.spp}.cost_ratio_flip"] = c.ratio_flip
+            method_metrics[f"frame_spp.{c.spp}.cost_ratio_psnr"] = c.ratio_psnr
         chosen = best(candidates)
-        how = "the config's" if config.evaluation_spp is not None else "timed and kept, `frame_spp`"
+        how = "the config's" if config.evaluation_spp is not None else "counted, `frame_spp`"
         ctx.log(f"the artifact's frame: direct light at {chosen.spp} spp ({how})")
+        seconds = timed(chosen, model, box, objects, report, config, ctx.seed)
         config = config.model_copy(update={"evaluation_spp": chosen.spp})
-        return chosen.frame, chosen.point.seconds_per_frame, config
+        return chosen.frame, seconds, config
