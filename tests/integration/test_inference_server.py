@@ -482,5 +482,5 @@ def test_open_endpoints_and_metrics(server):
     ):
         assert name in text
     spec = httpx.get(f"{server.url}/openapi.json").json()
-    content = spec["paths"]["/v1/artifacts/{artifact_id}:query"]["post"]["requestBody"]["content"]
+    content = spec["paths"]["/v1/artifacts/{artifact_id}:{operation}"]["post"]["requestBody"]["content"]
     assert {"application/json", OCTET_STREAM} <= set(content)
