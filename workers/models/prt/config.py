@@ -17,9 +17,9 @@ from workers.runtime.training import Schedule, TrainConfig
 from workers.scene.strict import StrictModel
 
 FRAME_SPP = (4, 8, 16, 32, 64)
-# A fixed price keeps the frame's choice the same on any machine and load; an AMD EPYC on one thread traces
-# a report view's ray in 1.9-2.2 us and runs a default network's FLOP in 0.16 ns (bfloat16 products).
-FLOPS_PER_RAY = 12_000.0
+# A fixed price keeps the frame's choice the same on any machine and load; `python -m tests.bench
+# bench_prt_cost` measured 12,000-23,000 on a 2-core AMD EPYC under varying load.
+FLOPS_PER_RAY = 16_000.0
 
 
 class LightingConfig(StrictModel):
