@@ -4,9 +4,9 @@ through `nbake serve`, with its driver and samplers on a Ray node that cannot se
 folder: they read only the stored scene, fetched from the store by digest. A new kind gets this by
 registering.
 
-The server joins a two-node cluster: a head with no CPUs (so nothing runs there) and a node in a mount
-namespace of its own with a private tmpfs over the server's data folder and the head's folder
-(`tests/support/cluster.py`). The store is a folder both see, as a bucket would be.
+The server joins a one-node Ray cluster whose node runs in a mount namespace of its own, with a private
+tmpfs over the server's data folder (`tests/support/cluster.py`), so no driver, sampler or actor of any
+kind can read the server's files. The store is a folder both see, as a bucket would be.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from workers.scene.builtin import get_builtin
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.timeout(1200)
 # The data path, not the model's quality, is what this checks (test_kind_contract.py gates quality on the
-# built-in scenes): training kinds stop after a few steps.
-SHORT = {"train": {"steps": 8}}
+# built-in scenes): training kinds stop after a few steps and measure against a short reference.
+SHORT = {"train": {"steps": 8}, "evaluation_spp": 2, "reference_spp": 8}
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +45,7 @@ def server() -> Iterator[tuple[ServeReplica, LocalCluster]]:
     cluster = LocalCluster(root / "nodes", env)
     replica = None
     try:
-        head = cluster.start_head(cpus=0)
-        worker = cluster.add_node("worker", cpus=2, hidden=(root / "server", head.folder))
+        node = cluster.start_head(cpus=2, hidden=(root / "server",))
         replica = ServeReplica(
             root / "server" / "data",
             {
@@ -56,7 +55,7 @@ def server() -> Iterator[tuple[ServeReplica, LocalCluster]]:
                 "NBAKE_MAX_RUNNING": "2",
             },
         ).start()
-        assert not worker.sees(replica.data_dir), "the worker node sees the server's data folder"
+        assert not node.sees(replica.data_dir), "the Ray node sees the server's data folder"
         yield replica, cluster
     finally:
         if replica is not None:
@@ -78,21 +77,30 @@ def overrides(name: str) -> dict:
     return merge_nested(kind.example.overrides, SHORT if kind.method is not None else {})
 
 
+@pytest.fixture(scope="module")
+def submitted(client) -> dict[str, dict]:
+    """Every kind's job, all submitted at once (the server runs two at a time; their start-up and I/O
+    overlap): kind name -> the job as submitted."""
+    jobs = {}
+    for name in kind_names():
+        files = user_folder(get_builtin(get_kind(name).example.scene), f"user_{name}")
+        response = client.post("/v1/assets", files=[("files", (n, data)) for n, data in files.items()])
+        assert response.status_code == 201, response.text
+        asset_id = response.json()["asset_id"]
+        jobs[name] = submit(client, kind=name, scene=asset_id, preset="quick", config=overrides(name))
+    return jobs
+
+
 @pytest.mark.parametrize("name", kind_names())
-def test_every_kind_trains_on_an_uploaded_folder_read_only_from_the_store(name, client, server):
-    _, cluster = server
-    files = user_folder(get_builtin(get_kind(name).example.scene), f"user_{name}")
-    response = client.post("/v1/assets", files=[("files", (n, data)) for n, data in files.items()])
-    assert response.status_code == 201, response.text
+def test_every_kind_trains_on_an_uploaded_folder_read_only_from_the_store(name, client, server, submitted):
+    job_id = submitted[name]["id"]
+    final = events(client, job_id, timeout=900)[-1]["data"]
+    assert final["state"] == "SUCCEEDED", client.get(f"/v1/jobs/{job_id}").json()
 
-    job = submit(client, kind=name, scene=response.json()["asset_id"], preset="quick", config=overrides(name))
-    final = events(client, job["id"], timeout=900)[-1]["data"]
-    assert final["state"] == "SUCCEEDED", final
-
-    artifact_id = client.get(f"/v1/jobs/{job['id']}").json()["artifact_id"]
+    artifact_id = client.get(f"/v1/jobs/{job_id}").json()["artifact_id"]
     manifest = client.get(f"/v1/artifacts/{artifact_id}").json()
     assert manifest["files"] and all(math.isfinite(v) for v in manifest["metrics"].values())
-    # the worker fetched the scene into its own cache: the files it trained on came from the store
-    worker = next(node for node in cluster.nodes if node.name == "worker")
-    cached = {p.name for p in worker.scene_cache.rglob("*") if p.is_file()}
+    # the node fetched the scene into its own cache: the files it trained on came from the store
+    (node,) = server[1].nodes
+    cached = {p.name for p in node.scene_cache.rglob("*") if p.is_file()}
     assert {"mesh.obj", "model.gltf"} <= cached, cached

@@ -103,10 +103,10 @@ class LocalCluster:
         """What a process joining the cluster (`nbake serve`) adds to its environment."""
         return {**self.env, "RAY_ADDRESS": self.address}
 
-    def start_head(self, cpus: int, name: str = "head") -> RayNode:
+    def start_head(self, cpus: int, name: str = "head", hidden: tuple[Path, ...] = ()) -> RayNode:
         """The head node; a head started again after `stop` (under a new name) takes the address of the one
         before, as a restarted head pod behind its service name would: the same cluster address, a new
-        cluster."""
+        cluster. `hidden`: folders the head cannot see, as for `add_node`."""
         restarted = bool(self.address)
 
         def head_args() -> list[str]:
@@ -120,7 +120,7 @@ class LocalCluster:
                 f"--ray-client-server-port={free_port()}",
             ]
 
-        return self._start_retrying(name, cpus, head_args, hidden=())
+        return self._start_retrying(name, cpus, head_args, hidden)
 
     def add_node(self, name: str, cpus: int, hidden: tuple[Path, ...] = ()) -> RayNode:
         return self._start_retrying(name, cpus, lambda: [f"--address={self.address}"], hidden)
