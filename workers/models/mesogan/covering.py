@@ -72,7 +72,9 @@ def covering(
     return Covering(triangles, uvs, plane_units, resolution)
 
 
-def shell_height(scene: CompiledScene, triangles: np.ndarray, height: ShellHeight, default: float) -> float:
+def world_shell_height(
+    scene: CompiledScene, triangles: np.ndarray, height: ShellHeight, default: float
+) -> float:
     """`height` in world units over `triangles` (`ShellHeight`), the artifact's `default` if unset."""
     corners = scene.positions[triangles].reshape(-1, 3).astype(np.float64)
     return height.world_height(float(np.linalg.norm(np.ptp(corners, 0))), default)
@@ -123,7 +125,8 @@ def shell_aggregate(
     scene's `surfaces` (by material name), as the path tracer's aggregate for paths starting at the camera
     `view`: what the kind's `:render` and a scene's mesogan material (`material`) draw. SceneErrors name
     `fields`: the surfaces', and the prefix of the shell height's (`params.`)."""
-    world = shell_height(scene, covered_triangles(scene, surfaces, fields[0]), height, config.shell_height)
+    triangles = covered_triangles(scene, surfaces, fields[0])
+    world = world_shell_height(scene, triangles, height, config.shell_height)
     cover = covering(scene, surfaces, world, config.texel, field=fields[0])
     shell = build_shell(scene, cover, world, field=fields[1] + height.height_field())
     material = neural_material(model, config, cover, structure, appearance, seed)

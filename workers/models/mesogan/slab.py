@@ -61,11 +61,11 @@ class Window:
         position alone, never from the window, so every window holding them gives a point the same value
         (tiles agree with one large window up to their borders, where `grid_sample` would clamp).
         `ValueError` if a point's texels are not all in the window (widen it by one texel)."""
-        lattice = xy.double() / self.texel - 0.5  # texel centres at integers
+        lattice = xy.to(plane.device, torch.float64) / self.texel - 0.5  # texel centres at integers
         low = lattice.floor()
         weight = (lattice - low).to(plane.dtype)
-        index = low.long() - torch.tensor(self.origin)
-        if ((index < 0) | (index + 1 >= torch.tensor(self.size))).any():
+        index = low.long() - torch.tensor(self.origin, device=plane.device)
+        if ((index < 0) | (index + 1 >= torch.tensor(self.size, device=plane.device))).any():
             raise ValueError("points need the texels around them: widen the window by one texel")
         rows, cols = index[:, 0], index[:, 1]
         texels = lambda i, j: plane[:, rows + i, cols + j].T  # noqa: E731
