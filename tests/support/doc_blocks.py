@@ -16,7 +16,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-FENCE = re.compile(r"^(```+|~~~+)\s*([\w+-]*)")
+FENCE = re.compile(r"^(\s*)(```+|~~~+)\s*([\w+-]*)")  # indented too: a block in a list item
 MARKER = re.compile(r"^<!--\s*example:\s*(?P<action>\S+)\s*(?P<rest>.*?)\s*-->\s*$")
 RUNNABLE = {"sh", "python"}
 
@@ -68,12 +68,12 @@ def blocks(path: Path) -> list[Block]:
         if opening is None:
             index += 1
             continue
-        fence, language = opening.groups()
-        end = next((i for i in range(index + 1, len(lines)) if lines[i].startswith(fence)), None)
+        indent, fence, language = opening.groups()
+        end = next((i for i in range(index + 1, len(lines)) if lines[i].strip().startswith(fence)), None)
         if end is None:
             raise MarkerError(f"{path}:{index + 1}: the fenced block is never closed")
         before = lines[index - 1] if index else ""
-        code = "\n".join(lines[index + 1 : end]) + "\n"
+        code = "\n".join(line.removeprefix(indent) for line in lines[index + 1 : end]) + "\n"
         found.append(Block(path, index + 1, language, code, **marker(path, index + 1, before, language)))
         index = end + 1
     return found

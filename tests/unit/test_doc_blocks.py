@@ -23,6 +23,7 @@ def write(tmp_path, text: str):
         ("<!-- example: maybe -->\n```sh\nnbake jobs\n```\n", "unknown marker"),
         ("<!-- example: run -->\n```yaml\nname: x\n```\n", "cannot run"),
         ("<!-- example: run -->\n```\nnbake jobs\n", "never closed"),
+        ("- a list item:\n\n  ```sh\n  nbake jobs\n  ```\n", "needs a marker"),
     ],
 )
 def test_a_block_the_runner_cannot_classify_is_an_error(tmp_path, text, problem):
@@ -42,6 +43,11 @@ def test_blocks_their_markers_and_commands(tmp_path):
     assert commands(shell.code) == ["nbake submit x --wait   # waits", "nbake jobs"]
     assert (script.language, script.slow, script.code) == ("python", True, "print(1)\n")
     assert (skipped.action, skipped.reason) == ("skip", "needs a GPU")
+
+
+def test_a_block_in_a_list_item_loses_its_indent(tmp_path):
+    (block,) = blocks(write(tmp_path, "- item\n  <!-- example: run -->\n  ```sh\n  nbake jobs\n  ```\n"))
+    assert block.code == "nbake jobs\n"
 
 
 def test_placeholders_come_from_the_json_lines_printed():
