@@ -62,6 +62,9 @@ def test_submit_wait_json_succeeds_and_download_gets_the_files(env, tmp_path):
 
     shown = nbake("show", job["id"], "--json", env=env)
     assert shown.returncode == 0 and lines(shown.stdout)[0]["job"]["artifact_id"] == job["artifact_id"]
+    by_digest = nbake("show", job["artifact_id"].removeprefix("sha256:"), env=env)  # the job that made it
+    assert by_digest.returncode == 0, by_digest.stderr
+    assert lines(by_digest.stdout)[0]["job"]["id"] == job["id"]
     listed = lines(nbake("jobs", "--state", "SUCCEEDED", "--kind", "render", env=env).stdout)
     assert job["id"] in {line["job"]["id"] for line in listed}
 
