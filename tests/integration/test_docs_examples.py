@@ -16,6 +16,7 @@ DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "clien
 IDS = [str(doc.relative_to(ROOT)) for doc in DOCS]
 
 
+@pytest.mark.timeout(1200)  # README's: 4-5 min on a loaded 2-core machine (local renders, a server, lsnif)
 @pytest.mark.parametrize("doc", DOCS, ids=IDS)
 def test_the_docs_examples_run(doc, tmp_path):
     with DocRun(tmp_path / "run", ROOT) as run:
