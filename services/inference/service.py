@@ -159,7 +159,7 @@ class InferenceService:
                 )
             typed = checked_params(spec, params)
             deadline = time.monotonic() + self.settings.request_timeout_s
-            nbytes = self._admitted_bytes(spec, arrays, body_bytes)
+            nbytes = self._admitted_bytes(spec, arrays, body_bytes, spec.params_bytes(loaded.model, typed))
             with self.working.reserved(nbytes, self.settings.request_timeout_s):
                 inputs = checked_arrays(spec, arrays, self.settings.max_rows)
                 future = served.batcher.submit(operation, spec, typed, inputs)
@@ -172,26 +172,34 @@ class InferenceService:
                     ) from None
                 yield served, answer
 
-    def _admitted_bytes(self, spec: Operation, arrays: dict[str, np.ndarray], body_bytes: int) -> int:
-        """The working memory a request will need, from its shapes alone (nothing converted or run yet);
-        RequestTooLarge naming its row input when that is more than the whole budget."""
+    def _admitted_bytes(
+        self, spec: Operation, arrays: dict[str, np.ndarray], body_bytes: int, params_bytes: int
+    ) -> int:
+        """The working memory a request will need, from its shapes and what its parameters ask for
+        (`params_bytes`; nothing converted or run yet); RequestTooLarge naming its row input, or its
+        parameters when they ask for most of it, when that is more than the whole budget."""
         known = {name: array for name, array in arrays.items() if name in spec.inputs}
         row_inputs = [a for n, a in known.items() if spec.inputs[n].rows and a.ndim]
         rows = max((len(a) for a in row_inputs), default=0)  # a 0-d array is refused by its shape check
         converted = sum(a.size * np.dtype(spec.inputs[n].dtype).itemsize for n, a in known.items())
-        per_call = spec.call_bytes + min(rows, self.settings.chunk_rows) * spec.activation_row_bytes
+        per_call = spec.call_bytes + params_bytes
+        per_call += min(rows, self.settings.chunk_rows) * spec.activation_row_bytes
         nbytes = body_bytes + 2 * converted + rows * spec.row_bytes + per_call
         budget = self.settings.working_bytes
         if nbytes > budget:
             self.metrics.admission.labels("working", "too_large").inc()
+            needs = (
+                f"this request needs about {nbytes:,} bytes of working memory ({rows:,} rows); the "
+                f"inference service's working-memory budget is {budget:,} bytes "
+                "(NBAKE_INFERENCE_WORKING_BYTES)"
+            )
+            if 2 * params_bytes > nbytes:
+                asked = f"{params_bytes:,} of them for what the parameters ask: ask for less"
+                raise RequestTooLarge(f"{needs}, {asked}", "params")
             field = next((f"arrays.{n}" for n in spec.inputs if n in known), "params")
             per_row = nbytes / max(rows, 1)
             raise RequestTooLarge(
-                f"this request needs about {nbytes:,} bytes of working memory ({rows:,} rows); the "
-                f"inference service's working-memory budget is {budget:,} bytes "
-                f"(NBAKE_INFERENCE_WORKING_BYTES), about {int(budget // per_row):,} rows of this operation: "
-                "split it",
-                field,
+                f"{needs}, about {int(budget // per_row):,} rows of this operation: split it", field
             )
         return nbytes
 

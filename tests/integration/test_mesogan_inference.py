@@ -1,7 +1,8 @@
 """A `mesogan` artifact as users reach it: `nbake serve-inference` in its own process serving an artifact
 placed in its store by hand (untrained weights: the plumbing, not quality). `generate`, which
 `/v1/models` lists, answers over REST (JSON and binary), gRPC and the SDK (both transports, and async),
-equal to the kind's `infer` in this process; an operation the kind lacks is a 400 naming those it has.
+equal to the kind's `infer` in this process; a window larger than the working budget is a 413 before it
+runs, an operation the kind lacks a 400 naming those it has.
 Tiled `query` windows agree with one large window between texel centres, through the service as a user
 tiles them."""
 
@@ -33,6 +34,7 @@ from workers.scene.builtin import get_builtin
 
 WINDOW = {"origin": [-3, 5], "size": [12, 7], "seed": 4, "structure": {"length": 0.5}}
 AUTH = (("authorization", f"Bearer {TOKENS['read']}"),)
+WORKING_BYTES = 64 << 20  # a 192^2 window fits; quick's generator takes ~140 MB for 512^2
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +50,7 @@ def served(tmp_path_factory) -> Iterator[tuple[Server, str, Path]]:
         files, kind="mesogan", job_id="by-hand", scene_hash="", config={}, code_version="", metrics={}
     )
     install_tokens(data_dir)
-    running = start_server(data_dir, [])
+    running = start_server(data_dir, ["--working-bytes", str(WORKING_BYTES)])
     try:
         yield running, manifest.artifact_id, folder
     finally:
@@ -86,6 +88,12 @@ def test_generate_is_served_over_rest_grpc_and_the_sdk(served):
 
         empty = client.post(f"/v1/artifacts/{artifact_id}:generate", json={"params": {"size": [0, 4]}})
         assert empty.status_code == 422 and empty.json()["field"] == "params.size", empty.text
+        # A window's memory follows its size: one beyond the working budget is refused before it runs.
+        fits = client.post(f"/v1/artifacts/{artifact_id}:generate", json={"params": {"size": [192, 192]}})
+        assert fits.status_code == 200, fits.text
+        large = client.post(f"/v1/artifacts/{artifact_id}:generate", json={"params": {"size": [512, 512]}})
+        assert large.status_code == 413 and large.json()["field"] == "params", large.text
+        assert f"budget is {WORKING_BYTES:,} bytes" in large.json()["detail"], large.text
         unknown = client.post(f"/v1/artifacts/{artifact_id}:grow", json={})
         problem = unknown.json()
         assert unknown.status_code == 400 and unknown.headers["content-type"] == "application/problem+json"

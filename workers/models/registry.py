@@ -8,7 +8,7 @@ without loading the path tracer or torch until a kind is actually asked for.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -86,9 +86,10 @@ class Operation:
     inputs: `row_bytes` per input row for as long as the answer lives (the outputs and their encoded
     copy), `activation_row_bytes` per row of the chunk being computed (intermediate arrays, network
     activations; a batched operation runs at most the service's `chunk_rows` rows at a time), and
-    `call_bytes` once per call (an image, a whole stored layer). Upper estimates, each kind's own, with
-    how they were found beside them; `python -m tests.bench bench_inference_memory` measures the
-    measured kinds' peaks against them."""
+    `call_bytes` once per call (an image, a whole stored layer), and `params_bytes(model, params)` for
+    what the typed parameters ask of the loaded model (a generated window of as many texels as they say).
+    Upper estimates, each kind's own, with how they were found beside them;
+    `python -m tests.bench bench_inference_memory` measures the measured kinds' peaks against them."""
 
     params: type[BaseModel]
     inputs: Mapping[str, ArraySpec] = field(default_factory=dict)
@@ -96,6 +97,7 @@ class Operation:
     row_bytes: int = 0
     activation_row_bytes: int = 0
     call_bytes: int = 0
+    params_bytes: Callable[[Any, BaseModel], int] = lambda model, params: 0
 
 
 @dataclass
