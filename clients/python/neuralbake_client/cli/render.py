@@ -73,7 +73,8 @@ class SceneOrArtifact(TyperCommand):
             exit_with(
                 USAGE,
                 f"error: {target}: rendering a scene needs the server package (pip install neuralbake); "
-                f"an artifact is named by its id ({ARTIFACT_PREFIX}...) or its job's id ({JOB_PREFIX}...)",
+                f"an artifact is named by its id ({ARTIFACT_PREFIX}...), its hex digest or its job's id "
+                f"({JOB_PREFIX}...)",
             )
         return local.load().make_context(info_name, args, parent, **extra)
 
