@@ -1,5 +1,5 @@
 """Working memory of inference queries, measured against what each kind declares (`Operation.row_bytes`,
-`activation_row_bytes`, `call_bytes`), which the inference service admits requests by.
+`activation_row_bytes`, `call_bytes`, `params_bytes`), which the inference service admits requests by.
 
 For each measured kind: a query of one service chunk (`chunk_rows`) and of eight, answered in this
 process after a warm-up query as the service runs it (a batched operation a chunk at a time, outputs
@@ -100,6 +100,7 @@ def run() -> list[BenchSection]:
                     rows * operation.row_bytes
                     + active * operation.activation_row_bytes
                     + operation.call_bytes
+                    + operation.params_bytes(model, typed)
                 )
                 section.add(
                     kind=kind,
@@ -109,7 +110,8 @@ def run() -> list[BenchSection]:
                     measured_per_declared=measured / declared,
                 )
     section.notes.append(
-        "declared: rows x row_bytes + the rows of one chunk x activation_row_bytes + call_bytes (the "
+        "declared: rows x row_bytes + the rows of one chunk x activation_row_bytes + call_bytes + "
+        "params_bytes (the "
         "service also reserves the body and twice the converted inputs, which this leaves out)"
     )
     return [section]
