@@ -33,10 +33,11 @@ lock: venv
 	$(COMPILE) -c requirements/dev.txt -o requirements/server.txt pyproject.toml clients/python/pyproject.toml
 	$(COMPILE) -c requirements/dev.txt -o requirements/client.txt clients/python/pyproject.toml
 
-## The main job on the embedded default: nbake serve on a free port, a render job of cornell_box over
-## HTTP with its progress, the artifact's files downloaded to out/run/, the server stopped.
+## The main job on the embedded default: nbake serve with its inference service on free ports, a quick lod
+## model of the Menger sponge trained and served, its frame beside the path-traced reference and the
+## report's speed-against-error line in out/run/ (scripts/first-run.sh; about a minute here), all stopped.
 run: venv
-	$(PY) -m services.cli.run_job --scene cornell_box --preset default --config '{"spp": 64}' --out out/run
+	bash scripts/first-run.sh
 
 ## Debian packages the tests use: Chromium for the dashboard's browser test (Playwright drives it; it never
 ## downloads a browser) and assimp's BSD sample models for the glTF importer's real-file test.
