@@ -1,4 +1,4 @@
-"""The `explore` kind's config and presets (thesis Ch. 5, App. A; `../shared/notes/explore.md` A9).
+"""The `explore` kind's config and presets (thesis Ch. 5, App. A).
 
 `paper` is the authors' README training command: 8 x 512 network, Adam 1e-4, 16 chains of 32^2 patches,
 R from 128 to 600 by 4 every 2000 iterations, p_LS 0.3, small steps in [1/25, 1/20], beta 4.6, EMA 0.9,

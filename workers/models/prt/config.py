@@ -1,4 +1,4 @@
-"""The `prt` kind's config and presets (Raghavan et al. 2023; numbers in `../shared/notes/prt.md`).
+"""The `prt` kind's config and presets (Raghavan et al. 2023, Sec. 4 and Table 2).
 
 The defaults are this 2-core CPU's sizes; `paper` is the paper's network (Sec. 4, Table 2): a 6 x 64^2
 cube map, K = 64 run-time wavelets, a hash grid of 32 levels x 2 features (M = 64, 2^19 rows, base 16,
