@@ -49,7 +49,8 @@ class Services:
         blobs = BlobStore(settings.store)
         artifacts = ArtifactStore(blobs, settings.store)  # checkpoints in the store: any node resumes a job
         tenancy = Tenancy(db)
-        scenes = SceneResolver(blobs, settings.store, data_dir / "scenes", tenancy)
+        geometry = GeometryProcesses()
+        scenes = SceneResolver(blobs, settings.store, data_dir / "scenes", tenancy, geometry)
         metrics = ServiceMetrics(jobs.count_by_state)
         scheduler_settings = SchedulerSettings(
             owner=settings.owner,
@@ -58,7 +59,6 @@ class Services:
             lease_s=settings.lease_s,
         )
         scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
-        geometry = GeometryProcesses()
         submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
         return cls(
             settings,

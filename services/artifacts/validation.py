@@ -1,4 +1,5 @@
-"""Checking an uploaded scene before it is stored: it parses, its files are in the upload, it compiles.
+"""Checking an uploaded scene before it is stored: it parses, its files are in the upload, the headers of its
+textures are within bounds, it compiles.
 
 Errors are SceneErrors naming the field (`objects[2].shape.path`); paths of the temporary
 folder the upload was checked in are replaced by names inside the upload.
@@ -17,6 +18,7 @@ from workers.scene.compile import compile_scene
 from workers.scene.errors import SceneError
 from workers.scene.io import load_scene
 from workers.scene.spec import SceneSpec
+from workers.scene.textures import check_texture_size, image_textures
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses
@@ -30,21 +32,23 @@ def validate_scene(
 ) -> SceneSpec:
     """The scene in `root / scene_file`, where `names` are the upload's files; SceneError if unusable.
 
-    Parsing is bounded here; the geometry is built in `geometry`'s child processes when given (a server),
-    in this process otherwise (a command line)."""
+    Everything that reads the upload's files (the scene file, imported glTF/USD, image headers, the built
+    geometry) runs in `geometry`'s child processes when given (a server: untrusted files never cost its
+    memory or its GIL), in this process otherwise (a command line); only the small validated spec returns."""
     with _names_inside_upload(root):
-        spec, base_dir = load_scene(root / scene_file)
-        check_references(spec, scene_file, names)
         if geometry is None:
-            check_geometry(spec, base_dir)
-        else:
-            geometry.run("scene", check_geometry, spec, base_dir)
+            return checked_scene(root, scene_file, names)
+        return geometry.run(scene_file, checked_scene, root, scene_file, names)
+
+
+def checked_scene(root: Path, scene_file: str, names: set[str]) -> SceneSpec:
+    """The scene parsed, its references and textures checked and its geometry built (module docstring)."""
+    spec, base_dir = load_scene(root / scene_file)
+    check_references(spec, scene_file, names)
+    for field, texture in image_textures(spec):
+        check_texture_size(texture, field, base_dir)
+    compile_scene(spec, base_dir)  # what only the built geometry shows (triangle limit, degenerate meshes)
     return spec
-
-
-def check_geometry(spec: SceneSpec, base_dir: Path | None) -> None:
-    """What only the built geometry shows (triangle limit, degenerate meshes, emitters without area)."""
-    compile_scene(spec, base_dir)
 
 
 def check_references(spec: SceneSpec, scene_file: str, names: set[str]) -> None:

@@ -12,7 +12,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.assets import AssetNotFound, load_asset, materialize
@@ -29,6 +29,9 @@ from workers.scene.spec import SceneSpec
 from workers.scene.stored import ARTIFACTS_FOLDER, StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"
+if TYPE_CHECKING:
+    from services.geometry import GeometryProcesses
+
 RESOLVED_CACHE_SIZE = 512  # resolved scenes (a spec of a few KB each) kept for repeated submissions
 
 
@@ -48,9 +51,9 @@ def scene_field(error: SceneError) -> str:
 
 
 class SceneResolver:
-    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused.
-    With `tenancy`, an asset, and a stored artifact a material names, resolve only for a caller whose tenant
-    sees them.
+    """Reads assets from the store; their files are unpacked once into `cache_dir/<hex>` and reused, and
+    parsed in `geometry`'s child processes when given. With `tenancy`, an asset, and a stored artifact a
+    material names, resolve only for a caller whose tenant sees them.
 
     Resolutions are cached: a built-in name and an asset id (content-addressed, never rewritten) always
     resolve to the same scene, and an inline scene is keyed by the hash of its canonical JSON. A repeated
@@ -59,9 +62,16 @@ class SceneResolver:
     answers for an asset or a material's artifact the caller does not see.
     """
 
-    def __init__(self, blobs: BlobStore, assets_root: str, cache_dir: Path, tenancy: Tenancy | None = None):
+    def __init__(
+        self,
+        blobs: BlobStore,
+        assets_root: str,
+        cache_dir: Path,
+        tenancy: Tenancy | None = None,
+        geometry: GeometryProcesses | None = None,
+    ):
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
-        self.tenancy = tenancy
+        self.tenancy, self.geometry = tenancy, geometry
         self.material_artifacts = MaterialArtifacts(ArtifactStore(blobs, assets_root), tenancy)
         self._resolved: OrderedDict[str, ResolvedScene] = OrderedDict()
         self._resolved_lock = threading.Lock()
@@ -138,7 +148,10 @@ class SceneResolver:
                 f"no asset {asset_id!r}; upload it with POST /v1/assets first", "scene"
             ) from None
         _, scene_file = self._materialized(asset_id, asset)
-        spec, _ = load_scene(scene_file)
+        if self.geometry is None:
+            spec, _ = load_scene(scene_file)
+        else:  # a server: an uploaded file is read in a child process, as at upload
+            spec, _ = self.geometry.run(asset.scene_file, load_scene, scene_file)
         named = list(named_artifacts(spec))
         if named and any(entry.name.startswith(f"{ARTIFACTS_FOLDER}/") for entry in asset.files):
             raise SceneError(

@@ -33,6 +33,9 @@ IMPORTED_SCENE_SUFFIXES = GLTF_SUFFIXES + USD_SUFFIXES
 # scene has about 700 values and nests 7 deep; a 700-byte alias bomb expands to 10^8 values.
 MAX_SCENE_VALUES = 200_000
 MAX_SCENE_DEPTH = 64
+# A scene file's bytes, checked before it is read: 200,000 short values fit in about 2 MB of YAML, and a
+# file past this is refused before a parser allocates for it.
+MAX_SCENE_FILE_BYTES = 4 << 20
 _FIELD_PREFIX = re.compile(r"^(?P<field>[A-Za-z_][\w\[\]\.]*): (?P<problem>.+)$", re.DOTALL)
 
 
@@ -176,12 +179,16 @@ def dotted_path(loc: tuple[str | int, ...], data: Any) -> str:
 
 
 def check_nesting(data: Any, field: str) -> None:
-    """SceneError if `data` nests deeper than MAX_SCENE_DEPTH; walked without recursion."""
-    stack = [(data, 1)]
+    """SceneError if `data` nests deeper than MAX_SCENE_DEPTH or holds more than MAX_SCENE_VALUES values;
+    walked without recursion."""
+    stack, values = [(data, 1)], 0
     while stack:
         node, depth = stack.pop()
         if depth > MAX_SCENE_DEPTH:
             raise SceneError(field, f"values nest more than {MAX_SCENE_DEPTH} levels deep")
+        values += len(node) if isinstance(node, dict | list | tuple) else 0
+        if values > MAX_SCENE_VALUES:
+            raise SceneError(field, f"more than {MAX_SCENE_VALUES} values, over the limit (MAX_SCENE_VALUES)")
         children = node.values() if isinstance(node, dict) else node if isinstance(node, list | tuple) else ()
         stack.extend((child, depth + 1) for child in children if isinstance(child, dict | list | tuple))
 
@@ -191,9 +198,18 @@ class _Unbounded(yaml.YAMLError):
 
 
 class _BoundedLoader(yaml.SafeLoader):
-    """SafeLoader that refuses, once a document is composed and before any value is built, a node graph
-    whose aliases expand past MAX_SCENE_VALUES values or that refers to itself (a "billion laughs" bomb
-    costs a few hundred bytes of YAML and the whole memory of whoever walks it)."""
+    """SafeLoader that refuses a document of more than MAX_SCENE_VALUES values as it composes it (a plain
+    list of 1.5M ones costs a gigabyte of nodes), and, once composed and before any value is built, a node
+    graph whose aliases expand past MAX_SCENE_VALUES values or that refers to itself (a "billion laughs"
+    bomb costs a few hundred bytes of YAML and the whole memory of whoever walks it)."""
+
+    composed = 0
+
+    def compose_node(self, parent, index):
+        self.composed += 1
+        if self.composed > MAX_SCENE_VALUES:
+            raise _Unbounded(f"the file holds more than {MAX_SCENE_VALUES} values, over the limit")
+        return super().compose_node(parent, index)
 
     def compose_document(self):
         node = super().compose_document()
@@ -235,6 +251,9 @@ def _children(node: yaml.Node) -> list[yaml.Node]:
 def _parse_file(path: Path) -> dict[str, Any]:
     """YAML or JSON text -> a mapping; syntax errors name the file and line."""
     try:
+        if (size := path.stat().st_size) > MAX_SCENE_FILE_BYTES:
+            problem = f"the scene file is {size:,} bytes, over the limit of {MAX_SCENE_FILE_BYTES:,} bytes"
+            raise SceneError(str(path), problem)
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(str(path), f"cannot read scene file: {error}") from error

@@ -12,6 +12,8 @@ normals, transmission) are declared `linear` by the importers, as glTF and UsdPr
 from __future__ import annotations
 
 import io
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -23,14 +25,15 @@ from workers.scene.gltf import embedded_image
 from workers.scene.image_io import read_exr, srgb_to_linear
 from workers.scene.usd import package_member
 
+# A texture's pixels: 8192 x 8192 decodes to 1.6 GB of float64 texels, the most a sampler actor affords; a
+# larger one is refused from its header, at upload and again before decoding.
+MAX_TEXTURE_PIXELS = 8192 * 8192
+
 
 def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> np.ndarray:
     """(H, W, 3) float32 RGB, decoded as `tex.color_space` says (module docstring); an `image` index reads
     that image out of the glTF file at `path`."""
-    path = Path(tex.path)
-    if not path.is_absolute() and base_dir is not None:
-        path = base_dir / path
-    where = f"{field}.path"
+    path, where = _resolved(tex, base_dir), f"{field}.path"
     if not path.is_file():
         raise SceneError(where, f"texture file not found: {path}")
     try:
@@ -39,17 +42,68 @@ def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None
             if tex.color_space == "srgb":
                 image = srgb_to_linear(image)
         else:
-            source = path if tex.image is None else io.BytesIO(embedded_image(path, tex.image))
-            if tex.member is not None:
-                source = io.BytesIO(package_member(path, tex.member))
-            with Image.open(source) as opened:
+            with _opened(_encoded(tex, path), where, path.name) as opened:
                 encoded = np.asarray(opened.convert("RGB"), dtype=np.float64) / 255.0
             image = encoded if tex.color_space == "linear" else srgb_to_linear(encoded)
+    except SceneError:
+        raise
     except (ValueError, OSError, UnidentifiedImageError) as error:
         raise SceneError(where, f"cannot read texture {path.name}: {error}") from error
     if not np.isfinite(image).all() or image.min() < 0:
         raise SceneError(where, f"texture {path.name} has NaN/Inf or negative texels")
     return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def image_textures(scene: spec.SceneSpec) -> Iterator[tuple[str, spec.ImageTexture]]:
+    """(field, texture) for every image texture of the scene's materials (an aggregate's base included)."""
+    for name, material in scene.materials.items():
+        if isinstance(material, spec.AggregateMaterial):
+            material, name = material.base, f"{name}.base"
+        for field, value in material:
+            if isinstance(value, spec.ImageTexture):
+                yield f"materials.{name}.{field}", value
+
+
+def check_texture_size(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> None:
+    """SceneError unless the texture's header declares at most MAX_TEXTURE_PIXELS; only the header is read
+    (an 83-byte PNG may declare 100000 x 100000), and EXR, read whole by its own reader, is skipped."""
+    path = _resolved(tex, base_dir)
+    if tex.image is None and path.suffix.lower() == ".exr":
+        return
+    try:
+        with _opened(_encoded(tex, path), f"{field}.path", path.name):
+            pass
+    except SceneError:
+        raise
+    except (ValueError, OSError, UnidentifiedImageError) as error:
+        raise SceneError(f"{field}.path", f"cannot read texture {path.name}: {error}") from error
+
+
+def _resolved(tex: spec.ImageTexture, base_dir: Path | None) -> Path:
+    path = Path(tex.path)
+    return base_dir / path if not path.is_absolute() and base_dir is not None else path
+
+
+def _encoded(tex: spec.ImageTexture, path: Path) -> Path | io.BytesIO:
+    """The encoded image: the file, or an image embedded in a glTF file or packed in a USDZ package."""
+    if tex.member is not None:
+        return io.BytesIO(package_member(path, tex.member))
+    return path if tex.image is None else io.BytesIO(embedded_image(path, tex.image))
+
+
+@contextmanager
+def _opened(source: Path | io.BytesIO, where: str, name: str) -> Iterator[Image.Image]:
+    """The image with its header read and its size checked against MAX_TEXTURE_PIXELS, not yet decoded."""
+    over = f"over the limit of {MAX_TEXTURE_PIXELS:,} pixels (MAX_TEXTURE_PIXELS)"
+    try:
+        opened = Image.open(source)
+    except Image.DecompressionBombError:
+        raise SceneError(where, f"texture {name} is {over}") from None
+    with opened:
+        width, height = opened.size
+        if width * height > MAX_TEXTURE_PIXELS:
+            raise SceneError(where, f"texture {name} is {width} x {height} pixels, {over}")
+        yield opened
 
 
 class MipChain:
