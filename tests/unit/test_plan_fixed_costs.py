@@ -25,9 +25,15 @@ def fixed_item(plan):
     return next(item for item in plan.items if item.name == "fixed costs")
 
 
+@pytest.fixture(scope="module")
+def planned() -> dict:
+    """Every kind's quick plan, made once (`prt`'s and `explore`'s trace probes)."""
+    return {name: quick_plan(name) for name in kind_names()}
+
+
 @pytest.mark.parametrize("name", kind_names())
-def test_a_quick_plan_counts_its_fixed_costs(name, monkeypatch):
-    plan = quick_plan(name)
+def test_a_quick_plan_counts_its_fixed_costs(name, planned, monkeypatch):
+    plan = planned[name]
     assert float(fixed_item(plan).choice.removesuffix(" s")) > 0
     monkeypatch.setattr(costs, "DRIVER_START_S", costs.DRIVER_START_S + EXTRA_S)
     slower = quick_plan(name)
@@ -36,9 +42,9 @@ def test_a_quick_plan_counts_its_fixed_costs(name, monkeypatch):
 
 
 @pytest.mark.parametrize("name", [n for n in kind_names() if n != "render"])
-def test_a_finer_reference_costs_more_evaluation(name):
+def test_a_finer_reference_costs_more_evaluation(name, planned):
     reference_spp = get_kind(name).resolve_config("quick", get_kind(name).example.overrides).reference_spp
-    coarse, fine = quick_plan(name), quick_plan(name, reference_spp=4 * reference_spp)
+    coarse, fine = planned[name], quick_plan(name, reference_spp=4 * reference_spp)
     assert fine.estimated_seconds > coarse.estimated_seconds
     assert fixed_item(fine).reason != fixed_item(coarse).reason  # the path segments counted
 
