@@ -22,32 +22,35 @@ from workers.scene.reference import SceneRef
 
 # Scheduler to the kind's first line: Ray starts the driver actor's worker process, which imports the
 # driver, torch (the runtime's batch streams need it), Numba and Embree: a warm `render` job's first log
-# came 3.2 s after RUNNING (load 1.5).
+# came 3.2 s after RUNNING at load 1.5, 4-7 s at loads 5-9.
 DRIVER_START_S = 3.0
 # A kind that trains imports its networks and the training runtime too: in fresh interpreters, importing
-# `lsnif`'s or `lod`'s method took 1.4-1.6x `render`'s run.
+# `lsnif`'s method took 1.6-1.8x `render`'s run in two of three measurements (0.9x in the third).
 TRAINING_IMPORT_S = 2.0
-# Loading the machine's cached Numba kernels into a process on its first render (compiling them is
-# once per machine and is not counted): the first 8x8 1-spp render in a fresh process, less a second.
+# Loading the machine's cached Numba kernels into a process on its first render (compiling them is once
+# per machine and is not counted): the first 8x8 1-spp render in a fresh process less a second, 0.4-2.2 s.
 KERNEL_LOAD_S = 1.5
 # A sampler actor's start: Ray placing the job's reservation and starting the actor's process, which
 # imports torch and the path tracer (a quick `render` with one actor took 9-11 s more than without, at
 # load 9, kernel load and compile included).
 SAMPLER_START_S = 4.0
-# Compiling a scene: flattening its triangles and building Embree's BVH (menger_sponge, 36k triangles:
-# 0.5 s; fur_patch, 96k: 1.4 s).
+# Compiling a scene: flattening its triangles and building Embree's BVH, 4e-6 to 2.2e-5 s a triangle
+# (menger_sponge's 36k, fur_patch's 96k).
 SCENE_S_PER_TRIANGLE = 1.5e-5
-# Fetching a scene's files into the node's cache and parsing its meshes and images.
-SCENE_S_PER_BYTE = 5e-8
-# Path tracing for the report, per path segment (a sample's bounce and its shadow ray): Embree's hits
-# plus NumPy shading (one thread: 4.5-5 us a sample on cornell_box at depth 8 and menger_sponge).
+# Fetching a scene's files into the node's cache and parsing them: fur_patch as a PLY read at 5e-8 to
+# 1.1e-7 s a byte.
+SCENE_S_PER_BYTE = 7e-8
+# Path tracing for the report, per path segment (a bounce and its shadow ray): Embree's hits plus NumPy
+# shading, 2.2-8.7 us a sample on one thread at 2.5-6 rays a sample (cornell_box, env_lit_objects,
+# menger_sponge).
 PATH_SEGMENT_S = 1.0e-6
 # Paths end by Russian roulette or escape long before a deep `max_depth`: the segments counted a sample.
 MEAN_SEGMENTS = 4
-# Each image the report renders and scores: a render's set-up, FLIP and PSNR against the reference.
-IMAGE_S = 0.1
-# Writing the report (JSON, the speed-error plot), the previews and publishing the artifact.
-REPORT_S = 1.0
+# Each image the report renders and scores (a render's set-up, FLIP and PSNR), and then writing the
+# report, its plot and previews and publishing the artifact: a quick `prt` job's 7 images of 16x16 and
+# report took 0.55 s from its last log to SUCCEEDED, `lsnif`'s at 32x32 2.4 s, 1.4 s of it paths.
+IMAGE_S = 0.05
+REPORT_S = 0.5
 
 
 @dataclass(frozen=True)
