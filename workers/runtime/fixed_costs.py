@@ -13,10 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pydantic import BaseModel
-
 from workers.runtime.contract import PlanItem
-from workers.runtime.kind_config import TrainedKindConfig
+from workers.runtime.kind_config import KindConfig, TrainedKindConfig
 from workers.runtime.report import PATH_TRACING_SPP
 from workers.scene.reference import SceneRef
 
@@ -104,7 +102,7 @@ class FixedCosts:
         )
 
 
-def fixed_costs(scene: SceneRef, config: BaseModel, evaluation: tuple[Evaluation, ...] = ()) -> FixedCosts:
+def fixed_costs(scene: SceneRef, config: KindConfig, evaluation: tuple[Evaluation, ...] = ()) -> FixedCosts:
     """The fixed costs of running `config` on `scene`: `evaluation` is the path tracing its kind does to
     measure the model (`report_view` for the shared report's view, plus the kind's own)."""
     trains = isinstance(config, TrainedKindConfig)
