@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import os
+import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,7 +26,7 @@ from neuralbake_client import AsyncClient, Client
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
-from tests.integration.test_api_server import TOKENS
+from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_grpc_server import details, rpc_error
 from tests.integration.test_inference_server import Server, install_tokens, start_server
 from workers.models.mesogan import KIND, artifact
@@ -146,3 +148,21 @@ def test_tiled_queries_through_the_service_agree_with_one_large_query(served):
         tiled[~right], tiled[right] = density([-8, -4, 8, 8], ~right), density([0, -4, 8, 8], right)
     assert np.ptp(whole) > 0.05
     np.testing.assert_allclose(tiled, whole, rtol=0, atol=1e-5 * np.ptp(whole))
+
+
+def test_generate_from_the_command_line(served, tmp_path):
+    server, artifact_id, folder = served
+    out = tmp_path / "plane.npz"
+    window = ["origin=[-3,5]", "size=[12,7]", "seed=4", "structure.length=0.5"]
+    done = subprocess.run(
+        [NBAKE, "query", artifact_id, "--operation", "generate", "-o", str(out)]
+        + [arg for item in window for arg in ("--set", item)]
+        + ["--inference-url", server.url, "--token", TOKENS["read"]],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={k: v for k, v in os.environ.items() if not k.startswith("NBAKE_")},
+    )
+    assert done.returncode == 0, done.stderr
+    expected = in_process(folder, "generate", WINDOW).arrays["plane"]
+    np.testing.assert_array_equal(np.load(out)["plane"], expected)

@@ -323,18 +323,19 @@ class Client:
         artifact: ArtifactRef,
         arrays: Mapping[str, ArrayLike] | None = None,
         params: dict[str, Any] | None = None,
+        operation: str = "query",
     ) -> QueryAnswer:
         """The kind's query: input arrays by name (e.g. `lsnif`: `origins`, `directions` (N, 3)), output
-        arrays by name (`answer["hit"]`) and `answer.meta`. Concurrent queries are batched by the server."""
+        arrays by name (`answer["hit"]`) and `answer.meta`. Concurrent queries are batched by the server.
+        `operation` names another operation of the kind that answers arrays (`/v1/models` lists them)."""
         ident, body = self.artifact_id(artifact), json_value(params or {})
-        return self.retry.call(lambda: self.inference.query(ident, body, arrays or {}))
+        return self.retry.call(lambda: self.inference.query(ident, body, arrays or {}, operation=operation))
 
     def generate(self, artifact: ArtifactRef, params: dict[str, Any] | None = None) -> QueryAnswer:
         """The kind's `generate` (`mesogan`: the feature plane of a window of its infinite texture,
         `answer["plane"]` (H, W, C) with `answer.meta["texel"]`, from `params` `origin` and `size` in texels,
         `structure` and `seed`): windows of one seed agree on their overlap, so they tile."""
-        ident, body = self.artifact_id(artifact), json_value(params or {})
-        return self.retry.call(lambda: self.inference.query(ident, body, {}, operation="generate"))
+        return self.query(artifact, None, params, operation="generate")
 
     def render(
         self,

@@ -1,5 +1,6 @@
 """`nbake query ARTIFACT`: the kind's query on the inference service, arrays in from .npy/.npz files and
-out to one .npz (e.g. `lsnif`: `-i origins.npy -i directions.npy`, out `hit`, `distance`, `normal`, ...).
+out to one .npz (e.g. `lsnif`: `-i origins.npy -i directions.npy`, out `hit`, `distance`, `normal`, ...);
+`--operation` names another of the kind's operations that answer arrays (`mesogan`'s `generate`).
 """
 
 from __future__ import annotations
@@ -44,6 +45,9 @@ def query_command(
     output: Annotated[Path, typer.Option("--output", "-o", help="The .npz file the answer's arrays go to.")],
     input_: InputOption = None,
     set_: SetOption = None,
+    operation: Annotated[
+        str, typer.Option(help="The kind's operation that answers arrays, e.g. generate (mesogan).")
+    ] = "query",
     json_lines: JsonOption = False,
     url: UrlOption = None,
     inference_url: InferenceUrlOption = None,
@@ -56,7 +60,7 @@ def query_command(
         exit_with(USAGE, f"error: --output: {output} must end in .npz")
     out, params, arrays = Output(json_lines), parse_sets(set_ or []), read_inputs(input_ or [])
     with remote_errors(), connect(url, token, inference_url) as client:
-        answer = client.query(artifact, arrays, params)
+        answer = client.query(artifact, arrays, params, operation=operation)
     write_outputs(output, answer.arrays)
     shapes = {name: {"dtype": a.dtype.name, "shape": list(a.shape)} for name, a in answer.arrays.items()}
     if out.json:
