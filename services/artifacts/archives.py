@@ -15,6 +15,7 @@ import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePosixPath
 
+from services.artifacts.paths import printable
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, Staging, UploadError, UploadLimits
 from services.artifacts.store import read_chunks
 
@@ -82,6 +83,9 @@ def extract_archive(path: Path, name: str, staging: Staging) -> None:
             _extract_tar(path, _TAR_MODES[suffix], staging, guard)
     except (zipfile.BadZipFile, tarfile.TarError, gzip.BadGzipFile, zlib.error, EOFError) as error:
         raise UploadError(name, f"cannot read the archive: {error}") from None
+    except UnicodeDecodeError as error:  # a zip member flagged UTF-8 with a name that is not UTF-8
+        member = printable(bytes(error.object).decode("utf-8", "surrogateescape"))
+        raise UploadError(member, "the file name is not valid UTF-8 (the archive says it is)") from None
 
 
 def _extract_zip(path: Path, staging: Staging, guard: _InflationGuard) -> None:

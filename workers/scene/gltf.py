@@ -21,6 +21,7 @@ folder is a SceneError naming it.
 from __future__ import annotations
 
 import base64
+import binascii
 import math
 import posixpath
 from dataclasses import dataclass
@@ -64,6 +65,14 @@ class GltfFile:
     buffers: list[bytes]
 
 
+def item(items: list | None, index, where: str, what: str):
+    """`items[index]`, or a SceneError naming `where` when the file's index is not one of them."""
+    items = items or []
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(items):
+        raise SceneError(where, f"{what} {index!r} does not exist (the file has {len(items)})")
+    return items[index]
+
+
 def _inside_folder(path: Path, uri: str, where: str) -> Path:
     """The file a relative URI names, which must stay in the glTF file's folder (uploads are confined)."""
     relative = unquote(uri)
@@ -81,7 +90,10 @@ def _uri_bytes(gltf_path: Path, uri: str, where: str) -> bytes:
         header, _, payload = uri.partition(",")
         if not header.endswith(";base64"):
             raise SceneError(where, "data URIs must be base64-encoded")
-        return base64.b64decode(payload)
+        try:
+            return base64.b64decode(payload, validate=True)
+        except binascii.Error as error:
+            raise SceneError(where, f"the data URI is not valid base64: {error}") from None
     target = _inside_folder(gltf_path, uri, where)
     if not target.is_file():
         raise SceneError(where, f"{uri!r} is missing (looked for {target.name} next to {gltf_path.name})")
@@ -120,36 +132,36 @@ def read_gltf(path: Path) -> GltfFile:
 
 def _view_bytes(file: GltfFile, index: int, where: str) -> tuple[bytes, int, int, int | None]:
     """(buffer, start, length, stride) of buffer view `index`."""
-    views = file.document.bufferViews
-    if not 0 <= index < len(views):
-        raise SceneError(where, f"buffer view {index} does not exist")
-    view = views[index]
-    data = file.buffers[view.buffer]
+    view = item(file.document.bufferViews, index, where, "buffer view")
+    data = item(file.buffers, view.buffer, f"{where}: bufferViews[{index}].buffer", "buffer")
     start = view.byteOffset or 0
-    if start + view.byteLength > len(data):
+    if start < 0 or view.byteLength < 0 or start + view.byteLength > len(data):
         raise SceneError(where, f"buffer view {index} runs past the end of buffer {view.buffer}")
     return data, start, view.byteLength, view.byteStride
 
 
 def accessor(file: GltfFile, index: int, where: str) -> np.ndarray:
     """(count, width) array of accessor `index`; normalized integers become floats in [0, 1] / [-1, 1]."""
-    accessors = file.document.accessors
-    if not 0 <= index < len(accessors):
-        raise SceneError(where, f"accessor {index} does not exist")
-    acc = accessors[index]
+    acc = item(file.document.accessors, index, where, "accessor")
     where = f"{where} (accessors[{index}])"
     if acc.sparse is not None:
         raise SceneError(where, "sparse accessors are not supported")
     if acc.componentType not in COMPONENTS or acc.type not in WIDTHS:
         raise SceneError(where, f"unknown component type {acc.componentType} or type {acc.type!r}")
+    if isinstance(acc.count, bool) or not isinstance(acc.count, int) or acc.count < 0:
+        raise SceneError(where, f"count {acc.count!r} is not a whole number of elements")
     dtype, width = np.dtype(COMPONENTS[acc.componentType]), WIDTHS[acc.type]
+    element = dtype.itemsize * width
     if acc.bufferView is None:
+        _zeros_fit(file, acc.count * element, where)
         return np.zeros((acc.count, width), dtype)
     data, start, length, stride = _view_bytes(file, acc.bufferView, where)
-    element = dtype.itemsize * width
     stride = stride or element
-    offset = start + (acc.byteOffset or 0)
-    if acc.count and (acc.byteOffset or 0) + stride * (acc.count - 1) + element > length:
+    byte_offset = acc.byteOffset or 0
+    if byte_offset < 0 or stride < element:
+        raise SceneError(where, f"byteOffset {byte_offset} or byteStride {stride} is out of range")
+    offset = start + byte_offset
+    if acc.count and byte_offset + stride * (acc.count - 1) + element > length:
         raise SceneError(where, "accessor runs past the end of its buffer view")
     array = np.ndarray(
         (acc.count, width), dtype, buffer=data, offset=offset, strides=(stride, dtype.itemsize)
@@ -159,6 +171,16 @@ def accessor(file: GltfFile, index: int, where: str) -> np.ndarray:
         array = array.astype(np.float64) / np.iinfo(dtype).max
         array = np.maximum(array, -1.0)
     return array
+
+
+def _zeros_fit(file: GltfFile, size: int, where: str) -> None:
+    """An accessor without a buffer view is zeros (glTF fills it so): it may not ask for more bytes than
+    the file's buffers hold, so a few bytes of JSON cannot allocate gigabytes."""
+    held = sum(len(buffer) for buffer in file.buffers)
+    if size > held:
+        raise SceneError(
+            where, f"an accessor without a bufferView asks for {size} bytes, more than the file's {held}"
+        )
 
 
 def embedded_image(path: Path, index: int) -> bytes:
@@ -243,10 +265,23 @@ def primitive_mesh(path: Path, mesh: int, primitive: int, field: str) -> MeshDat
 # --------------------------------------------------------------------------- the scene
 
 
-def _node_matrix(node: pygltflib.Node) -> np.ndarray:
+def _numbers(values, default: tuple[float, ...], field: str) -> np.ndarray:
+    """A node's `values` (or `default`), which must be as many numbers as `default`."""
+    if values is None:
+        return np.array(default)
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.shape != (len(default),):
+        raise SceneError(field, f"must be a list of {len(default)} numbers")
+    return array
+
+
+def _node_matrix(node: pygltflib.Node, where: str) -> np.ndarray:
     if node.matrix is not None:
-        return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T  # column-major in the file
-    x, y, z, w = node.rotation if node.rotation is not None else (0.0, 0.0, 0.0, 1.0)
+        return _numbers(node.matrix, (0.0,) * 16, f"{where}.matrix").reshape(4, 4).T  # column-major
+    x, y, z, w = _numbers(node.rotation, (0.0, 0.0, 0.0, 1.0), f"{where}.rotation")
     rotation = np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -255,27 +290,29 @@ def _node_matrix(node: pygltflib.Node) -> np.ndarray:
         ]
     )
     m = np.eye(4)
-    m[:3, :3] = rotation @ np.diag(node.scale if node.scale is not None else (1.0, 1.0, 1.0))
-    m[:3, 3] = node.translation if node.translation is not None else (0.0, 0.0, 0.0)
+    m[:3, :3] = rotation @ np.diag(_numbers(node.scale, (1.0, 1.0, 1.0), f"{where}.scale"))
+    m[:3, 3] = _numbers(node.translation, (0.0, 0.0, 0.0), f"{where}.translation")
     return m
 
 
 def _walk(document: pygltflib.GLTF2) -> list[tuple[int, np.ndarray]]:
     """(node index, node-to-world matrix) of the default scene's nodes, parents first."""
     if document.scenes:
-        roots = document.scenes[document.scene or 0].nodes or []
+        scene = document.scene or 0
+        roots, field = item(document.scenes, scene, "scene", "scene").nodes or [], f"scenes[{scene}].nodes"
     else:  # no scene: every node that is nobody's child
         children = {c for node in document.nodes for c in node.children or []}
-        roots = [i for i in range(len(document.nodes)) if i not in children]
-    out, stack, seen = [], [(r, np.eye(4)) for r in reversed(roots)], set()
+        roots, field = [i for i in range(len(document.nodes)) if i not in children], "nodes"
+    out, stack, seen = [], [(r, np.eye(4), field) for r in reversed(roots)], set()
     while stack:
-        index, parent = stack.pop()
-        if index in seen or not 0 <= index < len(document.nodes):
+        index, parent, field = stack.pop()
+        node = item(document.nodes, index, field, "node")
+        if index in seen:
             raise SceneError(f"nodes[{index}]", "the node hierarchy is not a tree (a node is reached twice)")
         seen.add(index)
-        world = parent @ _node_matrix(document.nodes[index])
+        world = parent @ _node_matrix(node, f"nodes[{index}]")
         out.append((index, world))
-        stack.extend((child, world) for child in reversed(document.nodes[index].children or []))
+        stack.extend((child, world, f"nodes[{index}].children") for child in reversed(node.children or []))
     return out
 
 
@@ -297,19 +334,18 @@ class _Importer:
     def texture(self, info, color_space: str, where: str) -> spec.ImageTexture | None:
         if info is None:
             return None
-        textures = self.doc.textures
-        if not 0 <= info.index < len(textures) or textures[info.index].source is None:
-            raise SceneError(where, f"texture {info.index} does not exist or has no image")
+        texture = item(self.doc.textures, info.index, f"{where}.index", "texture")
+        if texture.source is None:
+            raise SceneError(where, f"texture {info.index} has no image")
         if (info.texCoord or 0) != 0:
             self.ignore(f"{where}: TEXCOORD_{info.texCoord} (read with TEXCOORD_0)")
         if info.extensions:
             self.ignore(f"{where}: extensions {sorted(info.extensions)}")
-        texture = textures[info.index]
         wrap_u = wrap_v = "repeat"
         if texture.sampler is not None:
-            sampler = self.doc.samplers[texture.sampler]
+            sampler = item(self.doc.samplers, texture.sampler, f"{where}.sampler", "sampler")
             wrap_u, wrap_v = WRAPS.get(sampler.wrapS, "repeat"), WRAPS.get(sampler.wrapT, "repeat")
-        image = self.doc.images[texture.source]
+        image = item(self.doc.images, texture.source, f"{where}.source", "image")
         own_path = posixpath.join(self.prefix, self.file.path.name)
         if image.uri is not None and not image.uri.startswith("data:"):
             target = _inside_folder(self.file.path, image.uri, f"{where}: images[{texture.source}].uri")
@@ -324,8 +360,8 @@ class _Importer:
 
     def material(self, index: int) -> tuple[spec.PbrMaterial, tuple[float, float, float], bool]:
         """The material, its emitted radiance and whether it is double-sided."""
-        m = self.doc.materials[index]
         where = f"materials[{index}]"
+        m = item(self.doc.materials, index, where, "material")
         pbr = m.pbrMetallicRoughness or pygltflib.PbrMetallicRoughness()
         known = SUPPORTED_EXTENSIONS | {"KHR_lights_punctual"}
         for name in m.extensions or {}:
@@ -415,7 +451,7 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
         node = doc.nodes[index]
         where = f"nodes[{index}]" + (f" ({node.name})" if node.name else "")
         if node.mesh is not None:
-            mesh = doc.meshes[node.mesh]
+            mesh = item(doc.meshes, node.mesh, f"{where}.mesh", "mesh")
             if abs(np.linalg.det(world[:3, :3])) < 1e-12:
                 importer.ignore(f"{where}: zero scale (hidden)")
                 continue
@@ -430,10 +466,11 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
                     )
                 placements.setdefault((node.mesh, j), []).append(world)
         if node.camera is not None:
-            cameras.append((where, doc.cameras[node.camera], world))
+            cameras.append((where, item(doc.cameras, node.camera, f"{where}.camera", "camera"), world))
         light = _extension(node, "KHR_lights_punctual")
         if light:
-            lights.append((where, light_defs[light["light"]], world))
+            field = f"{where}.extensions.KHR_lights_punctual.light"
+            lights.append((where, item(light_defs, light.get("light"), field, "light"), world))
     if not placements:
         raise SceneError(file.path.name, "the glTF scene has no mesh to render")
 
@@ -447,6 +484,8 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
     for (mesh, j), matrices in placements.items():
         m = doc.meshes[mesh].primitives[j].material
         if m not in material_names:
+            if m is not None:
+                item(doc.materials, m, f"meshes[{mesh}].primitives[{j}].material", "material")
             if m is None:
                 material_names[m] = unique_name("default", "default", taken)
                 materials[material_names[m]] = spec.PbrMaterial()  # glTF's default material

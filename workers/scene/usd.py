@@ -126,6 +126,8 @@ def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
     points = np.asarray(mesh.GetPointsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    if not len(counts):
+        raise SceneError(where, "the mesh has no faces (faceVertexCounts is empty)")
     if counts.sum() != len(indices) or (len(indices) and (indices.min() < 0 or indices.max() >= len(points))):
         raise SceneError(where, "faceVertexCounts and faceVertexIndices do not describe faces of the points")
     if (counts < 3).any():
