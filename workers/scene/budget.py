@@ -15,6 +15,9 @@ from workers.scene.errors import SceneError
 
 MAX_SCENE_TRIANGLES_ENV = "NBAKE_MAX_SCENE_TRIANGLES"
 DEFAULT_MAX_SCENE_TRIANGLES = 8_000_000
+# Placements an imported file may make (a USD PointInstancer's instances): each is a transform stored in
+# every job's scene, and 100k of them made a 15 MB scene whatever their triangles.
+MAX_SCENE_INSTANCES = 10_000
 
 
 def max_scene_triangles() -> int:

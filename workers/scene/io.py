@@ -197,24 +197,42 @@ class _Unbounded(yaml.YAMLError):
     """A document whose values, once aliases are expanded, are too many or endless."""
 
 
-class _BoundedLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a document of more than MAX_SCENE_VALUES values as it composes it (a plain
-    list of 1.5M ones costs a gigabyte of nodes), and, once composed and before any value is built, a node
-    graph whose aliases expand past MAX_SCENE_VALUES values or that refers to itself (a "billion laughs"
-    bomb costs a few hundred bytes of YAML and the whole memory of whoever walks it)."""
+_LibYamlLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # LibYAML: composes 30x faster
 
-    composed = 0
 
-    def compose_node(self, parent, index):
-        self.composed += 1
-        if self.composed > MAX_SCENE_VALUES:
-            raise _Unbounded(f"the file holds more than {MAX_SCENE_VALUES} values, over the limit")
-        return super().compose_node(parent, index)
+class _BoundedLoader(_LibYamlLoader):
+    """A safe loader that refuses, once a document is composed and before any value is built, a node graph
+    whose aliases expand past MAX_SCENE_VALUES values or that refers to itself (a "billion laughs" bomb
+    costs a few hundred bytes of YAML and the whole memory of whoever walks it). `_check_events` bounds
+    what is composed."""
 
-    def compose_document(self):
-        node = super().compose_document()
-        _expanded_size(node)
+    def get_single_node(self):
+        node = super().get_single_node()
+        if node is not None:
+            _expanded_size(node)
         return node
+
+
+def _check_events(text: str) -> None:
+    """Counts values and nesting in the parser's event stream, before a node is composed: a plain list of
+    1.5M ones composes into a gigabyte of nodes, and LibYAML's composer recurses without a limit."""
+    values = depth = 0
+    try:
+        for event in yaml.parse(text, Loader=_LibYamlLoader):
+            if isinstance(event, yaml.ScalarEvent | yaml.AliasEvent | yaml.CollectionStartEvent):
+                values += 1
+                if values > MAX_SCENE_VALUES:
+                    raise _Unbounded(f"the file holds more than {MAX_SCENE_VALUES} values, over the limit")
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_SCENE_DEPTH:
+                    raise RecursionError
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+    except yaml.MarkedYAMLError as error:
+        if "nesting depth" in str(error.problem):  # LibYAML's own limit (1000), met while it looks ahead
+            raise RecursionError from None
+        raise
 
 
 def _expanded_size(root: yaml.Node) -> int:
@@ -258,7 +276,11 @@ def _parse_file(path: Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as error:
         raise SceneError(str(path), f"cannot read scene file: {error}") from error
     try:
-        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.load(text, _BoundedLoader)
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            _check_events(text)
+            data = yaml.load(text, _BoundedLoader)
     except RecursionError:
         raise SceneError(str(path), f"values nest more than {MAX_SCENE_DEPTH} levels deep") from None
     except _Unbounded as error:

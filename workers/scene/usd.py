@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from workers.scene import spec
+from workers.scene.budget import MAX_SCENE_INSTANCES
 from workers.scene.errors import SceneError
 from workers.scene.gltf import DEFAULT_ENVIRONMENT, unique_name
 from workers.scene.shapes import MeshData, degenerate_triangles
@@ -405,8 +406,13 @@ def _instanced(instancer_prim, world: np.ndarray, placements, bound, time, impor
     _, usd, usd_geom, _, usd_shade = _pxr()
     instancer = usd_geom.PointInstancer(instancer_prim)
     prototypes = instancer.GetPrototypesRel().GetTargets()
-    matrices = instancer.ComputeInstanceTransformsAtTime(time, time)
     proto_indices = np.asarray(instancer.GetProtoIndicesAttr().Get(time) or [], dtype=np.int64)
+    if (placed := len(proto_indices) + sum(map(len, placements.values()))) > MAX_SCENE_INSTANCES:
+        raise SceneError(
+            importer.path.name,
+            f"{instancer_prim.GetPath()}: {placed:,} instances, over the limit of {MAX_SCENE_INSTANCES:,}",
+        )
+    matrices = instancer.ComputeInstanceTransformsAtTime(time, time)
     cache = usd_geom.XformCache(time)
     for p, proto_path in enumerate(prototypes):
         proto = instancer_prim.GetStage().GetPrimAtPath(proto_path)
