@@ -9,7 +9,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from services.api import problems
+from services.api import headers, problems
 from services.api.limits import MULTIPART_OVERHEAD, BodyLimit
 from services.api.routes import artifacts, assets, catalog, health, jobs, tokens
 from services.api.services import Services
@@ -51,6 +51,7 @@ def create_app(settings: ServiceSettings, ray_connection: RayConnection | None =
         upload_bytes=settings.upload_limits.max_total_bytes + MULTIPART_OVERHEAD,
         upload_paths=("/v1/assets",),
     )
+    headers.install(app)
     for module in (jobs, assets, artifacts, catalog, tokens, health):
         app.include_router(module.router)
     mount_dashboard(app)

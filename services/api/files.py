@@ -17,6 +17,8 @@ from services.artifacts.manifest import FileEntry
 from services.artifacts.store import BlobStore
 
 CHUNK = 1 << 16
+# A blob never changes, but it is one tenant's: a browser may keep it, a shared cache must not.
+PRIVATE_IMMUTABLE = "private, max-age=31536000, immutable"
 _RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
 _verified: set[str] = set()
 _verified_lock = threading.Lock()
@@ -24,7 +26,7 @@ _verified_lock = threading.Lock()
 
 def blob_response(request: Request, blobs: BlobStore, entry: FileEntry) -> Response:
     etag = f'"{entry.digest}"'
-    headers = {"ETag": etag, "Accept-Ranges": "bytes", "Cache-Control": "public, max-age=31536000, immutable"}
+    headers = {"ETag": etag, "Accept-Ranges": "bytes", "Cache-Control": PRIVATE_IMMUTABLE}
     if etag in _listed(request.headers.get("if-none-match")) or request.headers.get("if-none-match") == "*":
         return Response(status_code=304, headers=headers)
     _verify_once(blobs, entry.digest)

@@ -2,7 +2,8 @@
 that `nbake serve` serves at `/ui` and that talk to the REST API with the token the user gives.
 
 Every response carries a Content-Security-Policy that allows only this origin's scripts and styles, so
-even a job field that escaped the dashboard's text-only rendering could not run a script."""
+even a job field that escaped the dashboard's text-only rendering could not run a script (the app's
+`services.api.headers` middleware adds the headers every response carries)."""
 
 from __future__ import annotations
 
@@ -18,8 +19,6 @@ PREFIX = "/ui"
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'none'; script-src 'self'; style-src 'self'; "
     "img-src 'self' blob:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'",
-    "X-Content-Type-Options": "nosniff",
-    "Referrer-Policy": "no-referrer",
     "Cache-Control": "no-cache",  # revalidate (ETag) so an upgraded server's files are used at once
 }
 

@@ -8,7 +8,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from services.api import problems
+from services.api import headers, problems
 from services.api.limits import BodyLimit
 from services.inference.grpc_server import start_grpc_inference
 from services.inference.routes import artifacts, health, models
@@ -59,6 +59,7 @@ def create_inference_app(
     app.add_middleware(
         BodyLimit, json_bytes=settings.max_body_bytes, upload_bytes=settings.max_body_bytes, upload_paths=()
     )
+    headers.install(app)
     for module in (models, artifacts, health):
         app.include_router(module.router)
     return app

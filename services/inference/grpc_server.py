@@ -9,7 +9,7 @@ from concurrent import futures
 
 import grpc
 import numpy as np
-from google.protobuf import json_format, struct_pb2
+from google.protobuf import struct_pb2
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
@@ -18,6 +18,7 @@ from pydantic import ValidationError
 from services.api.grpc.auth import TokenAuth, principal
 from services.api.grpc.errors import ErrorMapping
 from services.api.grpc.server import GrpcServer
+from services.api.grpc.structs import json_values
 from services.inference import images
 from services.inference.errors import MalformedBody, UnsupportedOperation
 from services.inference.service import ModelInfo, server_timing
@@ -82,7 +83,7 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
         operation = request.operation or QUERY
         if operation == RENDER:
             raise UnsupportedOperation("render answers an image: call Render", "operation")
-        params = json_format.MessageToDict(request.params)
+        params = json_values(request.params, "params")
         arrays = _arrays(request.arrays)
         size = request.ByteSize()
         with self.service.answering(request.artifact_id, operation, params, arrays, size) as (served, answer):
@@ -95,7 +96,7 @@ class InferenceServicer(inference_pb2_grpc.InferenceServiceServicer):
 
     def Render(self, request, context):
         self.tenancy.artifact(principal(context), request.artifact_id)  # another tenant's: NOT_FOUND
-        params, arrays = json_format.MessageToDict(request.params), _arrays(request.arrays)
+        params, arrays = json_values(request.params, "params"), _arrays(request.arrays)
         media_type = images.media_type_for(request.media_type)
         size = request.ByteSize()
         with self.service.answering(request.artifact_id, RENDER, params, arrays, size) as (_, answer):

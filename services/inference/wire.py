@@ -12,7 +12,6 @@ format of the request (or the `Accept` header), with `artifact_id`, `kind` and `
 from __future__ import annotations
 
 import base64
-import binascii
 import json
 import math
 from typing import Annotated, Any
@@ -98,7 +97,7 @@ def decode_json(body: QueryBody) -> dict[str, np.ndarray]:
     for name, encoded in body.arrays.items():
         try:
             data = base64.b64decode(encoded.data, validate=True)
-        except binascii.Error:
+        except ValueError:  # binascii.Error, or a character outside ASCII
             raise MalformedBody("data is not valid base64", f"arrays.{name}.data") from None
         arrays[name] = decode_array(f"arrays.{name}", encoded, data)
     return arrays

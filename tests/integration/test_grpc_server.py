@@ -233,6 +233,12 @@ def test_auth_errors_map_to_unauthenticated_and_permission_denied(jobs):
         ({}, {"spp": -1}, "config.spp"),
         ({}, {"colour": 1}, "config.colour"),
         ({"scene_ref": "no_such_scene"}, TINY, "scene"),
+        ({}, {"spp": float("nan")}, "config.spp"),  # a Struct holds NaN and Infinity, JSON cannot
+        (
+            {"scene_spec": config({"objects": [{"scale": [1, float("inf")]}]})},
+            TINY,
+            "scene.objects[0].scale[1]",
+        ),
     ],
 )
 def test_invalid_input_is_invalid_argument_naming_the_field(jobs, fields, values, field):

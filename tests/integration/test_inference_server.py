@@ -28,6 +28,7 @@ from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
 from services.jobs.db import Database
+from tests.integration.test_api_headers import assert_security_headers
 from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.support.jobs import run_kind_job
 from tests.support.ports import free_port
@@ -382,6 +383,24 @@ def test_render_frame_time_travels_as_grpc_metadata(server):
     assert timing.startswith("frame;dur=") and float(timing.removeprefix("frame;dur=")) > 0
 
 
+def test_a_non_finite_grpc_render_parameter_is_invalid_argument_naming_it(server):
+    request = inference_pb2.RenderRequest(artifact_id=server.lsnif.artifact_id, media_type="image/png")
+    request.params.update(SMALL_VIEW | {"camera": {"width": 16, "height": 12, "fov": float("inf")}})
+    with grpc.insecure_channel(server.grpc_target) as channel:
+        stub = inference_pb2_grpc.InferenceServiceStub(channel)
+        with pytest.raises(grpc.RpcError) as refused:
+            stub.Render(request, metadata=(("authorization", f"Bearer {TOKENS['read']}"),), timeout=60)
+    assert refused.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    assert refused.value.details().startswith("params.camera.fov: inf is not a finite number")
+
+
+def test_responses_carry_the_security_headers(server):
+    with server.client() as client:
+        answers = [client.get("/v1/models"), client.post(f"/v1/artifacts/sha256:{'0' * 64}:query", json={})]
+    for response in [*answers, httpx.get(f"{server.url}/docs"), httpx.get(f"{server.url}/openapi.json")]:
+        assert_security_headers(response)
+
+
 # ---------------------------------------------------------------------------------------------- cache
 
 
@@ -458,6 +477,10 @@ def test_bad_requests_get_clear_4xx_problems(server):
             lsnif, json={"arrays": {"origins": {"dtype": "float64", "shape": [1, 3], "data": "@@"}}}
         )
         assert bad_json.status_code == 400 and bad_json.json()["field"] == "arrays.origins.data"
+        accented = client.post(
+            lsnif, json={"arrays": {"origins": {"dtype": "float64", "shape": [1, 3], "data": "AAé="}}}
+        )
+        assert accented.status_code == 400 and accented.json()["field"] == "arrays.origins.data"
         params = binary_query(
             client, server.lsnif.artifact_id, {"origins": origins, "directions": directions}, {"x": 1}
         )

@@ -7,9 +7,10 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from google.protobuf import json_format, struct_pb2, timestamp_pb2
+from google.protobuf import struct_pb2, timestamp_pb2
 from neuralbake.v1 import artifacts_pb2, assets_pb2, files_pb2, jobs_pb2
 
+from services.api.grpc.structs import json_values
 from services.api.schemas import JobView
 from services.artifacts.assets import Asset
 from services.artifacts.manifest import FileEntry, Manifest
@@ -28,10 +29,11 @@ def struct(data: dict[str, Any] | None) -> struct_pb2.Struct | None:
     return message
 
 
-def plain(message: struct_pb2.Struct) -> dict[str, Any]:
-    """The Struct as JSON values. A Struct holds every number as a double, so whole numbers come back as
-    ints, as a JSON body gives them: counts validate strictly (`spp: 64.0` would not) and both APIs agree."""
-    return _whole_numbers_as_ints(json_format.MessageToDict(message))
+def plain(message: struct_pb2.Struct, field: str) -> dict[str, Any]:
+    """The Struct `field` as JSON values. A Struct holds every number as a double, so whole numbers come
+    back as ints, as a JSON body gives them: counts validate strictly (`spp: 64.0` would not) and both
+    APIs agree."""
+    return _whole_numbers_as_ints(json_values(message, field))
 
 
 def _whole_numbers_as_ints(value: Any) -> Any:
@@ -83,12 +85,16 @@ def event_message(event: Event) -> jobs_pb2.JobEvent:
 
 def submit_fields(request: jobs_pb2.SubmitJobRequest) -> dict[str, Any]:
     """The `JobRequest` body a SubmitJobRequest stands for (unset optional fields take the defaults)."""
-    fields: dict[str, Any] = {"kind": request.kind, "force": request.force, "config": plain(request.config)}
+    fields: dict[str, Any] = {
+        "kind": request.kind,
+        "force": request.force,
+        "config": plain(request.config, "config"),
+    }
     source = request.WhichOneof("scene")
     if source == "scene_ref":
         fields["scene"] = request.scene_ref
     elif source == "scene_spec":
-        fields["scene"] = plain(request.scene_spec)
+        fields["scene"] = plain(request.scene_spec, "scene")
     for name in ("preset", "seed", "priority"):
         if request.HasField(name):
             fields[name] = getattr(request, name)
