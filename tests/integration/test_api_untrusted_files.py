@@ -69,10 +69,10 @@ def _status_bytes(field: str) -> int:
 )
 def test_a_hostile_scene_file_is_refused_without_the_server_growing(client, files, detail_part):
     growth, response = peak_rss_growth(lambda: upload(client, files))
+    assert growth < PEAK_GROWTH_BYTES, f"the server's peak RSS grew by {growth >> 20} MiB"
     body = problem_of(response, 422)
     assert files[0][0] in body["field"] + body["detail"] and detail_part in body["detail"]
     assert "alias" not in body["detail"]
-    assert growth < PEAK_GROWTH_BYTES, f"the server's peak RSS grew by {growth >> 20} MiB"
 
 
 def test_a_texture_declaring_ten_billion_pixels_is_refused_at_upload(client):
