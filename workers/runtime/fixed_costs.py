@@ -3,7 +3,7 @@
 A quick job spends most of its time here, not training: the scheduler handing it to a driver actor,
 imports, the scene's fetch and compile, loading the compiled kernels, sampler actors starting, the
 report's path tracing (its curve and reference) and writing the artifact. Plans that counted only their
-training were 4-60x below what quick jobs took through `nbake serve`. Each cost is a count (processes,
+training were 2-40x below what quick jobs took through `nbake serve`. Each cost is a count (processes,
 triangles, bytes, path segments, images) times a per-unit cost, so it scales with the scene and config,
 and a plan stays a pure function of them. The per-unit costs were measured on one core of a 2-core AMD
 EPYC; `docs/results/plans.md` has the commands and figures.
