@@ -1,6 +1,6 @@
 """What a job costs besides its kind's own work, counted the same way in every kind's plan.
 
-A quick job spends most of its time here, not training: the scheduler handing it to a driver actor,
+A quick job spends much of its time here rather than training: the scheduler handing it to a driver actor,
 imports, the scene's fetch and compile, loading the compiled kernels, sampler actors starting, the
 report's path tracing (its curve and reference) and writing the artifact. Plans that counted only their
 training were 2-40x below what quick jobs took through `nbake serve`. Each cost is a count (processes,
