@@ -22,6 +22,7 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 from workers.runtime.contract import InfrastructureFailure
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.runtime.sources import Batch, SourceSpec
+from workers.scene.errors import SceneError
 
 SAMPLER_FAILURES = (RayActorError, ObjectLostError, GetTimeoutError)
 # Samplers that keep dying on one batch (killed, out of memory, a lost node) fail the job as the cluster's
@@ -85,24 +86,40 @@ class InProcessBatches:
 
 @ray.remote
 class SamplerActor:
-    """Runs one sample source in its own process; counts what it produced so back-pressure is observable."""
+    """Runs one sample source in its own process; counts what it produced so back-pressure is observable.
+
+    A source that cannot be built from the scene (a texture that does not decode: a SceneError) is the
+    user's error, not the cluster's: the actor stays up and every call raises it, so the job fails at once
+    naming the file. Raised from `__init__`, Ray would report only that the actor died, and the pool would
+    replace it and the service retry the job as a cluster failure."""
 
     def __init__(self, spec: SourceSpec) -> None:
-        self.source = spec.build()
+        self.unusable: SceneError | None = None
+        try:
+            self.source = spec.build()
+        except SceneError as error:
+            self.unusable = error
         self.batches_made = 0
 
     def batch(self, index: int) -> dict[str, np.ndarray]:
         """The batch as NumPy arrays, which Ray moves without pickling (about half the cost of tensors)."""
+        self._check_usable()
         self.batches_made += 1
         return {name: tensor.numpy() for name, tensor in self.source.batch(index).items()}
 
     def render(self, request: Any) -> dict[str, np.ndarray]:
         """What a request-driven source (`RequestSource`) renders for `request`, as NumPy arrays."""
+        self._check_usable()
         self.batches_made += 1
         return {name: tensor.numpy() for name, tensor in self.source.render(request).items()}
 
     def produced(self) -> int:
+        self._check_usable()
         return self.batches_made
+
+    def _check_usable(self) -> None:
+        if self.unusable is not None:
+            raise self.unusable
 
 
 class SamplerPool:
