@@ -3,8 +3,11 @@
 
 from __future__ import annotations
 
+import base64
+import io
 import json
 import struct
+import zipfile
 import zlib
 
 Files = list[tuple[str, bytes]]
@@ -81,5 +84,91 @@ def Xform "World"
         }}
     }}
 }}
+"""
+    return [("scene.usda", stage.encode())]
+
+
+def gltf_triangle(**changes) -> dict:
+    """A valid one-triangle glTF document (its buffer a data URI); `changes` replace top-level keys."""
+    positions = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+    document = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [
+            {
+                "bufferView": 0,
+                "componentType": 5126,
+                "count": 3,
+                "type": "VEC3",
+                "min": [0, 0, 0],
+                "max": [1, 1, 0],
+            }
+        ],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "buffers": [
+            {
+                "byteLength": 36,
+                "uri": "data:application/octet-stream;base64," + base64.b64encode(positions).decode(),
+            }
+        ],
+    }
+    return document | changes
+
+
+def gltf_variants() -> dict[str, Files]:
+    """glTF files with an index out of range, a matrix of the wrong size, a negative count or a data URI that
+    is not base64 (each made the server answer 500 before issue 50)."""
+    good = gltf_triangle()
+    accessor = good["accessors"][0]
+    variants = {
+        "glTF scene index": {"scene": 5},
+        "glTF node.mesh": {"nodes": [{"mesh": 9}]},
+        "glTF node.camera": {"nodes": [{"mesh": 0, "camera": 9}]},
+        "glTF primitive.material": {
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 9}]}]
+        },
+        "glTF bufferView.buffer": {"bufferViews": [{"buffer": 9, "byteLength": 36}]},
+        "glTF 3-number matrix": {"nodes": [{"mesh": 0, "matrix": [1, 0, 0]}]},
+        "glTF count -5": {"accessors": [accessor | {"count": -5}]},
+        "glTF non-base64 data URI": {
+            "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,@@@"}]
+        },
+    }
+    return {
+        name: [("scene.gltf", json.dumps(gltf_triangle(**change)).encode())]
+        for name, change in variants.items()
+    }
+
+
+def zip_with_bad_utf8_name() -> Files:
+    """A zip whose entry is flagged UTF-8 (general purpose bit 11) and whose name bytes are not UTF-8."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("scene.yaml", "objects: []\n")
+        archive.writestr("mX.obj", "v 0 0 0\n")
+    data = bytearray(buffer.getvalue().replace(b"mX.obj", b"m\xff.obj"))
+    for signature, flags_at in ((b"PK\x03\x04", 7), (b"PK\x01\x02", 9)):  # the high byte of the flags
+        start = data.find(signature)
+        while start >= 0:
+            data[start + flags_at] |= 0x08  # bit 11: the name is UTF-8
+            start = data.find(signature, start + 4)
+    return [("scene.zip", bytes(data))]
+
+
+def usd_mesh_without_faces() -> Files:
+    """A USD stage whose one mesh has points but no faces."""
+    stage = """#usda 1.0
+def Xform "World"
+{
+    def Mesh "Empty"
+    {
+        int[] faceVertexCounts = []
+        int[] faceVertexIndices = []
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    }
+}
 """
     return [("scene.usda", stage.encode())]

@@ -1,0 +1,138 @@
+"""Hostile uploads against a real `nbake serve` (issue 50): every row of the issue's table that is an upload,
+built procedurally (`tests.support.hostile_inputs`), is sent to `POST /v1/assets` while another client
+polls `/healthz`. Per case: the status, the time to answer, the growth of the API process's peak RSS
+(its VmHWM, reset before each case through /proc/<pid>/clear_refs) and the longest `/healthz` answer
+during it. The figures go to the bench report and to `docs/results/hostile.md`, with the CPU model and
+the load: the machine may be shared, which inflates the times.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import httpx
+
+from tests.bench.bench_plans import cpu_model, load_average
+from tests.bench.common import BenchSection
+from tests.integration.test_api_server import TOKENS
+from tests.integration.test_grpc_server import Served, start_serve
+from tests.support import hostile_inputs as hostile
+
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results" / "hostile.md"
+HEADERS = {"Authorization": f"Bearer {TOKENS['admin']}"}
+WARM_UP = [("scene.yaml", b"objects: [{name: ball, shape: {type: sphere}, material: m}]\n")]
+NOT_REPLAYED = (
+    "not replayed here (not uploads): a non-ASCII inference JSON field, NaN/Inf in a gRPC Struct, the "
+    "tenant files' headers and per-tenant quotas"
+)
+
+
+def cases() -> dict[str, Callable[[], hostile.Files]]:
+    return {
+        "5.7 MiB YAML list of 1.5M ones": hostile.yaml_list,
+        "YAML list of 700k ones (2.7 MiB)": lambda: hostile.yaml_list(700_000),
+        "glTF accessor count 20M, no bufferView": hostile.gltf_accessor_bomb,
+        "PNG texture declaring 100000 x 100000": hostile.png_bomb_texture,
+        "USD PointInstancer, 100k instances": hostile.usd_point_instancer,
+        **{name: (lambda files=files: files) for name, files in hostile.gltf_variants().items()},
+        "zip entry flagged UTF-8, invalid name": hostile.zip_with_bad_utf8_name,
+        "USD mesh without faces": hostile.usd_mesh_without_faces,
+    }
+
+
+def run() -> list[BenchSection]:
+    section = BenchSection("Hostile uploads against nbake serve (issue 50)")
+    load_before = load_average()
+    with tempfile.TemporaryDirectory(prefix="nbake-bench-hostile-", dir="/tmp") as root:
+        served = start_serve(Path(root))
+        try:
+            replay(served, WARM_UP)  # starts the server's child processes, untimed
+            for name, build in cases().items():
+                section.add(case=name, **replay(served, build()))
+        finally:
+            served.stop()
+    section.notes += [
+        "answer_s: from sending the upload to its answer; rss_growth_mib: the API process's peak RSS over "
+        "its RSS before the case; health_max_s: the longest /healthz answer while the upload was in flight",
+        "the server's child processes were started by an untimed warm-up upload",
+        NOT_REPLAYED,
+    ]
+    write_results(section, f"{load_before} before the run, {load_average()} after")
+    return [section]
+
+
+def replay(served: Served, files: hostile.Files) -> dict:
+    """One upload with `/healthz` polled beside it; its figures (see the module docstring)."""
+    pid = served.process.pid
+    Path(f"/proc/{pid}/clear_refs").write_text("5")  # the peak RSS starts again from the current RSS
+    before = _status_kib(pid, "VmRSS")
+    health: list[float] = []
+    done = threading.Event()
+
+    def poll_health() -> None:
+        with httpx.Client(base_url=served.url, timeout=600) as http:
+            while not done.is_set():
+                start = time.perf_counter()
+                http.get("/healthz").raise_for_status()
+                health.append(time.perf_counter() - start)
+                done.wait(0.05)
+
+    poller = threading.Thread(target=poll_health)
+    poller.start()
+    start = time.perf_counter()
+    try:
+        response = httpx.post(
+            f"{served.url}/v1/assets", files=[("files", f) for f in files], headers=HEADERS, timeout=600
+        )
+    finally:
+        answer_s = time.perf_counter() - start
+        done.set()
+        poller.join()
+    body = response.json()
+    return {
+        "status": response.status_code,
+        "answer_s": answer_s,
+        "rss_growth_mib": (_status_kib(pid, "VmHWM") - before) / 1024,
+        "health_max_s": max(health, default=0.0),
+        "answer": f"{body.get('field')}: {body.get('detail')}" if response.is_error else body["asset_id"],
+    }
+
+
+def _status_kib(pid: int, field: str) -> int:
+    line = next(x for x in Path(f"/proc/{pid}/status").read_text().splitlines() if x.startswith(f"{field}:"))
+    return int(line.split()[1])
+
+
+def write_results(section: BenchSection, load: str) -> None:
+    rows = [
+        f"| {r['case']} | {r['status']} | {r['answer_s']:.2f} | {r['rss_growth_mib']:.1f} "
+        f"| {r['health_max_s']:.2f} | {r['answer'].replace('|', '/')[:160]} |"
+        for r in section.rows
+    ]
+    RESULTS.write_text(
+        "\n".join(
+            [
+                "# Hostile uploads (issue 50)",
+                "",
+                "Generated by `python -m tests.bench bench_hostile` (`tests/bench/bench_hostile.py`):",
+                "each upload of issue 50's table sent to a real `nbake serve` while another client polls",
+                "`/healthz`. Uploads are parsed in the server's child processes (`services/geometry.py`), so",
+                "the API process's RSS does not follow the file's cost.",
+                "",
+                f"Run {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {cpu_model()} "
+                f"({os.cpu_count()} CPUs), load average (`uptime`) {load}: a shared machine inflates times.",
+                "",
+                "| case | status | answer s | API peak RSS growth MiB | longest /healthz s | answer |",
+                "| --- | --- | --- | --- | --- | --- |",
+                *rows,
+                "",
+                *(f"- {note}" for note in section.notes),
+                "",
+            ]
+        )
+    )
