@@ -9,6 +9,7 @@ from its CDN with an inline script, so their policy only forbids framing, `<base
 
 from __future__ import annotations
 
+from fastapi import FastAPI
 from starlette.datastructures import MutableHeaders
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -40,7 +41,7 @@ class SecurityHeaders:
         await self.app(scope, receive, with_headers)
 
 
-def install(app) -> None:
+def install(app: FastAPI) -> None:
     """Add the middleware to a FastAPI `app`, outermost, so that even its error responses carry them."""
     docs = (app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)
     app.add_middleware(SecurityHeaders, docs_paths=tuple(path for path in docs if path))
