@@ -2,11 +2,18 @@
 
 import json
 import time
+from pathlib import Path
 
 import pytest
 
 from workers.scene.errors import SceneError
-from workers.scene.io import MAX_SCENE_DEPTH, MAX_SCENE_VALUES, load_scene, scene_from_dict
+from workers.scene.io import (
+    MAX_SCENE_DEPTH,
+    MAX_SCENE_FILE_BYTES,
+    MAX_SCENE_VALUES,
+    load_scene,
+    scene_from_dict,
+)
 
 # ~700 bytes whose aliases expand to 10^8 leaves under `params`
 ALIAS_BOMB = """\
@@ -85,3 +92,18 @@ def _write(tmp_path, name, text):
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+@pytest.mark.parametrize("suffix", ["yaml", "json"])
+def test_a_plain_list_over_the_value_limit_is_refused_without_blaming_aliases(tmp_path, suffix):
+    ones = ", ".join(["1"] * (MAX_SCENE_VALUES + 1))
+    error = refusal(tmp_path, f"scene.{suffix}", f'{{"objects": [{ones}]}}')
+    assert f"more than {MAX_SCENE_VALUES} values" in error.problem and "alias" not in error.problem
+
+
+def test_a_scene_file_over_the_byte_limit_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    path = tmp_path / "scene.yaml"
+    path.write_text("objects: []\n" + "#" * MAX_SCENE_FILE_BYTES)
+    monkeypatch.setattr(Path, "read_text", lambda *_, **__: pytest.fail("the file was read"))
+    with pytest.raises(SceneError, match=f"over the limit of {MAX_SCENE_FILE_BYTES:,} bytes"):
+        load_scene(path)

@@ -4,10 +4,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from tests.support.hostile_inputs import png_header
 from workers.scene import spec
 from workers.scene.errors import SceneError
 from workers.scene.image_io import srgb_to_linear, write_exr
-from workers.scene.textures import evaluate_texture, load_image_texture
+from workers.scene.textures import (
+    MAX_TEXTURE_PIXELS,
+    check_texture_size,
+    evaluate_texture,
+    load_image_texture,
+)
 
 
 def test_png_is_decoded_from_srgb_to_linear(tmp_path):
@@ -93,3 +99,14 @@ def test_declared_colour_space_decides_the_decoding(tmp_path, color_space):
     image = load_image_texture(spec.ImageTexture(path="t.png", color_space=color_space), "m", tmp_path)
     expected = pixels / 255.0 if color_space == "linear" else srgb_to_linear(pixels / 255.0)
     np.testing.assert_allclose(image, expected, rtol=1e-6)
+
+
+def test_a_texture_declaring_too_many_pixels_is_refused_before_it_is_decoded(tmp_path):
+    (tmp_path / "big.png").write_bytes(png_header(100_000, 100_000))
+    texture = spec.ImageTexture(path="big.png")
+    for check in (load_image_texture, check_texture_size):
+        with pytest.raises(
+            SceneError, match=f"big.png is over the limit of {MAX_TEXTURE_PIXELS:,} pixels"
+        ) as caught:
+            check(texture, "materials.m.reflectance", tmp_path)
+        assert caught.value.field == "materials.m.reflectance.path"
