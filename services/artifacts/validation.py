@@ -47,7 +47,7 @@ def checked_scene(root: Path, scene_file: str, names: set[str]) -> SceneSpec:
     check_references(spec, scene_file, names)
     for field, texture in image_textures(spec):
         check_texture_size(texture, field, base_dir)
-    compile_scene(spec, base_dir)  # what only the built geometry shows (triangle limit, degenerate meshes)
+    compile_scene(spec, base_dir)  # the geometry (triangle limit, degenerate meshes), the environment map
     return spec
 
 

@@ -5,7 +5,7 @@ import pytest
 from PIL import Image
 
 from tests.support.hostile_inputs import png_header
-from workers.scene import spec
+from workers.scene import spec, textures
 from workers.scene.errors import SceneError
 from workers.scene.image_io import srgb_to_linear, write_exr
 from workers.scene.textures import (
@@ -110,3 +110,11 @@ def test_a_texture_declaring_too_many_pixels_is_refused_before_it_is_decoded(tmp
         ) as caught:
             check(texture, "materials.m.reflectance", tmp_path)
         assert caught.value.field == "materials.m.reflectance.path"
+
+
+def test_an_exr_is_refused_from_its_header_before_it_is_read(tmp_path, monkeypatch):
+    write_exr(tmp_path / "wide.exr", np.zeros((1, 8, 3), np.float32))
+    monkeypatch.setattr(textures, "MAX_TEXTURE_PIXELS", 7)
+    with pytest.raises(SceneError, match=r"wide\.exr is 8 x 1 pixels, over the limit") as caught:
+        load_image_texture(spec.ImageTexture(path="wide.exr"), "materials.m.reflectance", tmp_path)
+    assert caught.value.field == "materials.m.reflectance.path"

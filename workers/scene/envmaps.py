@@ -18,6 +18,7 @@ from workers.scene import spec
 from workers.scene.errors import SceneError
 from workers.scene.image_io import read_exr
 from workers.scene.procedural import parse_params
+from workers.scene.textures import check_exr_size
 
 HDRI_DIR = Path(__file__).resolve().parents[2] / "assets" / "hdri"
 NEGATIVE_RINGING = 0.05  # negatives within 5% of the mean are lossy-compression ringing, clamped to 0
@@ -169,6 +170,7 @@ def load_environment(env: spec.EnvironmentMap, field: str, base_dir: Path | None
                 path = base_dir / path
             if not path.is_file():
                 raise SceneError(source, f"environment map not found: {path}")
+        check_exr_size(path, source)
         try:
             image = read_exr(path)
         except ValueError as error:

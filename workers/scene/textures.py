@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 from PIL import Image, UnidentifiedImageError
 
 from workers.scene import spec
@@ -25,9 +26,10 @@ from workers.scene.gltf import embedded_image
 from workers.scene.image_io import read_exr, srgb_to_linear
 from workers.scene.usd import package_member
 
-# A texture's pixels: 8192 x 8192 decodes to 1.6 GB of float64 texels, the most a sampler actor affords; a
-# larger one is refused from its header, at upload and again before decoding.
+# An image's pixels (a texture, an environment map): 8192 x 8192 decodes to 1.6 GB of float64 texels, the
+# most a sampler actor affords; a larger one is refused from its header, at upload and again before decoding.
 MAX_TEXTURE_PIXELS = 8192 * 8192
+_OVER = f"over the limit of {MAX_TEXTURE_PIXELS:,} pixels (MAX_TEXTURE_PIXELS)"
 
 
 def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> np.ndarray:
@@ -38,6 +40,7 @@ def load_image_texture(tex: spec.ImageTexture, field: str, base_dir: Path | None
         raise SceneError(where, f"texture file not found: {path}")
     try:
         if tex.image is None and path.suffix.lower() == ".exr":
+            check_exr_size(path, where)
             image = read_exr(path)
             if tex.color_space == "srgb":
                 image = srgb_to_linear(image)
@@ -66,17 +69,34 @@ def image_textures(scene: spec.SceneSpec) -> Iterator[tuple[str, spec.ImageTextu
 
 def check_texture_size(tex: spec.ImageTexture, field: str, base_dir: Path | None) -> None:
     """SceneError unless the texture's header declares at most MAX_TEXTURE_PIXELS; only the header is read
-    (an 83-byte PNG may declare 100000 x 100000), and EXR, read whole by its own reader, is skipped."""
+    (an 83-byte PNG may declare 100000 x 100000)."""
     path = _resolved(tex, base_dir)
-    if tex.image is None and path.suffix.lower() == ".exr":
-        return
     try:
-        with _opened(_encoded(tex, path), f"{field}.path", path.name):
-            pass
+        if tex.image is None and path.suffix.lower() == ".exr":
+            check_exr_size(path, f"{field}.path")
+        else:
+            with _opened(_encoded(tex, path), f"{field}.path", path.name):
+                pass
     except SceneError:
         raise
     except (ValueError, OSError, UnidentifiedImageError) as error:
         raise SceneError(f"{field}.path", f"cannot read texture {path.name}: {error}") from error
+
+
+def check_exr_size(path: Path, where: str) -> None:
+    """SceneError if an EXR's header declares more than MAX_TEXTURE_PIXELS (its reader allocates them all)."""
+    try:
+        with OpenEXR.File(str(path), header_only=True) as exr:
+            low, high = exr.header()["dataWindow"]
+    except Exception as error:  # OpenEXR raises bare RuntimeError/ValueError subclasses on corrupt files
+        raise SceneError(where, f"cannot read {path.name} as OpenEXR: {error}") from None
+    width, height = (int(side) + 1 for side in high - low)
+    _check_pixels(width, height, where, path.name)
+
+
+def _check_pixels(width: int, height: int, where: str, name: str) -> None:
+    if width * height > MAX_TEXTURE_PIXELS:
+        raise SceneError(where, f"image {name} is {width} x {height} pixels, {_OVER}")
 
 
 def _resolved(tex: spec.ImageTexture, base_dir: Path | None) -> Path:
@@ -94,15 +114,12 @@ def _encoded(tex: spec.ImageTexture, path: Path) -> Path | io.BytesIO:
 @contextmanager
 def _opened(source: Path | io.BytesIO, where: str, name: str) -> Iterator[Image.Image]:
     """The image with its header read and its size checked against MAX_TEXTURE_PIXELS, not yet decoded."""
-    over = f"over the limit of {MAX_TEXTURE_PIXELS:,} pixels (MAX_TEXTURE_PIXELS)"
     try:
         opened = Image.open(source)
     except Image.DecompressionBombError:
-        raise SceneError(where, f"texture {name} is {over}") from None
+        raise SceneError(where, f"image {name} is {_OVER}") from None
     with opened:
-        width, height = opened.size
-        if width * height > MAX_TEXTURE_PIXELS:
-            raise SceneError(where, f"texture {name} is {width} x {height} pixels, {over}")
+        _check_pixels(*opened.size, where, name)
         yield opened
 
 
