@@ -119,10 +119,9 @@ def test_render_takes_an_uploaded_map_and_refuses_nan_naming_the_field(served):
         served.answer(RENDER, PrtRender(wavelets=10**6), {})
 
 
-def test_query_gives_indirect_light_at_g_buffer_points(served):
-    rng = np.random.default_rng(0)
-    n = 5
-    arrays = {
+def diffuse_points(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+    """`n` G-buffer points of :query's inputs: upward-facing, diffuse grey, seen from one direction."""
+    return {
         "position": rng.uniform(-0.5, 0.5, (n, 3)),
         "normal": np.tile([0.0, 1.0, 0.0], (n, 1)),
         "view": np.tile([0.0, 0.6, 0.8], (n, 1)),
@@ -130,11 +129,15 @@ def test_query_gives_indirect_light_at_g_buffer_points(served):
         "ks": np.zeros((n, 3)),
         "roughness": np.ones(n),
     }
+
+
+def test_query_gives_indirect_light_at_g_buffer_points(served):
+    arrays = diffuse_points(np.random.default_rng(0), 5)
     studio = PrtQuery(lighting={"builtin": "studio"})
     brighter = PrtQuery(lighting={"builtin": "studio", "scale": 3.0})
     one = served.answer(QUERY, studio, arrays).arrays["indirect"]
     three = served.answer(QUERY, brighter, arrays).arrays["indirect"]
-    assert one.shape == (n, 3) and np.isfinite(one).all()
+    assert one.shape == (5, 3) and np.isfinite(one).all()
     np.testing.assert_allclose(three, 3 * one, rtol=1e-4, atol=1e-6)
 
 
@@ -199,15 +202,7 @@ def test_query_takes_an_uploaded_map_as_render_does_through_the_inference_servic
     artifact_id = publish(store, "prt", spec, outcome).artifact_id
     install_tokens(tmp_path)
     rng = np.random.default_rng(4)
-    n = 7
-    points = {
-        "position": rng.uniform(-0.5, 0.5, (n, 3)),
-        "normal": np.tile([0.0, 1.0, 0.0], (n, 1)),
-        "view": np.tile([0.0, 0.6, 0.8], (n, 1)),
-        "kd": np.full((n, 3), 0.4),
-        "ks": np.zeros((n, 3)),
-        "roughness": np.ones(n),
-    }
+    points = diffuse_points(rng, 7)
     maps = [rng.uniform(0.0, 4.0, (8, 16, 3)).astype(np.float32) for _ in range(2)]
     maps[1][:4] *= 10  # a bright sky over the first: another light at every point
     params = {"lighting": {"path": "mine.exr"}}
