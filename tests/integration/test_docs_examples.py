@@ -14,6 +14,7 @@ from tests.support.doc_runner import DocRun
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "clients/python/README.md"]
 IDS = [str(doc.relative_to(ROOT)) for doc in DOCS]
+TRAINING = [doc for doc in DOCS if any(block.slow for block in blocks(doc))]  # docs with `run slow` blocks
 
 
 @pytest.mark.timeout(1200)  # README's: 4-5 min on a loaded 2-core machine (local renders, a server, lsnif)
@@ -25,10 +26,7 @@ def test_the_docs_examples_run(doc, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.timeout(3600)
-@pytest.mark.parametrize("doc", DOCS, ids=IDS)
+@pytest.mark.parametrize("doc", TRAINING, ids=[str(doc.relative_to(ROOT)) for doc in TRAINING])
 def test_the_docs_examples_run_with_the_training_ones(doc, tmp_path):
-    found = blocks(doc)
-    if not any(block.slow for block in found):
-        pytest.skip("no `run slow` block")
     with DocRun(tmp_path / "run", ROOT) as run:
-        run.run(found, slow=True)
+        run.run(blocks(doc), slow=True)
