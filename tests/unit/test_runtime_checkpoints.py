@@ -39,6 +39,29 @@ def test_a_crashed_write_is_invisible_and_cleared(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["step-000000001", "step-000000002"]
 
 
+def test_a_crash_while_the_marker_is_written_leaves_the_previous_checkpoint(tmp_path, monkeypatch):
+    """A driver killed as the marker's bytes go out (the file created, nothing written yet) must not leave
+    an empty marker that makes the step look complete: the resumed job read it and failed on its JSON."""
+    store = CheckpointStore(str(tmp_path), keep=3)
+    store.save(1, files_of(1))
+    write = store.fs.pipe_file
+
+    def killed_at_the_marker(path, value, **kwargs):
+        if "COMMITTED" in path:
+            write(path, b"")
+            raise KeyboardInterrupt("killed")
+        return write(path, value, **kwargs)
+
+    monkeypatch.setattr(store.fs, "pipe_file", killed_at_the_marker)
+    with pytest.raises(KeyboardInterrupt):
+        store.save(2, files_of(2))
+    monkeypatch.undo()
+    resumed = CheckpointStore(str(tmp_path), keep=3)
+    assert resumed.steps() == [1] and resumed.load(1) == files_of(1)
+    resumed.save(2, files_of(2))
+    assert resumed.steps() == [1, 2] and resumed.load(2) == files_of(2)
+
+
 def test_saving_a_step_again_replaces_it(tmp_path):
     store = CheckpointStore(str(tmp_path), keep=3)
     store.save(3, {"a": b"old", "b": b"old"})

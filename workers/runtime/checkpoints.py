@@ -1,9 +1,10 @@
 """A directory of numbered checkpoints on any fsspec file system (a local folder, `s3://`), the last K kept.
 
-Each checkpoint is a folder `step-000000123/` of named files and a commit marker, written last, that lists
-them. Object stores have no atomic rename of a folder, so the marker is what makes a checkpoint visible: a
-reader only ever sees steps whose marker is there, a crash mid-write leaves a folder without one (which
-the next save clears away), and a checkpoint is removed marker first.
+Each checkpoint is a folder `step-000000123/` of named files and a commit marker, written last (beside,
+then renamed into place, so that it is never seen half-written), that lists them. Object stores have no
+atomic rename of a folder, so the marker is what makes a checkpoint visible: a reader only ever sees
+steps whose marker is there, a crash mid-write leaves a folder without one (which the next save clears
+away), and a checkpoint is removed marker first.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import fsspec
 
 STEP_FOLDER = re.compile(r"^step-(\d{9})$")
 COMMIT_MARKER = "COMMITTED.json"
+PARTIAL = ".partial"  # a marker being written (a driver killed mid-write leaves it, never an empty marker)
 
 
 class CheckpointStore:
@@ -72,7 +74,9 @@ class CheckpointStore:
         self.fs.makedirs(folder, exist_ok=True)
         for name, content in files.items():
             self.fs.pipe_file(f"{folder}/{name}", content)
-        self.fs.pipe_file(f"{folder}/{COMMIT_MARKER}", json.dumps(sorted(files)).encode())
+        # the marker appears whole or not at all: written beside, then renamed (a PUT on an object store)
+        self.fs.pipe_file(f"{folder}/{COMMIT_MARKER}{PARTIAL}", json.dumps(sorted(files)).encode())
+        self.fs.mv(f"{folder}/{COMMIT_MARKER}{PARTIAL}", f"{folder}/{COMMIT_MARKER}")
         for old in self.steps()[: -self.keep]:
             self._remove(old)
 
