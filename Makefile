@@ -14,7 +14,7 @@ $(STAMP): requirements/dev.txt pyproject.toml clients/python/pyproject.toml cons
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q pip==$(PIP_VERSION)
 	$(PIP) install -q torch==2.13.0 -r requirements/dev.txt
-	$(PIP) install -q --no-deps -e . -e clients/python
+	$(PIP) install -q --no-deps --no-build-isolation -e . -e clients/python  # built by the locked setuptools
 	$(PIP) check
 	touch $(STAMP)
 
