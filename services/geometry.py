@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 
 from pebble import ProcessExpired, ProcessPool
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 
 T = TypeVar("T")
 MEMORY_ENV, DEADLINE_ENV = "NBAKE_GEOMETRY_MEMORY_BYTES", "NBAKE_GEOMETRY_DEADLINE_S"

@@ -13,7 +13,7 @@ from typing import NoReturn
 import typer
 from pydantic import ValidationError
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.io import dotted_path
 
 USER_ERROR_EXIT = 2

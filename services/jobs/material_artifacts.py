@@ -1,4 +1,4 @@
-"""Scene materials that name a model in the store (`artifact: sha256:...`; `workers.scene.spec`'s
+"""Scene materials that name a model in the store (`artifact: sha256:...`; `workers.scene.format.spec`'s
 `AggregateMaterial`) instead of a folder of the upload, so a pipeline that trained one (a `mesogan` job)
 renders it in any number of scenes without uploading it again.
 
@@ -18,7 +18,7 @@ from services.artifacts.artifacts import ArtifactNotFound, ArtifactStore
 from services.jobs.errors import InvalidInput
 from services.jobs.tenants import Principal, Tenancy
 from workers.models.registry import material_kind
-from workers.scene.spec import AggregateMaterial, SceneSpec
+from workers.scene.format.spec import AggregateMaterial, SceneSpec
 from workers.scene.stored import StoredFile, artifact_folder
 
 KINDS_CACHE_SIZE = 4096  # artifact id -> kind; a manifest never changes, so a repeated submission reads none

@@ -23,9 +23,9 @@ from services.jobs.identity import scene_hash, sha256_of
 from services.jobs.material_artifacts import MaterialArtifacts, named_artifacts
 from services.jobs.tenants import Principal, Tenancy
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import SceneSpec
 from workers.scene.io import check_nesting, load_scene, scene_from_dict
-from workers.scene.spec import SceneSpec
 from workers.scene.stored import ARTIFACTS_FOLDER, StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"

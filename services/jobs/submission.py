@@ -26,10 +26,10 @@ from services.jobs.tenants import DEFAULT_TENANT, Principal
 from workers.models.registry import UnknownKind, get_kind
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.budget import scene_triangles
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import MeshShape, SceneSpec
 from workers.scene.io import dotted_path
 from workers.scene.reference import SceneRef
-from workers.scene.spec import MeshShape, SceneSpec
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses

@@ -80,8 +80,8 @@ from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import Progress, train_phases
 from workers.scene.builtin import get_builtin
+from workers.scene.format.variables import dimension_names
 from workers.scene.reference import SceneRef
-from workers.scene.variables import dimension_names
 
 # EXPLORE_BENCH_SCENES (comma-separated) runs only those scenes
 SCENES = tuple(os.environ.get("EXPLORE_BENCH_SCENES", "cornell_variable,mirror_variable").split(","))

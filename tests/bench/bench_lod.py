@@ -29,7 +29,7 @@ from workers.models.lod.evaluate import lod_tracer, timed_render
 from workers.render.render import RenderSettings
 from workers.scene.builtin import get_builtin, sun_and_sky
 from workers.scene.compile import compile_scene
-from workers.scene.spec import (
+from workers.scene.format.spec import (
     Camera,
     ConstantBackground,
     Diffuse,

@@ -22,7 +22,7 @@ with atheris.instrument_imports(include=["services", "workers"]):
     from services.artifacts.staging import Staging, UploadError, UploadLimits
     from services.inference.errors import MalformedBody
     from services.inference.wire import decode_binary
-    from workers.scene.errors import SceneError
+    from workers.scene.format.errors import SceneError
     from workers.scene.io import load_scene
 
 # NBAKE_FUZZ_DIR: a folder the caller owns and removes (libFuzzer exits without Python's clean-up)

@@ -25,7 +25,7 @@ from workers.models.prt.infer import PrtRender
 from workers.models.prt.network import PrtNetwork
 from workers.models.registry import RENDER, get_kind
 from workers.scene.compile import compile_scene
-from workers.scene.spec import TranslateVariable
+from workers.scene.format.spec import TranslateVariable
 from workers.scene.stored import CACHE_ENV
 
 

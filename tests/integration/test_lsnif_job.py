@@ -30,7 +30,7 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.report import Report
 from workers.scene.compile import compile_scene
-from workers.scene.spec import SceneSpec, Transform
+from workers.scene.format.spec import SceneSpec, Transform
 
 SEED = 7
 OVERRIDES = {"min_triangles": 1000}

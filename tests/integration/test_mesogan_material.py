@@ -39,7 +39,7 @@ from workers.render import aggregate_materials
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.image_io import read_exr_channels
 from workers.scene.io import load_scene, scene_from_dict
 from workers.scene.reference import SceneRef

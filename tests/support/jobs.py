@@ -13,8 +13,8 @@ from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.contract import JobContext, imported
 from workers.runtime.pipeline import Trainable, round_to_storage
+from workers.scene.format.spec import SceneSpec
 from workers.scene.reference import SceneRef
-from workers.scene.spec import SceneSpec
 
 
 def run_kind_job(

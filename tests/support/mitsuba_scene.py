@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from workers.scene import spec
 from workers.scene.compile import CompiledScene
+from workers.scene.format import spec
 
 
 def _rgb(value) -> dict:

@@ -9,8 +9,8 @@ from __future__ import annotations
 import trimesh
 import yaml
 
+from workers.scene.format.spec import SceneSpec
 from workers.scene.shapes import MeshData, shape_mesh
-from workers.scene.spec import SceneSpec
 
 
 def trimesh_of(mesh: MeshData) -> trimesh.Trimesh:

@@ -13,7 +13,7 @@ from services.artifacts.assets import AssetNotFound, load_asset, materialize, sa
 from services.artifacts.store import BlobCorrupted, BlobStore
 from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.io import load_scene
 
 SCENE = """\

@@ -19,8 +19,14 @@ from workers.models.explore.source import PatchRequest, PatchSource, PatchSource
 from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.scene.builtin import get_builtin
+from workers.scene.format.spec import (
+    Camera,
+    Conductor,
+    EnvironmentMap,
+    EnvironmentRotationVariable,
+    SceneSpec,
+)
 from workers.scene.reference import SceneRef
-from workers.scene.spec import Camera, Conductor, EnvironmentMap, EnvironmentRotationVariable, SceneSpec
 
 SIZE = 24
 SUN_AHEAD = {"sun_elevation": 10.0, "sun_azimuth": 0.0, "sun_irradiance": 1.0}  # its glow turns with the sky

@@ -21,8 +21,8 @@ from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import TrainConfig, train_phases
 from workers.scene.builtin import get_builtin
+from workers.scene.format.spec import SceneSpec
 from workers.scene.reference import SceneRef
-from workers.scene.spec import SceneSpec
 
 K = 3
 QUICK = ExploreConfig.model_validate(PRESETS["quick"])

@@ -23,8 +23,8 @@ from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.compile import compile_scene
+from workers.scene.format.spec import ConstantBackground, Diffuse, ProceduralShape, SceneObject, SceneSpec
 from workers.scene.reference import SceneRef
-from workers.scene.spec import ConstantBackground, Diffuse, ProceduralShape, SceneObject, SceneSpec
 
 STEPS = 150
 HELD_OUT_BATCHES = 4

@@ -21,7 +21,7 @@ from workers.models.lod.plan import (
 )
 from workers.models.registry import get_kind
 from workers.scene.builtin import get_builtin
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.reference import SceneRef
 
 

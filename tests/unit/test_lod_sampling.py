@@ -26,7 +26,7 @@ from workers.models.lod.sampling import (
 )
 from workers.models.lod.segments import roulette_survivors
 from workers.scene.compile import compile_scene
-from workers.scene.spec import (
+from workers.scene.format.spec import (
     BoxShape,
     CheckerTexture,
     ConstantBackground,

@@ -28,9 +28,9 @@ from workers.render.voxels import boundary_points
 from workers.runtime.pipeline import round_to_storage
 from workers.scene.builtin import cornell_box
 from workers.scene.compile import compile_scene
+from workers.scene.format.spec import SceneObject, SphereShape, Transform
 from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
-from workers.scene.spec import SceneObject, SphereShape, Transform
 
 QUICK = LsnifConfig.model_validate({**PRESETS["quick"], "min_triangles": 1000})
 

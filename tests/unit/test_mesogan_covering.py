@@ -19,8 +19,8 @@ from workers.models.registry import register_materials
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.format.spec import MesoganMaterial
 from workers.scene.io import scene_from_dict
-from workers.scene.spec import MesoganMaterial
 
 RELATIVE = 0.04
 

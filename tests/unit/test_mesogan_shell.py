@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from workers.models.mesogan.shell import Shell
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.shapes import sphere
 
 

@@ -16,7 +16,7 @@ from workers.models.mesogan.networks import MesoGAN
 from workers.models.mesogan.sampling import Instance, View, hemisphere, stack_views, to_scene
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes, render_slab
 from workers.render.camera import PinholeCamera
-from workers.scene.spec import Appearance, Camera, Structure
+from workers.scene.format.spec import Appearance, Camera, Structure
 
 
 def test_a_constant_density_slab_stops_vertical_rays_as_the_exponential_law_says():

@@ -16,6 +16,15 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.view_render import MAX_SAMPLES, CameraParams, ViewRender
 from workers.scene.compile import compile_scene
+from workers.scene.format.spec import (
+    Camera,
+    Diffuse,
+    EnvironmentMap,
+    ImageTexture,
+    MeshShape,
+    SceneObject,
+    SphereShape,
+)
 from workers.scene.image_io import write_exr, write_png
 from workers.scene.portable import (
     NEUTRAL_RADIANCE,
@@ -25,15 +34,6 @@ from workers.scene.portable import (
     neutral_scene,
     portable_scene,
     save_scene,
-)
-from workers.scene.spec import (
-    Camera,
-    Diffuse,
-    EnvironmentMap,
-    ImageTexture,
-    MeshShape,
-    SceneObject,
-    SphereShape,
 )
 from workers.scene.stored import CACHE_ENV
 

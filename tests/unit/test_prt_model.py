@@ -32,8 +32,8 @@ from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
 from workers.runtime.contract import resolve_preset
 from workers.scene.envmaps import texel_directions
-from workers.scene.errors import SceneError
-from workers.scene.spec import Camera, EnvironmentMap, euler_xyz
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import Camera, EnvironmentMap, euler_xyz
 
 SIZES = [1, 2, 4, 8, 16, 32]
 

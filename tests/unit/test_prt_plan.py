@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from workers.models.registry import get_kind
-from workers.scene import spec
+from workers.scene.format import spec
 from workers.scene.reference import SceneRef
 
 

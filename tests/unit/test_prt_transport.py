@@ -11,9 +11,9 @@ from workers.models.prt.lighting import CubeMapLight, relit_tracer, uniform_cube
 from workers.models.prt.transport import BACKGROUND, DIRECT, INDIRECT, trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.render.stratified import StratifiedUniforms
-from workers.scene import spec
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
+from workers.scene.format import spec
 
 SIZE = 4
 MAX_DEPTH = 6

@@ -7,7 +7,7 @@ import pytest
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from tests.support.mitsuba_scene import mitsuba_bsdf
 from workers.render.bsdf import SurfaceBatch, bsdf_code, eval_bsdf
-from workers.scene import spec
+from workers.scene.format import spec
 
 mi = pytest.importorskip("mitsuba")
 pytestmark = pytest.mark.mitsuba

@@ -10,7 +10,7 @@ from numba import njit
 from workers.render.environment import EnvironmentMapLight, _bilinear_maxima, _cdf, _guide, sample
 from workers.render.kernels import guided_search
 from workers.render.sampling import luminance
-from workers.scene.spec import euler_xyz
+from workers.scene.format.spec import euler_xyz
 
 
 @njit(cache=False)

@@ -14,7 +14,7 @@ from tests.unit.test_render_bsdf_sampling import (
 )
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family, eval_bsdf, sample_bsdf
 from workers.render.sampling import square_to_cosine_hemisphere
-from workers.scene import spec
+from workers.scene.format import spec
 
 COLOUR = (0.7, 0.5, 0.3)
 # (metallic, roughness, ior, transmission): a dielectric, a metal, a blend, glass and a rough blend of all

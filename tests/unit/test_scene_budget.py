@@ -6,10 +6,10 @@ import tracemalloc
 
 import pytest
 
-from workers.scene import spec
 from workers.scene.budget import MAX_SCENE_TRIANGLES_ENV, scene_triangles, shape_triangles
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.procedural import GENERATORS, generate, generated_triangles
 from workers.scene.shapes import shape_mesh
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from workers.scene import spec
 from workers.scene.builtin import BUILTIN_SCENES
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.shapes import box
 
 GREY = {"grey": spec.Diffuse()}

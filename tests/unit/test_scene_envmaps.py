@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from workers.scene import spec
 from workers.scene.envmaps import (
     builtin_environment_names,
     check_environment,
@@ -14,7 +13,8 @@ from workers.scene.envmaps import (
     texel_solid_angles,
     uv_to_direction,
 )
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.image_io import write_exr
 
 BUILTIN_HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]

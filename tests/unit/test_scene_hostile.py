@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.io import (
     MAX_SCENE_DEPTH,
     MAX_SCENE_FILE_BYTES,

@@ -8,10 +8,10 @@ import pytest
 import trimesh
 from pydantic import ValidationError
 
-from workers.scene import spec
 from workers.scene.builtin import BUILTIN_SCENES, cornell_box
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.io import dump_scene, load_scene
 
 YAML_SCENE = """\

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.meshio import load_mesh_file
 
 

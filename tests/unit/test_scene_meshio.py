@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from workers.scene import spec
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.meshio import load_mesh_file
 from workers.scene.shapes import shape_mesh
 

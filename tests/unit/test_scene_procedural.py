@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import Structure
 from workers.scene.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, local_strands
 from workers.scene.procedural import GENERATORS, generate, gradient_noise
 from workers.scene.shapes import check_mesh
-from workers.scene.spec import Structure
 
 SMALL = {
     "ground_plane": {},

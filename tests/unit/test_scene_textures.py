@@ -5,8 +5,9 @@ import pytest
 from PIL import Image
 
 from tests.support.hostile_inputs import png_header
-from workers.scene import spec, textures
-from workers.scene.errors import SceneError
+from workers.scene import textures
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.image_io import srgb_to_linear, write_exr
 from workers.scene.textures import (
     MAX_TEXTURE_PIXELS,

@@ -17,7 +17,7 @@ from tests.support import usd_files as usd
 from tests.support.gltf_files import QUAD_INDICES, QUAD_NORMALS, QUAD_POSITIONS, QUAD_UVS, GltfBuilder
 from workers.render.render import RenderSettings, render
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.io import load_scene
 
 FOV = 43.0

@@ -11,10 +11,10 @@ from workers.render.variable_tracer import VariableTracer
 from workers.scene import compile as compile_module
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.variables import dimension_names, switch_index, vector_from_values
 from workers.scene.io import scene_from_dict
 from workers.scene.variable_scene import CompiledVariableScene
-from workers.scene.variables import dimension_names, switch_index, vector_from_values
 
 
 def cornell(variables: list[dict], **extra) -> dict:

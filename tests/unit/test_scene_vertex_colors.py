@@ -13,9 +13,9 @@ import trimesh
 from tests.support.gltf_files import QUAD_POSITIONS, GltfBuilder, quad
 from workers.render.camera import PinholeCamera
 from workers.render.render import RenderSettings, render
-from workers.scene import spec
 from workers.scene.compile import compile_scene
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.image_io import srgb_to_linear
 from workers.scene.io import load_scene
 from workers.scene.meshio import load_mesh_file

@@ -47,7 +47,7 @@ from workers.runtime.contract import (
 )
 from workers.runtime.pipeline import run_method
 from workers.runtime.resources import ResourceRequest, actor_options
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.reference import SceneRef
 from workers.scene.stored import StoredScene
 

@@ -28,7 +28,7 @@ from workers.nn.encodings.hashgrid import HashGrid
 from workers.nn.encodings.one_blob import OneBlob
 from workers.nn.encodings.spherical_harmonics import MAX_DEGREE, SphericalHarmonics
 from workers.nn.mlp import ACTIVATIONS, MLP
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 Activation = Literal[tuple(ACTIVATIONS)]  # the names `workers.nn.mlp.make_activation` knows
 

@@ -1,6 +1,6 @@
 """Materials the path tracer draws as a volume over surfaces (a kind's neural shell, say) rather than as a
 BSDF: plugins registered by name, like the BSDF families (`workers.render.bsdf`), that turn the surfaces
-using a scene material of their `type` (a `workers.scene.spec.AggregateMaterial`) into the `Aggregate`
+using a scene material of their `type` (a `workers.scene.format.spec.AggregateMaterial`) into the `Aggregate`
 the integrator scatters in (`workers.render.aggregate`). The surfaces themselves keep the material's
 `base` BSDF.
 
@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workers.scene.errors import SceneError
-from workers.scene.spec import AggregateMaterial, Camera
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import AggregateMaterial, Camera
 from workers.scene.stored import artifact_folder
 
 if TYPE_CHECKING:

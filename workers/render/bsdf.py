@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from workers.render.jit import njit
-from workers.scene.spec import ColorOrTexture
+from workers.scene.format.spec import ColorOrTexture
 
 
 @dataclass
@@ -78,7 +78,7 @@ class BSDF(ABC):
 
     @abstractmethod
     def parameters(self, material: Any) -> MaterialParameters:
-        """The rows' parameters of a scene material (`workers.scene.spec`) of this family."""
+        """The rows' parameters of a scene material (`workers.scene.format.spec`) of this family."""
 
     @abstractmethod
     def eval(self, s: SurfaceBatch, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -107,8 +107,8 @@ class BSDF(ABC):
             array[slice(None) if every else rows] = result
 
     def textures(self, material: Any) -> dict[str, Any]:
-        """The material's textured parameters by slot name (`workers.scene.spec` textures); none by default.
-        The slots `normal` and `emission` are the renderer's (`workers.render.materials`)."""
+        """The material's textured parameters by slot name (`workers.scene.format.spec` textures); none by
+        default. The slots `normal` and `emission` are the renderer's (`workers.render.materials`)."""
         return {}
 
     def apply_textures(self, material: Any, s: SurfaceBatch, lookups: dict[str, np.ndarray]) -> None:  # noqa: B027

@@ -8,7 +8,7 @@ import numpy as np
 
 from workers.render.jit import njit
 from workers.render.sampling import normalize
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 
 class PinholeCamera:

@@ -25,7 +25,7 @@ import numpy as np
 
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer, SurfaceRecords
-from workers.scene import spec
+from workers.scene.format import spec
 
 # GGX alpha at or below which a conductor is followed as a mirror: its lobe is a few degrees wide, so the
 # reflection of one direction stands for the whole lobe (mirror_variable's mirror is 0.01)

@@ -25,7 +25,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.stratified import StratifiedUniforms
 from workers.scene.compile import CompiledScene
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 MAX_PATHS_PER_ITEM = 1 << 16
 AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission", "path_length")

@@ -15,7 +15,7 @@ from pydantic import BaseModel, Field, model_validator
 
 from workers.runtime.contract import merge_nested
 from workers.runtime.training import TrainConfig
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 
 class KindConfig(StrictModel):

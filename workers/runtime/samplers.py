@@ -22,7 +22,7 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 from workers.runtime.contract import InfrastructureFailure
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.runtime.sources import Batch, SourceSpec
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 
 SAMPLER_FAILURES = (RayActorError, ObjectLostError, GetTimeoutError)
 # Samplers that keep dying on one batch (killed, out of memory, a lost node) fail the job as the cluster's

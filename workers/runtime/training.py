@@ -25,7 +25,7 @@ from workers.runtime import training_state
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.samplers import BatchStream
 from workers.runtime.sources import Batch
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 LossFunction = Callable[[torch.nn.Module, Batch], torch.Tensor]
 MAIN_PHASE = "main"  # the one phase of `train`

@@ -19,8 +19,8 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.threads import torch_threads
 from workers.scene.compile import CompiledScene
+from workers.scene.format.spec import Camera, Vec3
 from workers.scene.portable import StoredScene
-from workers.scene.spec import Camera, Vec3
 
 SCENE, NEUTRAL = "scene", "neutral"
 MAX_SIZE = 4096

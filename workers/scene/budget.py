@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import os
 
-from workers.scene import spec
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 
 MAX_SCENE_TRIANGLES_ENV = "NBAKE_MAX_SCENE_TRIANGLES"
 DEFAULT_MAX_SCENE_TRIANGLES = 8_000_000

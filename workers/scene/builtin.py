@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from workers.scene.envmaps import sun_direction
-from workers.scene.spec import AlbedoVariable as _Albedo
-from workers.scene.spec import (
+from workers.scene.format.spec import AlbedoVariable as _Albedo
+from workers.scene.format.spec import (
     BoxShape,
     Camera,
     Conductor,
@@ -24,10 +24,10 @@ from workers.scene.spec import (
     SphereShape,
     Transform,
 )
-from workers.scene.spec import LightIntensityVariable as _LightIntensity
-from workers.scene.spec import LightPositionVariable as _LightPosition
-from workers.scene.spec import RoughnessVariable as _Roughness
-from workers.scene.spec import TranslateVariable as _Translate
+from workers.scene.format.spec import LightIntensityVariable as _LightIntensity
+from workers.scene.format.spec import LightPositionVariable as _LightPosition
+from workers.scene.format.spec import RoughnessVariable as _Roughness
+from workers.scene.format.spec import TranslateVariable as _Translate
 
 BUILTIN_SCENES: dict[str, Callable[[], SceneSpec]] = {}
 
@@ -38,7 +38,7 @@ def builtin(fn: Callable[[], SceneSpec]) -> Callable[[], SceneSpec]:
 
 
 def get_builtin(name: str) -> SceneSpec:
-    from workers.scene.errors import SceneError
+    from workers.scene.format.errors import SceneError
 
     if name not in BUILTIN_SCENES:
         raise SceneError(

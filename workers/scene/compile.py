@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene import spec
 from workers.scene.budget import check_triangles, max_scene_triangles, placement_field, shape_triangles
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.shapes import MeshData, shape_mesh
 
 

@@ -32,8 +32,8 @@ from urllib.parse import unquote
 import numpy as np
 import pygltflib
 
-from workers.scene import spec
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.shapes import MeshData, degenerate_triangles
 
 GLTF_SUFFIXES = (".gltf", ".glb")

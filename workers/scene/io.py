@@ -22,9 +22,9 @@ import yaml
 from pydantic import ValidationError
 
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import SceneSpec
 from workers.scene.gltf import GLTF_SUFFIXES, import_gltf
-from workers.scene.spec import SceneSpec
 from workers.scene.usd import USD_SUFFIXES, import_usd
 
 SCENE_FILE_SUFFIXES = (".yaml", ".yml", ".json")

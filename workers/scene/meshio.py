@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 from workers.scene.image_io import srgb_to_linear
 from workers.scene.shapes import MeshData
 

@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field
 
+from workers.scene.format.spec import Structure
 from workers.scene.procedural import (
     GroundPlaneParams,
     Params,
@@ -27,7 +28,6 @@ from workers.scene.procedural import (
     tubes,
 )
 from workers.scene.shapes import MeshData
-from workers.scene.spec import Structure
 
 MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]

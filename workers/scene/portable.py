@@ -30,7 +30,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from workers.scene.compile import CompiledScene, compile_scene
-from workers.scene.spec import (
+from workers.scene.format.spec import (
     AggregateMaterial,
     Camera,
     ConstantBackground,

@@ -24,9 +24,9 @@ from pydantic import (
     model_validator,
 )
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import Vec3
 from workers.scene.shapes import MeshData, box
-from workers.scene.spec import Vec3
 
 PositiveFloat = Annotated[FiniteFloat, Field(gt=0)]
 Seed = Annotated[int, Field(ge=0, lt=2**63)]

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene import spec
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 
 DEGENERATE_AREA = 1e-14  # relative to the squared bounding-box diagonal
 

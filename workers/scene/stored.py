@@ -22,7 +22,7 @@ from pathlib import Path, PurePosixPath
 import fsspec
 from pydantic import BaseModel, ConfigDict, Field
 
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 
 CACHE_ENV = "NBAKE_SCENE_CACHE"  # where a node keeps fetched scenes; default <temp dir>/nbake-scenes
 CHUNK_BYTES = 1 << 20

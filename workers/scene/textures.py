@@ -20,8 +20,8 @@ import numpy as np
 import OpenEXR
 from PIL import Image, UnidentifiedImageError
 
-from workers.scene import spec
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.gltf import embedded_image
 from workers.scene.image_io import read_exr, srgb_to_linear
 from workers.scene.usd import package_member

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene import spec
 from workers.scene.budget import MAX_SCENE_INSTANCES
-from workers.scene.errors import SceneError
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
 from workers.scene.gltf import DEFAULT_ENVIRONMENT, unique_name
 from workers.scene.shapes import MeshData, degenerate_triangles
 

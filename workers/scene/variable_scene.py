@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from workers.scene.compile import CompiledScene, _place, compile_scene
-from workers.scene.spec import SceneSpec, euler_xyz
-from workers.scene.variables import check_vector, moved_objects
+from workers.scene.format.spec import SceneSpec, euler_xyz
+from workers.scene.format.variables import check_vector, moved_objects
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,9 +15,9 @@ import torch
 
 from workers.models.explore.config import ExploreConfig
 from workers.models.explore.network import PixelGenerator
+from workers.scene.format.spec import SceneSpec
+from workers.scene.format.variables import dimension_names
 from workers.scene.portable import load_scene, portable_scene, save_scene
-from workers.scene.spec import SceneSpec
-from workers.scene.variables import dimension_names
 
 MANIFEST = "explore.json"
 WEIGHTS = "explore.safetensors"

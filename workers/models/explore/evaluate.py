@@ -29,7 +29,7 @@ from workers.render.gbuffer import primary_gbuffers
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.threads import torch_threads
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 PIXELS_PER_CHUNK = 1 << 16
 ANTIALIASING = 4  # network samples per pixel side in the measured frames

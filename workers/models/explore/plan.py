@@ -20,11 +20,11 @@ from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import RoughnessVariable, SceneSpec
+from workers.scene.format.variables import dimension_labels, variable_slices
 from workers.scene.reference import SceneRef
-from workers.scene.spec import RoughnessVariable, SceneSpec
 from workers.scene.variable_scene import CompiledVariableScene
-from workers.scene.variables import dimension_labels, variable_slices
 
 PROBE_SIZE = 16
 PROBE_SPP = 4

@@ -16,7 +16,7 @@ from workers.nn.configs import HashTableConfig, MLPConfig
 from workers.nn.encodings.grid import GridGeometry
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 
 class NetworkConfig(StrictModel):

@@ -37,6 +37,7 @@ from workers.runtime.view_render import (
     scene_bytes,
 )
 from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.format.spec import Camera, Diffuse, SceneObject
 from workers.scene.portable import (
     StoredScene,
     framing_camera,
@@ -44,7 +45,6 @@ from workers.scene.portable import (
     neutral_scene,
     standin_shape,
 )
-from workers.scene.spec import Camera, Diffuse, SceneObject
 
 STANDIN = "lod asset"
 # Working memory of a ray query: the outputs (at most 29 bytes a ray) and their encoded copy; per ray of a

@@ -18,10 +18,10 @@ from workers.models.lod.config import LodConfig, NetworkConfig
 from workers.render.voxels import padded_bounds
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import Camera, SceneSpec
 from workers.scene.reference import SceneRef
 from workers.scene.shapes import MeshData
-from workers.scene.spec import Camera, SceneSpec
 
 TRAINING_SAMPLES_PER_SECOND = 60_000.0  # voxel samples per second, one idle 2-core CPU, default sizes
 # quick menger_sponge: 24,128 occupied voxels x 64 samples took 1.3-3.0 s at loads 6-7 (0.5-1.2M a second);

@@ -25,8 +25,8 @@ from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
 from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.render.voxels import VoxelGrid
 from workers.scene.compile import CompiledScene
+from workers.scene.format.spec import Material, SceneSpec
 from workers.scene.portable import portable_scene, reads_file, save_scene, untextured
-from workers.scene.spec import Material, SceneSpec
 
 MANIFEST = "lsnif.json"
 SAFETENSORS = "application/vnd.neuralbake.safetensors"

@@ -38,8 +38,8 @@ from workers.runtime.view_render import (
     scene_bytes,
 )
 from workers.scene.compile import CompiledScene, compile_scene
+from workers.scene.format.spec import Camera, Diffuse, SceneObject, Transform
 from workers.scene.portable import StoredScene, framing_camera, load_scene, neutral_scene, standin_shape
-from workers.scene.spec import Camera, Diffuse, SceneObject, Transform
 
 TRIANGLES, LSNIF = "triangles", "lsnif"
 # Working memory of a ray query: the outputs (37 bytes a ray) and their encoded copy; and per ray of a

@@ -13,8 +13,8 @@ import torch
 
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
+from workers.scene.format.spec import SceneSpec
 from workers.scene.portable import portable_scene, save_scene
-from workers.scene.spec import SceneSpec
 
 MANIFEST = "mesogan.json"
 WEIGHTS = "mesogan.safetensors"

@@ -32,7 +32,7 @@ from workers.models.mesogan.slab import Window, draw_noise, generate_planes, ren
 from workers.models.mesogan.train import fake_views, view_structure
 from workers.models.mesogan.volume import tonemap
 from workers.render.render import RenderSettings, render
-from workers.scene.spec import Camera, Structure
+from workers.scene.format.spec import Camera, Structure
 
 HELD_OUT_SEED_OFFSET = 1 << 20  # held-out instances come from a seed no training batch uses
 PATCH = 3

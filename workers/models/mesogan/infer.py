@@ -38,9 +38,8 @@ from workers.runtime.view_render import (
 )
 from workers.scene.builtin import get_builtin
 from workers.scene.compile import CompiledScene, compile_scene
-from workers.scene.errors import SceneError
-from workers.scene.portable import framing_camera, load_scene, neutral_scene
-from workers.scene.spec import (
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import (
     Appearance,
     Camera,
     Diffuse,
@@ -50,6 +49,7 @@ from workers.scene.spec import (
     SphereShape,
     Structure,
 )
+from workers.scene.portable import framing_camera, load_scene, neutral_scene
 
 GENERATE = "generate"
 MAX_WINDOW = 2048

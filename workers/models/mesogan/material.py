@@ -1,4 +1,4 @@
-"""The mesogan material of scene files (`workers.scene.spec.MesoganMaterial`): a trained artifact's
+"""The mesogan material of scene files (`workers.scene.format.spec.MesoganMaterial`): a trained artifact's
 generated fur, grass or carpet on a shell over the surfaces that use the material, drawn by the path
 tracer as the aggregate `covering.shell_aggregate` builds, as the kind's own `:render` draws it. The kind
 registers it under its name (`KIND.materials`, `workers.render.aggregate_materials`).
@@ -6,7 +6,7 @@ registers it under its name (`KIND.materials`, `workers.render.aggregate_materia
 The artifact is the folder `path` names, relative to the scene file, or the stored `artifact` a server job
 fetched (`aggregate_materials.artifact_source`); structure, appearance and shell height left out are the
 artifact's own (what its job rendered); the shell height may be relative to the covered surfaces' size
-(`workers.scene.spec.ShellHeight`).
+(`workers.scene.format.spec.ShellHeight`).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import shell_aggregate
 from workers.render.aggregate_materials import artifact_source
 from workers.scene.compile import CompiledScene
-from workers.scene.errors import SceneError
-from workers.scene.spec import Camera, MesoganMaterial
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import Camera, MesoganMaterial
 
 
 def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Camera) -> ShellAggregate:

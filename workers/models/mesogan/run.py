@@ -28,7 +28,7 @@ from workers.runtime.pipeline import Finished, Trainable, Trained
 from workers.runtime.report import TimedImage
 from workers.runtime.sources import SourceSpec
 from workers.runtime.view import PathTracedView
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 TRIANGLE_BYTES = 3 * 3 * 4 + 3 * 3 * 4 + 3 * 2 * 4 + 64  # positions, normals, UVs and BVH share, float32
 

@@ -32,7 +32,7 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.compile import compile_scene
-from workers.scene.spec import (
+from workers.scene.format.spec import (
     Appearance,
     Camera,
     ConstantBackground,

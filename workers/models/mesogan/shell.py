@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workers.models.mesogan import prism_kernels
-from workers.scene.errors import SceneError
+from workers.scene.format.errors import SceneError
 
 EDGES = ((0, 1), (1, 2), (2, 0))
 DEGENERATE = 1e-12  # relative area below which a base triangle has no well-defined prism

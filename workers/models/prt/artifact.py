@@ -14,8 +14,8 @@ import torch
 
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.network import PrtNetwork
+from workers.scene.format.spec import SceneSpec
 from workers.scene.portable import StoredScene, load_scene, portable_scene, save_scene
-from workers.scene.spec import SceneSpec
 
 MANIFEST = "prt.json"
 WEIGHTS = "prt.safetensors"

@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 from workers.nn.configs import HashGridConfig, MLPConfig, SphericalHarmonicsConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import Schedule, TrainConfig
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 FRAME_SPP = (4, 8, 16, 32, 64)
 # A fixed price keeps the frame's choice the same on any machine and load; `python -m tests.bench

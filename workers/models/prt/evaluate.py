@@ -25,8 +25,8 @@ from workers.nn.metrics import flip, psnr, ssim
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.view import PathTracedView
+from workers.scene.format.spec import Camera
 from workers.scene.reference import SceneRef
-from workers.scene.spec import Camera
 
 TRUTH_SEED = 1000  # the direct ground truth's noise is independent of the frame's
 

@@ -23,7 +23,7 @@ from workers.models.prt.views import pixel_rays
 from workers.render.denoise import LUMINANCE, Guides, atrous
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderResult, RenderSettings, render
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 DIRECT_DEPTH = 2  # camera segment + one bounce: emitters seen, NEE and BSDF-sampled escapes at the first hit
 SECOND_HALF_SEED = 1 << 20  # seed offset of the direct light's second half (independent of the first)

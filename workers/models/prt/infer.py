@@ -42,8 +42,8 @@ from workers.runtime.view_render import (
     refuse_missing_scene,
     scene_bytes,
 )
-from workers.scene.errors import SceneError
-from workers.scene.spec import EnvironmentMap
+from workers.scene.format.errors import SceneError
+from workers.scene.format.spec import EnvironmentMap
 
 DEFAULT_LIGHTING = EnvironmentMap(builtin="courtyard")
 UPLOAD = "environment"

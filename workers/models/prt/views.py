@@ -13,7 +13,7 @@ import numpy as np
 
 from workers.models.prt.config import CamerasConfig
 from workers.render.camera import PinholeCamera
-from workers.scene.spec import Camera
+from workers.scene.format.spec import Camera
 
 TRAIN, NEAR, FAR = "train", "near", "far"
 

@@ -16,7 +16,7 @@ from workers.render.kernels import (
     visible_normal,
     visible_normal_pdf,
 )
-from workers.scene import spec
+from workers.scene.format import spec
 
 
 @register_material("dielectric")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.jit import njit
 from workers.render.kernels import INV_PI, cosine_hemisphere
-from workers.scene import spec
+from workers.scene.format import spec
 
 
 @register_material("diffuse")

@@ -64,7 +64,7 @@ from workers.render.microfacet import (
     visible_normal_pdf,
 )
 from workers.render.sampling import INV_PI, dot, normalize, safe_sqrt, square_to_cosine_hemisphere
-from workers.scene import spec
+from workers.scene.format import spec
 
 ALPHA_FLOOR = 0.001  # Mitsuba's calc_dist_params: roughness 0 is a very sharp lobe, never a delta
 METALLIC, TRANSMISSION, ROUGHNESS, DIFFUSE = 0, 1, 2, 3

@@ -31,7 +31,7 @@ from workers.render import kernels as k
 from workers.render.bsdf import CompiledBSDF, MaterialParameters, SurfaceBatch, contiguous, register_material
 from workers.render.jit import njit
 from workers.render.microfacet import fresnel_dielectric, single_scattering_albedo
-from workers.scene import spec
+from workers.scene.format import spec
 
 TABLE_COSINES = np.linspace(0.0, 1.0, 64)  # Mitsuba's MI_ROUGH_TRANSMITTANCE_RES nodes
 

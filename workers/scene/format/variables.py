@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydantic import ValidationError
 
-from workers.scene import spec as s
+from workers.scene.format import spec as s
 
 if TYPE_CHECKING:
-    from workers.scene.spec import SceneSpec, Variable
+    from workers.scene.format.spec import SceneSpec, Variable
 
 VECTOR_RANGES = {
     "translate": ("min", "max"),

@@ -24,7 +24,7 @@ from pydantic import (
     model_validator,
 )
 
-from workers.scene.strict import StrictModel
+from workers.scene.format.strict import StrictModel
 
 Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 NonNegRGB = tuple[
@@ -514,7 +514,7 @@ class Camera(Model):
 
 class _Variable(Model):
     """A named variable: one or more dimensions of the scene vector v in [0, 1]^K, each mapped linearly
-    onto its range (`workers.scene.variables` applies them)."""
+    onto its range (`workers.scene.format.variables` applies them)."""
 
     name: str = Field(min_length=1, max_length=128, pattern=r"^[A-Za-z_][\w.-]*$")
 
@@ -669,7 +669,7 @@ class SceneSpec(Model):
 
     @model_validator(mode="after")
     def _variables_valid(self):
-        from workers.scene.variables import check_variables
+        from workers.scene.format.variables import check_variables
 
         check_variables(self)
         return self
@@ -677,13 +677,13 @@ class SceneSpec(Model):
     @property
     def dimensions(self) -> int:
         """K, the length of the scene vector."""
-        from workers.scene.variables import scene_dimensions
+        from workers.scene.format.variables import scene_dimensions
 
         return scene_dimensions(self)
 
     def at(self, v) -> SceneSpec:
         """The concrete scene (no variables) at the scene vector `v` in [0, 1]^K."""
-        from workers.scene.variables import apply_variables
+        from workers.scene.format.variables import apply_variables
 
         return apply_variables(self, v)
 
