@@ -14,9 +14,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from workers.scene.compile import compile_scene
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene
 from workers.scene.textures import check_texture_size, image_textures
 

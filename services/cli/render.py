@@ -16,8 +16,8 @@ from services.cli.outputs import RenderOutputs, as_display
 from services.cli.progress import print_json, rays_per_second, render_progress
 from workers.models.registry import register_materials
 from workers.render.render import RenderResult, RenderSettings, render
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import Camera
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene
 
 DEFAULT_OUTPUT_DIR = Path("out")

@@ -25,9 +25,9 @@ from services.jobs.tables import Job, utcnow
 from services.jobs.tenants import DEFAULT_TENANT, Principal
 from workers.models.registry import UnknownKind, get_kind
 from workers.runtime.contract import Plan, PlanItem
-from workers.scene.budget import scene_triangles
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import MeshShape, SceneSpec
+from workers.scene.geometry.budget import scene_triangles
 from workers.scene.io import dotted_path
 from workers.scene.reference import SceneRef
 

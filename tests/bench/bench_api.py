@@ -31,7 +31,7 @@ from tests.integration.test_api_server import (
 from workers.models.registry import get_kind
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 SUBMISSIONS = 200
 HEADERS = {"Authorization": f"Bearer {TOKENS['admin']}"}

@@ -22,7 +22,7 @@ from tests.integration.test_inference_server import frame_ms, install_tokens, ru
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 SIZE, SPP, REPEATS = 64, 4, 3
 VIEW = {"camera": {"width": SIZE, "height": SIZE}, "spp": SPP}

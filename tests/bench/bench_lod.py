@@ -28,7 +28,6 @@ from workers.models.lod import artifact
 from workers.models.lod.evaluate import lod_tracer, timed_render
 from workers.render.render import RenderSettings
 from workers.scene.builtin import get_builtin, sun_and_sky
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import (
     Camera,
     ConstantBackground,
@@ -39,6 +38,7 @@ from workers.scene.format.spec import (
     SceneObject,
     SceneSpec,
 )
+from workers.scene.geometry.compile import compile_scene
 
 LEAK_SPP = 16
 LEAK_SIZE = 48

@@ -34,7 +34,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.runtime.view import PathTracedView
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 
 CURVE_STEPS = 300

@@ -51,7 +51,7 @@ from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train_phases
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 SIZE = 32
 SPPS = (1, 2, 4, 8, 16, 64)

@@ -93,9 +93,9 @@ def probe() -> None:
     from workers.render.integrator import PathTracer
     from workers.render.render import RenderSettings, render
     from workers.scene.builtin import get_builtin
-    from workers.scene.compile import compile_scene
     from workers.scene.format import spec
-    from workers.scene.shapes import shape_mesh
+    from workers.scene.geometry.compile import compile_scene
+    from workers.scene.geometry.shapes import shape_mesh
 
     figures = {}
     tracer = PathTracer(compile_scene(get_builtin("cornell_box")))

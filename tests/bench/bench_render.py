@@ -33,7 +33,7 @@ from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, plan_render, render, render_item
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 THREADS = 2
 SCENES = ("cornell_box", "cornell_glossy", "env_lit_objects")
@@ -137,7 +137,7 @@ FIRST_RUN = """
 import time
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 scene = compile_scene(get_builtin("{scene}"))
 times = []
 for _ in range(2):

@@ -11,8 +11,8 @@ import numpy as np
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from tests.bench.common import BenchSection, median_seconds
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family, eval_bsdf, sample_bsdf
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import dump_scene, load_scene
 
 N = 1 << 18

@@ -12,7 +12,7 @@ from tests.integration.test_api_server import QUICK_RENDER, events, submit, wait
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import read_exr
 
 SEED = 7

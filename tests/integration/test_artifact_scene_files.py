@@ -24,8 +24,8 @@ from workers.models.prt import artifact
 from workers.models.prt.infer import PrtRender
 from workers.models.prt.network import PrtNetwork
 from workers.models.registry import RENDER, get_kind
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import TranslateVariable
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.stored import CACHE_ENV
 
 

@@ -21,7 +21,7 @@ from tests.integration.test_api_server import (
 from tests.support.gltf_files import GltfBuilder, quad
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import read_exr
 from workers.scene.io import load_scene
 

@@ -14,7 +14,7 @@ from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, star
 from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import read_exr, read_exr_channels
 
 WAIT_S = 120  # generous: a deadline for a hung test, never a speed assertion

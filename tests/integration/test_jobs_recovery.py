@@ -24,7 +24,7 @@ from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.runtime.checkpoints import COMMIT_MARKER
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import read_exr
 
 database = api.database  # fixture

@@ -28,7 +28,7 @@ from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
 from workers.runtime.report import Report
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 
 SEED = 3

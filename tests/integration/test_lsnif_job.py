@@ -29,8 +29,8 @@ from workers.models.registry import get_kind
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.report import Report
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import SceneSpec, Transform
+from workers.scene.geometry.compile import compile_scene
 
 SEED = 7
 OVERRIDES = {"min_triangles": 1000}

@@ -34,10 +34,10 @@ from PIL import Image
 
 from tests.support.mitsuba_scene import render_mitsuba
 from workers.render.render import RenderSettings, render
-from workers.scene import shapes
 from workers.scene.builtin import cornell_box, cornell_glossy, ground
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry import shapes
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene
 
 mi = pytest.importorskip("mitsuba")

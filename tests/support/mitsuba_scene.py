@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from workers.scene.compile import CompiledScene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import CompiledScene
 
 
 def _rgb(value) -> dict:

@@ -25,7 +25,7 @@ from workers.models.lod.sampling import asset_tracer
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings
 from workers.runtime.report import Report
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 
 # lsnif, against "always miss" (on the instanced ball: occlusion 0.85 overall, 0.78 in voxels, no normals)
 HIT_RATE_TOLERANCE = 0.05  # |predicted - true| fraction of held-out rays that hit

@@ -12,8 +12,8 @@ from PIL import Image
 from services.artifacts.assets import AssetNotFound, load_asset, materialize, save_asset
 from services.artifacts.store import BlobCorrupted, BlobStore
 from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
-from workers.scene.compile import compile_scene
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene
 
 SCENE = """\

@@ -14,8 +14,8 @@ from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.render.integrator import PathTracer
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import Conductor, SceneSpec
+from workers.scene.geometry.compile import compile_scene
 
 SIZE = 20
 COLOUR = (0.8, 0.6, 0.4)

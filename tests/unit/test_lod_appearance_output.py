@@ -22,8 +22,8 @@ from workers.models.lod.train import RELATIVE_SCALE, lod_loss, positive_relative
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import ConstantBackground, Diffuse, ProceduralShape, SceneObject, SceneSpec
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 
 STEPS = 150

@@ -25,7 +25,6 @@ from workers.models.lod.sampling import (
     throughput_estimates,
 )
 from workers.models.lod.segments import roulette_survivors
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import (
     BoxShape,
     CheckerTexture,
@@ -36,6 +35,7 @@ from workers.scene.format.spec import (
     SceneSpec,
     Transform,
 )
+from workers.scene.geometry.compile import compile_scene
 
 ALBEDO = (0.8, 0.5, 0.2)
 CHI2_2DOF_P1E4 = 18.42  # the chi-square critical value at p = 1e-4 for 2 degrees of freedom

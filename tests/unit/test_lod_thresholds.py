@@ -17,7 +17,7 @@ from workers.models.lod.grid import LodGrid
 from workers.models.lod.sampling import asset_tracer, asset_triangles, boundary_pairs, first_asset_hits
 from workers.models.lod.thresholds import best_thresholds, f_measure, optimise_thresholds
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 
 def eq5(tp: int, fp: int, fn: int, beta: float) -> float:

@@ -27,10 +27,10 @@ from workers.render.materials import MaterialTable
 from workers.render.voxels import boundary_points
 from workers.runtime.pipeline import round_to_storage
 from workers.scene.builtin import cornell_box
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import SceneObject, SphereShape, Transform
+from workers.scene.geometry.compile import compile_scene
+from workers.scene.geometry.shapes import MeshData
 from workers.scene.reference import SceneRef
-from workers.scene.shapes import MeshData
 
 QUICK = LsnifConfig.model_validate({**PRESETS["quick"], "min_triangles": 1000})
 

@@ -31,7 +31,6 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import ground
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import (
     Appearance,
     BoxShape,
@@ -48,6 +47,7 @@ from workers.scene.format.spec import (
     Structure,
     Transform,
 )
+from workers.scene.geometry.compile import compile_scene
 
 SIGMA = 0.8  # extinction per shell height
 

@@ -18,8 +18,8 @@ from workers.models.mesogan.networks import MesoGAN
 from workers.models.registry import register_materials
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import MesoganMaterial
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import scene_from_dict
 
 RELATIVE = 0.04

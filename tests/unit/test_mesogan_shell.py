@@ -8,7 +8,7 @@ import pytest
 
 from workers.models.mesogan.shell import Shell
 from workers.scene.format.errors import SceneError
-from workers.scene.shapes import sphere
+from workers.scene.geometry.shapes import sphere
 
 
 def sphere_shell(height: float = 0.1, subdivisions: int = 2) -> Shell:

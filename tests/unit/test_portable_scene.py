@@ -15,7 +15,6 @@ from tests.unit.test_lsnif_model import instanced_scene
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.view_render import MAX_SAMPLES, CameraParams, ViewRender
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import (
     Camera,
     Diffuse,
@@ -25,6 +24,7 @@ from workers.scene.format.spec import (
     SceneObject,
     SphereShape,
 )
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import write_exr, write_png
 from workers.scene.portable import (
     NEUTRAL_RADIANCE,

@@ -394,7 +394,7 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one(monkeypatch, sam
     from workers.models.prt.views import pixel_rays
     from workers.render.denoise import interior
     from workers.scene.builtin import get_builtin
-    from workers.scene.compile import compile_scene
+    from workers.scene.geometry.compile import compile_scene
 
     monkeypatch.setattr(frame, "SAMPLER", sampler)
     spec = get_builtin("env_lit_objects")

@@ -12,8 +12,8 @@ from workers.models.prt.transport import BACKGROUND, DIRECT, INDIRECT, trace_row
 from workers.models.prt.views import pixel_rays
 from workers.render.stratified import StratifiedUniforms
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 
 SIZE = 4
 MAX_DEPTH = 6

@@ -14,8 +14,8 @@ from workers.render.aggregate import AggregateEvents
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import scene_from_dict
 
 BASE = {"type": "plastic", "diffuse": [0.2, 0.6, 0.3], "roughness": 0.3}

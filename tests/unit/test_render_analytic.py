@@ -11,8 +11,8 @@ from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
 from workers.render.render import ImageAccumulator, RenderSettings, plan_render, render, render_item
 from workers.scene.builtin import cornell_box
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 
 
 def scene_with(objects, materials, environment=None, lights=(), camera=None) -> spec.SceneSpec:

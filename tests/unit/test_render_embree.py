@@ -11,7 +11,7 @@ import numpy as np
 
 from workers.render.embree import _PACKET_WORDS, RayScene, _intersect16_through, _occluded16_through
 from workers.scene.builtin import cornell_box
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 
 def test_a_bounded_query_finds_the_hits_up_to_its_bound_and_skips_farther_ones():

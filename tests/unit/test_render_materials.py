@@ -12,8 +12,8 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.render.sampling import INV_PI, square_to_cosine_hemisphere
 from workers.scene.builtin import cornell_box
-from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import CompiledScene, compile_scene
 
 
 @dataclasses.dataclass(frozen=True)

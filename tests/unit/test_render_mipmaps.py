@@ -9,8 +9,8 @@ from PIL import Image
 
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.textures import MipChain, bilinear
 
 

@@ -9,8 +9,8 @@ from workers.render.aggregate import AggregateEvents
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.observer import PathObserver
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 
 BOX = np.array([[0.4, 0.0, -0.3], [1.0, 0.6, 0.3]])
 

@@ -295,7 +295,7 @@ def test_white_furnace_pbr_sphere_returns_the_environment(params):
     from tests.unit.test_render_analytic import ball, scene_with, sphere_pixels
     from workers.render.integrator import PathTracer
     from workers.render.render import RenderSettings, render
-    from workers.scene.compile import compile_scene
+    from workers.scene.geometry.compile import compile_scene
 
     radiance = np.array([2.0, 2.0, 2.0])
     scene = scene_with(

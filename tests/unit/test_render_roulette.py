@@ -14,8 +14,8 @@ from workers.render import wavefront
 from workers.render.bsdf import SurfaceBatch, bsdf_code, sample_bsdf
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 
 IOR = 1.5
 N = 10_000

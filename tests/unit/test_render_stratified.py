@@ -10,8 +10,8 @@ from tests.unit.test_render_analytic import floor, reflected_by_a_floor, scene_w
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.render.stratified import grid, stratified
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import compile_scene
 
 
 @pytest.mark.parametrize(("spp", "dims"), [(16, 2), (8, 2), (7, 2), (16, 1), (1, 2)])

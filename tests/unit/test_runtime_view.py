@@ -12,7 +12,7 @@ from workers.render.render import RenderSettings
 from workers.runtime import view as view_module
 from workers.runtime.view import PathTracedView
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import compile_scene
+from workers.scene.geometry.compile import compile_scene
 
 
 def test_the_curve_warms_up_once_untimed_and_keeps_its_frames_exact(monkeypatch):

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from workers.scene.builtin import BUILTIN_SCENES
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.shapes import box
+from workers.scene.geometry.compile import compile_scene
+from workers.scene.geometry.shapes import box
 
 GREY = {"grey": spec.Diffuse()}
 LIGHT = [spec.PointLight(position=(0, 5, 0), intensity=(1, 1, 1))]

@@ -13,9 +13,9 @@ import yaml
 from tests.support.gltf_files import QUAD_POSITIONS, GltfBuilder, quad
 from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.image_io import srgb_to_linear
 from workers.scene.io import load_scene
 

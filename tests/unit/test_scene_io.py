@@ -9,9 +9,9 @@ import trimesh
 from pydantic import ValidationError
 
 from workers.scene.builtin import BUILTIN_SCENES, cornell_box
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import dump_scene, load_scene
 
 YAML_SCENE = """\

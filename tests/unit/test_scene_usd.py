@@ -16,8 +16,8 @@ from pxr import Sdf, UsdGeom, UsdLux, UsdUtils, Vt
 from tests.support import usd_files as usd
 from tests.support.gltf_files import QUAD_INDICES, QUAD_NORMALS, QUAD_POSITIONS, QUAD_UVS, GltfBuilder
 from workers.render.render import RenderSettings, render
-from workers.scene.compile import compile_scene
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene
 
 FOV = 43.0

@@ -13,13 +13,13 @@ import trimesh
 from tests.support.gltf_files import QUAD_POSITIONS, GltfBuilder, quad
 from workers.render.camera import PinholeCamera
 from workers.render.render import RenderSettings, render
-from workers.scene.compile import compile_scene
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import compile_scene
+from workers.scene.geometry.shapes import MeshData, check_mesh
 from workers.scene.image_io import srgb_to_linear
 from workers.scene.io import load_scene
 from workers.scene.meshio import load_mesh_file
-from workers.scene.shapes import MeshData, check_mesh
 
 # Per quad corner: red grows along +x, green along +y, blue is constant (affine, so interpolation is exact).
 QUAD_COLORS = np.stack(

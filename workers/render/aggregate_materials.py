@@ -27,7 +27,7 @@ from workers.scene.stored import artifact_folder
 
 if TYPE_CHECKING:
     from workers.render.aggregate import Aggregate
-    from workers.scene.compile import CompiledScene
+    from workers.scene.geometry.compile import CompiledScene
 
 _families: dict[str, str] = {}
 

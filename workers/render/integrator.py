@@ -41,9 +41,9 @@ from workers.render.sampling import (
 )
 from workers.render.stratified import surface_uniforms
 from workers.render.wavefront import RAY_OFFSET
-from workers.scene.compile import CompiledScene
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Camera
+from workers.scene.geometry.compile import CompiledScene
 
 UNIFORM_SPHERE_PDF = 1.0 / (4.0 * np.pi)
 _NO_ROWS, _NO_ROWS3 = np.zeros(0), np.zeros((0, 3))  # per-row environment values the lat-long kernels skip

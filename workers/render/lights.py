@@ -19,8 +19,8 @@ from workers.render import kernels
 from workers.render.environment import NO_MAP, ConstantEnvironment, EnvironmentMapLight, sample_rows
 from workers.render.jit import njit
 from workers.render.sampling import luminance, normalize
-from workers.scene.compile import CompiledScene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import CompiledScene
 
 TRIANGLE, POINT, DIRECTIONAL, ENVIRONMENT = 0, 1, 2, 3
 

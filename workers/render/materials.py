@@ -16,8 +16,8 @@ import numpy as np
 import workers.render.bsdfs  # noqa: F401  (registers the built-in families)
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
 from workers.render.jit import njit
-from workers.scene.compile import CompiledScene
 from workers.scene.format import spec
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.textures import MipChain, evaluate_texture, load_image_texture
 
 SHADING_SLOTS = frozenset({"normal", "emission"})  # read by the renderer, not by the BSDF family

@@ -24,8 +24,8 @@ from pydantic import BaseModel, ConfigDict, Field
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.stratified import StratifiedUniforms
-from workers.scene.compile import CompiledScene
 from workers.scene.format.spec import Camera
+from workers.scene.geometry.compile import CompiledScene
 
 MAX_PATHS_PER_ITEM = 1 << 16
 AOV_NAMES = ("position", "normal", "albedo", "roughness", "depth", "emission", "path_length")

@@ -9,7 +9,7 @@ import numpy as np
 from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
-from workers.scene.variable_scene import CompiledVariableScene, SceneState
+from workers.scene.geometry.variable_scene import CompiledVariableScene, SceneState
 
 
 class LayeredIntersector:

@@ -16,7 +16,7 @@ import numpy as np
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.report import PATH_TRACING_SPP, TimedImage
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 
 REFERENCE_SEED_OFFSET = 2  # the reference's noise is independent of every frame rendered at the view's seed
 

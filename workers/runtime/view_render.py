@@ -18,8 +18,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.threads import torch_threads
-from workers.scene.compile import CompiledScene
 from workers.scene.format.spec import Camera, Vec3
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.portable import StoredScene
 
 SCENE, NEUTRAL = "scene", "neutral"

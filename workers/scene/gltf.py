@@ -34,7 +34,7 @@ import pygltflib
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.shapes import MeshData, degenerate_triangles
+from workers.scene.geometry.shapes import MeshData, degenerate_triangles
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 SUPPORTED_EXTENSIONS = frozenset(

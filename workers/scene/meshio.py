@@ -17,8 +17,8 @@ import numpy as np
 import trimesh
 
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.shapes import MeshData
 from workers.scene.image_io import srgb_to_linear
-from workers.scene.shapes import MeshData
 
 SUPPORTED_EXTENSIONS = (".obj", ".ply", ".gltf", ".glb", ".stl")
 

@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from workers.scene.format.spec import Structure
+from workers.scene.geometry.shapes import MeshData
 from workers.scene.procedural import (
     GroundPlaneParams,
     Params,
@@ -27,7 +28,6 @@ from workers.scene.procedural import (
     orthonormal_frames,
     tubes,
 )
-from workers.scene.shapes import MeshData
 
 MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]

@@ -29,7 +29,6 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.format.spec import (
     AggregateMaterial,
     Camera,
@@ -45,6 +44,7 @@ from workers.scene.format.spec import (
     SphereShape,
     UsdShape,
 )
+from workers.scene.geometry.compile import CompiledScene, compile_scene
 from workers.scene.stored import StoredFile, artifact_folder
 from workers.scene.stored import StoredScene as StoredFiles
 

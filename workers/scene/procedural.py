@@ -26,7 +26,7 @@ from pydantic import (
 
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Vec3
-from workers.scene.shapes import MeshData, box
+from workers.scene.geometry.shapes import MeshData, box
 
 PositiveFloat = Annotated[FiniteFloat, Field(gt=0)]
 Seed = Annotated[int, Field(ge=0, lt=2**63)]

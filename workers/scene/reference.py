@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from workers.scene.budget import shape_triangles
-from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.format.spec import SceneSpec
+from workers.scene.geometry.budget import shape_triangles
+from workers.scene.geometry.compile import CompiledScene, compile_scene
+from workers.scene.geometry.shapes import shape_mesh
 from workers.scene.io import scene_from_dict
-from workers.scene.shapes import shape_mesh
 from workers.scene.stored import StoredScene
 
 COMPILED_CACHE_SIZE = 4  # scenes kept compiled per process; a driver needs one, a test process a few

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene.budget import MAX_SCENE_INSTANCES
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
+from workers.scene.geometry.shapes import MeshData, degenerate_triangles
 from workers.scene.gltf import DEFAULT_ENVIRONMENT, unique_name
-from workers.scene.shapes import MeshData, degenerate_triangles
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 Z_UP_TO_Y_UP = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)

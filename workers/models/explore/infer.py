@@ -33,7 +33,7 @@ from workers.render.gbuffer import GBuffers
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.view_render import MAX_SAMPLES, RENDER_WORKING_BYTES, CameraParams, scene_bytes
 from workers.scene.format.variables import vector_from_values
-from workers.scene.variable_scene import CompiledVariableScene
+from workers.scene.geometry.variable_scene import CompiledVariableScene
 
 # Working memory, estimated from the network's shapes (not measured): a query's output (12 bytes a pixel)
 # and its encoded copy; per pixel, its features and the network's hidden layers.

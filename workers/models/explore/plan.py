@@ -23,8 +23,8 @@ from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import RoughnessVariable, SceneSpec
 from workers.scene.format.variables import dimension_labels, variable_slices
+from workers.scene.geometry.variable_scene import CompiledVariableScene
 from workers.scene.reference import SceneRef
-from workers.scene.variable_scene import CompiledVariableScene
 
 PROBE_SIZE = 16
 PROBE_SPP = 4

@@ -22,8 +22,8 @@ from workers.render.gbuffer import primary_gbuffers
 from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.sources import Batch, batch_rng
+from workers.scene.geometry.variable_scene import CompiledVariableScene
 from workers.scene.reference import SceneRef
-from workers.scene.variable_scene import CompiledVariableScene
 
 
 @dataclass(frozen=True)

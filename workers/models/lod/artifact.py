@@ -20,7 +20,7 @@ from workers.models.lod.grid import LodGrid
 from workers.models.lod.networks import LodNetworks
 from workers.models.lod.plan import octaves
 from workers.models.lod.traversal import LodAggregate
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.portable import portable_scene, save_scene
 
 MANIFEST = "lod.json"

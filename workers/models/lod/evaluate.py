@@ -29,7 +29,7 @@ from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.report import TimedImage
 from workers.runtime.threads import torch_threads
 from workers.runtime.view import PathTracedView
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 
 MIN_HEIGHT = 16
 MAX_DEPTH = 64  # the paper compares at unlimited depth; paths end by Russian roulette long before this

@@ -41,7 +41,7 @@ from workers.render.embree import SubsetRayScene
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
 from workers.runtime.sources import Batch, batch_rng
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.reference import SceneRef
 
 RR_MAX_SURVIVAL = 0.95

@@ -24,8 +24,8 @@ from workers.models.lsnif.config import LsnifConfig
 from workers.models.lsnif.intersector import NeuralInstance, NeuralIntersector
 from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.render.voxels import VoxelGrid
-from workers.scene.compile import CompiledScene
 from workers.scene.format.spec import Material, SceneSpec
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.portable import portable_scene, reads_file, save_scene, untextured
 
 MANIFEST = "lsnif.json"

@@ -37,8 +37,8 @@ from workers.runtime.view_render import (
     render_view,
     scene_bytes,
 )
-from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.format.spec import Camera, Diffuse, SceneObject, Transform
+from workers.scene.geometry.compile import CompiledScene, compile_scene
 from workers.scene.portable import StoredScene, framing_camera, load_scene, neutral_scene, standin_shape
 
 TRIANGLES, LSNIF = "triangles", "lsnif"

@@ -18,7 +18,7 @@ import numpy as np
 
 from workers.render.embree import RayScene
 from workers.render.intersector import Hits, SurfaceOverride
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
 
 
 class NeuralAnswer(Protocol):

@@ -25,9 +25,9 @@ from workers.render.region_rays import rays_from_bounding_sphere
 from workers.render.sampling import coordinate_frame, square_to_cosine_hemisphere, to_world
 from workers.render.voxels import VoxelGrid, voxelize
 from workers.runtime.sources import Batch, batch_rng
-from workers.scene.compile import CompiledScene
+from workers.scene.geometry.compile import CompiledScene
+from workers.scene.geometry.shapes import MeshData
 from workers.scene.reference import SceneRef
-from workers.scene.shapes import MeshData
 
 SURFACE_SEARCH_ROUNDS = 8
 

@@ -23,11 +23,11 @@ from workers.models.mesogan.sampling import SKIN, cone_radius, normalized_struct
 from workers.models.mesogan.shell import Shell
 from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import mip_stack
-from workers.scene.compile import CompiledScene, ObjectGeometry
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Appearance, Camera, Diffuse, ShellHeight, Structure
+from workers.scene.geometry.compile import CompiledScene, ObjectGeometry
+from workers.scene.geometry.shapes import MeshData
 from workers.scene.mesoscale import grow_on_triangles
-from workers.scene.shapes import MeshData
 
 MAX_PLANE = 4096  # texels per side of a generated plane
 

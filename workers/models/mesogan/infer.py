@@ -37,7 +37,6 @@ from workers.runtime.view_render import (
     render_view,
 )
 from workers.scene.builtin import get_builtin
-from workers.scene.compile import CompiledScene, compile_scene
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import (
     Appearance,
@@ -49,6 +48,7 @@ from workers.scene.format.spec import (
     SphereShape,
     Structure,
 )
+from workers.scene.geometry.compile import CompiledScene, compile_scene
 from workers.scene.portable import framing_camera, load_scene, neutral_scene
 
 GENERATE = "generate"

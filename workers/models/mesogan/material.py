@@ -18,9 +18,9 @@ from workers.models.mesogan import artifact
 from workers.models.mesogan.aggregate import ShellAggregate
 from workers.models.mesogan.covering import shell_aggregate
 from workers.render.aggregate_materials import artifact_source
-from workers.scene.compile import CompiledScene
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Camera, MesoganMaterial
+from workers.scene.geometry.compile import CompiledScene
 
 
 def draw(scene: CompiledScene, materials: dict[str, MesoganMaterial], view: Camera) -> ShellAggregate:

@@ -31,7 +31,6 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.sources import Batch, batch_rng
-from workers.scene.compile import compile_scene
 from workers.scene.format.spec import (
     Appearance,
     Camera,
@@ -43,6 +42,7 @@ from workers.scene.format.spec import (
     SceneSpec,
     Structure,
 )
+from workers.scene.geometry.compile import compile_scene
 
 SKIN = (0.08, 0.07, 0.06)  # the base under the strands
 # A first hit this high above the base is a strand: the skin is at 0 and Embree's float32 hits land

@@ -21,7 +21,6 @@ from workers.nn.cubemap import FACE_FRAMES, cubemap_directions, latlong_to_cubem
 from workers.render.integrator import PathTracer
 from workers.render.jit import njit
 from workers.render.sampling import luminance
-from workers.scene.compile import CompiledScene
 from workers.scene.envmaps import (
     HDRI_DIR,
     PROCEDURAL_MAPS,
@@ -31,6 +30,7 @@ from workers.scene.envmaps import (
 )
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.compile import CompiledScene
 from workers.scene.image_io import read_exr
 
 PROCEDURAL = tuple(PROCEDURAL_MAPS)  # sky, studio

@@ -9,7 +9,7 @@ between n objects takes the k-th for v in [k/n, (k+1)/n) and the last at v = 1.
 
 Geometry changes only by placement: a moved object keeps its mesh and gets a new transform (rotations about
 the pivot first, then offsets), so a compiled variable scene re-places its triangles without reloading
-them (`workers.scene.variable_scene`).
+them (`workers.scene.geometry.variable_scene`).
 """
 
 from __future__ import annotations

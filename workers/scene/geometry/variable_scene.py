@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene.compile import CompiledScene, _place, compile_scene
 from workers.scene.format.spec import SceneSpec, euler_xyz
 from workers.scene.format.variables import check_vector, moved_objects
+from workers.scene.geometry.compile import CompiledScene, _place, compile_scene
 
 
 @dataclasses.dataclass(frozen=True)

@@ -7,10 +7,15 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene.budget import check_triangles, max_scene_triangles, placement_field, shape_triangles
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.shapes import MeshData, shape_mesh
+from workers.scene.geometry.budget import (
+    check_triangles,
+    max_scene_triangles,
+    placement_field,
+    shape_triangles,
+)
+from workers.scene.geometry.shapes import MeshData, shape_mesh
 
 
 @dataclass(frozen=True)
