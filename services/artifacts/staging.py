@@ -12,7 +12,7 @@ from pathlib import Path, PurePosixPath
 from pydantic import BaseModel, ConfigDict, Field
 
 from services.artifacts.paths import UnsafePath, printable, safe_relative_path
-from workers.scene.meshio import SUPPORTED_EXTENSIONS as MESH_SUFFIXES
+from workers.scene.importers.meshio import SUPPORTED_EXTENSIONS as MESH_SUFFIXES
 
 PAYLOAD_TOO_LARGE = 413
 BAD_REQUEST = 400

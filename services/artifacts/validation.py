@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
 from workers.scene.geometry.compile import compile_scene
+from workers.scene.importers.textures import check_texture_size, image_textures
 from workers.scene.io import load_scene
-from workers.scene.textures import check_texture_size, image_textures
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses

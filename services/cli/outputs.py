@@ -14,7 +14,7 @@ from pathlib import Path
 
 from services.cli.errors import fail
 from workers.render.render import AOV_NAMES, RenderResult
-from workers.scene.image_io import write_exr, write_png
+from workers.scene.importers.image_io import write_exr, write_png
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workers.scene.image_io import write_exr, write_png
+from workers.scene.importers.image_io import write_exr, write_png
 
 EXR, PNG = "image/x-exr", "image/png"
 WRITERS = {EXR: (".exr", write_exr), PNG: (".png", write_png)}

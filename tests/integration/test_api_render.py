@@ -13,7 +13,7 @@ from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.scene.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 SEED = 7
 database, server, client = api.incidental_database, api.server, api.client  # fixtures

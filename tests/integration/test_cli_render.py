@@ -14,7 +14,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from workers.render.render import AOV_NAMES, SCALAR_AOVS
-from workers.scene.image_io import read_exr, read_exr_channels
+from workers.scene.importers.image_io import read_exr, read_exr_channels
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE_SCENE = REPO / "assets" / "scenes" / "example.yaml"

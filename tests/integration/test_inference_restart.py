@@ -22,7 +22,7 @@ from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_inference_server import install_tokens, run_and_publish
 from tests.support.ports import free_port
 from workers.scene.builtin import BUILTIN_SCENES
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 CLIENTS = 4
 RETRY = Retry(attempts=60, backoff_s=0.25, max_backoff_s=1.0)  # rides out a restart of some seconds

@@ -22,8 +22,8 @@ import httpx
 import numpy as np
 import pytest
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
-
 from services.api.auth import store_tokens
+
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
@@ -35,7 +35,7 @@ from tests.support.ports import free_port
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.models.registry import get_inference
 from workers.scene.builtin import BUILTIN_SCENES
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 START_TIMEOUT_S = 60
 RAY_OUTPUTS = ("hit", "distance", "normal", "albedo", "material", "object")

@@ -15,7 +15,7 @@ from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import read_exr, read_exr_channels
+from workers.scene.importers.image_io import read_exr, read_exr_channels
 
 WAIT_S = 120  # generous: a deadline for a hung test, never a speed assertion
 

@@ -25,7 +25,7 @@ from workers.render.render import render
 from workers.runtime.checkpoints import COMMIT_MARKER
 from workers.scene.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 database = api.database  # fixture
 SEED = 3

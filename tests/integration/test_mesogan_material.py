@@ -40,7 +40,7 @@ from workers.render.render import RenderSettings, render
 from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import read_exr_channels
+from workers.scene.importers.image_io import read_exr_channels
 from workers.scene.io import load_scene, scene_from_dict
 from workers.scene.reference import SceneRef
 

@@ -24,7 +24,7 @@ from PIL import Image
 from tests.integration.test_api_server import NBAKE, TOKENS, TOKENS_ENV
 from tests.integration.test_grpc_server import TINY, Served
 from tests.support.ports import free_port
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 START_TIMEOUT_S = 180
 

@@ -26,7 +26,7 @@ from tests.support.s3 import S3Server, moto_s3
 from workers.driver.jobs import JobEvent, JobSpec, run_job
 from workers.models.registry import get_kind
 from workers.runtime.checkpoints import COMMIT_MARKER, CheckpointStore
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 from workers.scene.io import load_scene
 from workers.scene.stored import StoredScene
 

@@ -23,7 +23,7 @@ def _rgb(value) -> dict:
 
 
 def _reflectance(value: spec.ColorOrTexture, base_dir: Path | None = None) -> dict:
-    """A colour, or a texture looked up with the same UV convention (workers/scene/textures.py)."""
+    """A colour, or a texture looked up with the same UV convention (workers/scene/importers/textures.py)."""
     match value:
         case spec.CheckerTexture():
             # Mitsuba's checkerboard has 2 x 2 cells per unit of UV, ours `scale` x `scale`.

@@ -25,7 +25,7 @@ from workers.scene.format.spec import (
     SphereShape,
 )
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import write_exr, write_png
+from workers.scene.importers.image_io import write_exr, write_png
 from workers.scene.portable import (
     NEUTRAL_RADIANCE,
     StoredScene,

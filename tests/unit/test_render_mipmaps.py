@@ -11,7 +11,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.scene.format import spec
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.textures import MipChain, bilinear
+from workers.scene.importers.textures import MipChain, bilinear
 
 
 def test_levels_halve_down_to_one_texel_and_keep_the_mean():

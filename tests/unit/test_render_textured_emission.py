@@ -10,7 +10,7 @@ from workers.render.integrator import PathTracer
 from workers.render.lights import spot_falloff
 from workers.scene.format import spec
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.textures import evaluate_texture, load_image_texture
+from workers.scene.importers.textures import evaluate_texture, load_image_texture
 
 FLOOR_ALBEDO = 0.5
 

@@ -15,7 +15,7 @@ from workers.scene.envmaps import (
 )
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.image_io import write_exr
+from workers.scene.importers.image_io import write_exr
 
 BUILTIN_HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
 

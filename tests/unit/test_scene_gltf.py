@@ -16,7 +16,7 @@ from workers.render.materials import MaterialTable
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.image_io import srgb_to_linear
+from workers.scene.importers.image_io import srgb_to_linear
 from workers.scene.io import load_scene
 
 S = math.sqrt(0.5)

@@ -5,7 +5,7 @@ import OpenEXR
 import pytest
 from PIL import Image
 
-from workers.scene.image_io import (
+from workers.scene.importers.image_io import (
     linear_to_srgb,
     read_exr,
     read_exr_channels,

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from workers.scene.format.errors import SceneError
-from workers.scene.meshio import load_mesh_file
+from workers.scene.importers.meshio import load_mesh_file
 
 
 @pytest.mark.parametrize("reference", ["../outside.bin", "ABSOLUTE"])

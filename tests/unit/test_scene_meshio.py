@@ -7,7 +7,7 @@ import trimesh
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.shapes import shape_mesh
-from workers.scene.meshio import load_mesh_file
+from workers.scene.importers.meshio import load_mesh_file
 
 TWO_GROUP_OBJ = """\
 v 0 0 0

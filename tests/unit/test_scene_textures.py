@@ -5,11 +5,11 @@ import pytest
 from PIL import Image
 
 from tests.support.hostile_inputs import png_header
-from workers.scene import textures
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.image_io import srgb_to_linear, write_exr
-from workers.scene.textures import (
+from workers.scene.importers import textures
+from workers.scene.importers.image_io import srgb_to_linear, write_exr
+from workers.scene.importers.textures import (
     MAX_TEXTURE_PIXELS,
     check_texture_size,
     evaluate_texture,

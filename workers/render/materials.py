@@ -18,7 +18,7 @@ from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family
 from workers.render.jit import njit
 from workers.scene.format import spec
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.textures import MipChain, evaluate_texture, load_image_texture
+from workers.scene.importers.textures import MipChain, evaluate_texture, load_image_texture
 
 SHADING_SLOTS = frozenset({"normal", "emission"})  # read by the renderer, not by the BSDF family
 

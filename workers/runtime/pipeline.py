@@ -29,7 +29,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.threads import torch_threads
 from workers.runtime.training import Phase, Progress, TrainConfig, TrainResult, train_phases
 from workers.runtime.view import PathTracedView
-from workers.scene.image_io import write_png
+from workers.scene.importers.image_io import write_png
 
 PREVIEW = "preview.png"  # the reference, any images the kind adds, and the model's frame, side by side
 REFERENCE_PNG, FRAME_PNG = "reference.png", "frame.png"  # the two alone, for a comparison slider

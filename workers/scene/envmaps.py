@@ -16,9 +16,9 @@ from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
+from workers.scene.importers.textures import check_exr_size
 from workers.scene.procedural import parse_params
-from workers.scene.textures import check_exr_size
 
 HDRI_DIR = Path(__file__).resolve().parents[2] / "assets" / "hdri"
 NEGATIVE_RINGING = 0.05  # negatives within 5% of the mean are lossy-compression ringing, clamped to 0

@@ -1,7 +1,7 @@
 """Load a SceneSpec from a built-in name, a YAML/JSON file, a glTF file or a dict; write one back.
 
 A glTF (`.gltf`, `.glb`) or USD (`.usda`, `.usdc`, `.usd`, `.usdz`) file is a scene by itself
-(`workers.scene.gltf`, `workers.scene.usd`). A YAML/JSON scene
+(`workers.scene.importers.gltf`, `workers.scene.importers.usd`). A YAML/JSON scene
 may `import:` one (a path relative to the scene file) and override parts of it: its `camera`,
 `environment` and `name` replace the file's, its `materials` replace the file's of the same name (or add
 new ones), its `lights` replace the file's, and its `objects` are added to the file's.
@@ -24,8 +24,8 @@ from pydantic import ValidationError
 from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
-from workers.scene.gltf import GLTF_SUFFIXES, import_gltf
-from workers.scene.usd import USD_SUFFIXES, import_usd
+from workers.scene.importers.gltf import GLTF_SUFFIXES, import_gltf
+from workers.scene.importers.usd import USD_SUFFIXES, import_usd
 
 SCENE_FILE_SUFFIXES = (".yaml", ".yml", ".json")
 IMPORTED_SCENE_SUFFIXES = GLTF_SUFFIXES + USD_SUFFIXES
@@ -63,8 +63,9 @@ def load_scene(source: str | Path | dict | SceneSpec) -> tuple[SceneSpec, Path |
 
 
 def import_scene_file(path: Path, prefix: str = "") -> SceneSpec:
-    """A glTF or USD file's scene (`workers.scene.gltf`, `workers.scene.usd`); values our scene format
-    cannot hold (a base colour above 1, say) are a SceneError naming the file and the field."""
+    """A glTF or USD file's scene (`workers.scene.importers.gltf`, `workers.scene.importers.usd`); values
+    our scene format cannot hold (a base colour above 1, say) are a SceneError naming the file and the
+    field."""
     try:
         if path.suffix.lower() in GLTF_SUFFIXES:
             return import_gltf(path, prefix)

@@ -146,7 +146,7 @@ def dependencies(path: Path) -> list[Path]:
         uris = [item.get("uri") for key in ("buffers", "images") for item in document.get(key, [])]
         return [path.parent / unquote(uri) for uri in uris if uri and not uri.startswith("data:")]
     if suffix in (".usd", ".usda", ".usdc"):
-        from workers.scene.usd import read_stage
+        from workers.scene.importers.usd import read_stage
 
         layers = {Path(layer.realPath) for layer in read_stage(path).GetUsedLayers() if layer.realPath}
         return sorted(layers - {path.resolve()})

@@ -31,7 +31,7 @@ from workers.scene.envmaps import (
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.image_io import read_exr
+from workers.scene.importers.image_io import read_exr
 
 PROCEDURAL = tuple(PROCEDURAL_MAPS)  # sky, studio
 SAMPLING_FLOOR = 1e-3  # share of the mean radiance every texel keeps for importance sampling (no zero pdf)

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from workers.models.registry import QUERY, RENDER, Answer, ArraySpec, Operation
 from workers.runtime.view_render import CameraParams
-from workers.scene.image_io import read_exr_channels
+from workers.scene.importers.image_io import read_exr_channels
 
 MAIN_LAYER = "image"
 # Working memory: a pixel's values in every layer (up to 16 float32 channels) and their encoded copy; the

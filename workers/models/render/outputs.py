@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from workers.render.render import RenderResult
-from workers.scene.image_io import write_exr, write_png
+from workers.scene.importers.image_io import write_exr, write_png
 
 EXR = "image/x-exr"
 PNG = "image/png"

@@ -118,8 +118,9 @@ Wrap = Literal["repeat", "clamp", "mirror"]
 
 
 class ImageTexture(Model):
-    """An image addressed by UV (`workers.scene.textures`): by default 8-bit images are sRGB-decoded and
-    EXR is linear; `color_space` says otherwise (data such as roughness or normals is linear)."""
+    """An image addressed by UV (`workers.scene.importers.textures`): by default 8-bit images are
+    sRGB-decoded and EXR is linear; `color_space` says otherwise (data such as roughness or normals is
+    linear)."""
 
     type: Literal["image"] = "image"
     path: str
@@ -361,7 +362,8 @@ class ProceduralShape(Model):
 
 class GltfShape(Model):
     """One primitive of a mesh in a glTF 2.0 file (`.gltf` or `.glb`), in the mesh's own space: what
-    `workers.scene.gltf` imports each (mesh, primitive) as, placed once per node that uses the mesh."""
+    `workers.scene.importers.gltf` imports each (mesh, primitive) as, placed once per node that uses the
+    mesh."""
 
     type: Literal["gltf"] = "gltf"
     path: str
@@ -372,7 +374,7 @@ class GltfShape(Model):
 
 class UsdShape(Model):
     """A UsdGeom.Mesh prim of a USD file (`.usda`, `.usdc`, `.usd`, `.usdz`), triangulated, in its own space:
-    what `workers.scene.usd` imports each mesh as, placed once per instance of it."""
+    what `workers.scene.importers.usd` imports each mesh as, placed once per instance of it."""
 
     type: Literal["usd"] = "usd"
     path: str

@@ -83,7 +83,7 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
         case spec.SphereShape():
             mesh = sphere(shape.center, shape.radius, shape.subdivisions)
         case spec.MeshShape():
-            from workers.scene.meshio import load_mesh_file
+            from workers.scene.importers.meshio import load_mesh_file
 
             path = Path(shape.path)
             if not path.is_absolute() and base_dir is not None:
@@ -94,14 +94,14 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
 
             mesh = generate(shape.generator, shape.params, field)
         case spec.GltfShape():
-            from workers.scene.gltf import primitive_mesh
+            from workers.scene.importers.gltf import primitive_mesh
 
             path = Path(shape.path)
             if not path.is_absolute() and base_dir is not None:
                 path = base_dir / path
             mesh = primitive_mesh(path, shape.mesh, shape.primitive, field)
         case spec.UsdShape():
-            from workers.scene.usd import prim_mesh
+            from workers.scene.importers.usd import prim_mesh
 
             path = Path(shape.path)
             if not path.is_absolute() and base_dir is not None:

@@ -22,9 +22,9 @@ from PIL import Image, UnidentifiedImageError
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.gltf import embedded_image
-from workers.scene.image_io import read_exr, srgb_to_linear
-from workers.scene.usd import package_member
+from workers.scene.importers.gltf import embedded_image
+from workers.scene.importers.image_io import read_exr, srgb_to_linear
+from workers.scene.importers.usd import package_member
 
 # An image's pixels (a texture, an environment map): 8192 x 8192 decodes to 1.6 GB of float64 texels, the
 # most a sampler actor affords; a larger one is refused from its header, at upload and again before decoding.

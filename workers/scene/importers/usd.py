@@ -10,9 +10,9 @@ asks), and metallic/roughness read from the B/G channels of one texture (glTF's 
 lights map onto ours: distant -> directional, sphere -> point (radius 0 or treatAsPoint) or an emitting
 sphere, rect -> an emitting rectangle, dome -> environment (its latlong texture, or its colour).
 Intensities are colour x intensity x 2^exposure, read as our units. The first camera in traversal order
-is the view. Defaults (camera, environment) and ignored features
-are listed in `SceneSpec.notes`, as for glTF (`workers.scene.gltf`). A layer, reference or texture outside
-the root file's folder is a SceneError naming it.
+is the view. Defaults (camera, environment) and ignored features are listed in `SceneSpec.notes`, as for
+glTF (`workers.scene.importers.gltf`). A layer, reference or texture outside the root file's folder is a
+SceneError naming it.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
 from workers.scene.geometry.shapes import MeshData, degenerate_triangles
-from workers.scene.gltf import DEFAULT_ENVIRONMENT, unique_name
+from workers.scene.importers.gltf import DEFAULT_ENVIRONMENT, unique_name
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 Z_UP_TO_Y_UP = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)

@@ -18,7 +18,7 @@ import trimesh
 
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.shapes import MeshData
-from workers.scene.image_io import srgb_to_linear
+from workers.scene.importers.image_io import srgb_to_linear
 
 SUPPORTED_EXTENSIONS = (".obj", ".ply", ".gltf", ".glb", ".stl")
 
