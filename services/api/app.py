@@ -9,13 +9,14 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from services.api import headers, problems
-from services.api.limits import MULTIPART_OVERHEAD, BodyLimit
 from services.api.routes import artifacts, assets, catalog, health, jobs, tokens
 from services.api.services import Services
 from services.api.settings import ServiceSettings
 from services.dashboard import mount_dashboard
+from services.jobs.problems import JOB_PROBLEMS
 from services.jobs.ray_connection import RayConnection
+from services.platform import headers, problems
+from services.platform.limits import MULTIPART_OVERHEAD, BodyLimit
 
 
 def create_app(settings: ServiceSettings, ray_connection: RayConnection | None = None) -> FastAPI:
@@ -43,8 +44,8 @@ def create_app(settings: ServiceSettings, ray_connection: RayConnection | None =
         "download its artifact. Errors are `application/problem+json`. The web dashboard is at `/ui`.",
         lifespan=lifespan,
     )
-    app.state.services = services
-    problems.install(app)
+    app.state.services, app.state.tokens = services, services.tokens
+    problems.install(app, JOB_PROBLEMS)
     app.add_middleware(
         BodyLimit,
         json_bytes=settings.max_json_bytes,

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import ray
 
-from services.api.auth import configured_tokens, generated_admin_token, store_tokens
 from services.api.settings import ServiceSettings
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.assets import asset_ids
@@ -21,7 +20,9 @@ from services.jobs.scenes import SceneResolver
 from services.jobs.scheduler import Scheduler, SchedulerSettings
 from services.jobs.submission import JobRequest, Submitter
 from services.jobs.tables import Job
-from services.jobs.tenants import Principal, Tenancy
+from services.jobs.tenants import Tenancy
+from services.jobs.tokens import DatabaseTokens
+from services.platform.auth import Principal, configured_tokens, generated_admin_token
 
 
 @dataclass
@@ -37,6 +38,7 @@ class Services:
     scheduler: Scheduler
     geometry: GeometryProcesses
     tenancy: Tenancy
+    tokens: DatabaseTokens
     ray_connection: RayConnection | None = None  # None: the one `ray.init` made, joined again as it was
     admin_token_file: Path | None = None
 
@@ -72,6 +74,7 @@ class Services:
             scheduler,
             geometry,
             tenancy,
+            DatabaseTokens(db),
             ray_connection,
         )
 
@@ -85,7 +88,7 @@ class Services:
         if not tokens:
             token, self.admin_token_file = generated_admin_token(self.settings.data_dir)
             tokens = {token: "admin"}
-        store_tokens(self.db, tokens)
+        self.tokens.store_configured(tokens)
         self.tenancy.adopt_unowned_assets(asset_ids(self.settings.store))
         if self.settings.scheduling:
             self.scheduler.start(self.ray_connection or RayConnection.current())

@@ -11,11 +11,22 @@ import logging
 import os
 import signal
 import sys
+from typing import Annotated
+
+import typer
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 PARENT_DIED = signal.SIGUSR2  # the kernel's notice; handled here, so a plain SIGTERM stays distinguishable
 
 logger = logging.getLogger("uvicorn.error")  # where the server's own start and stop lines go
+
+OutliveParent = Annotated[
+    bool,
+    typer.Option(
+        "--outlive-parent/--die-with-parent",
+        help="Keep running when the program that started this one exits (by default the server stops).",
+    ),
+]
 
 
 def die_with_parent(sig: signal.Signals = signal.SIGTERM) -> bool:

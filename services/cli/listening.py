@@ -1,6 +1,6 @@
-"""The sockets a server command listens on, taken before anything else starts (`services.api.ports`): bound
-by the command itself, or handed down by the parent that bound them (`nbake serve --inference-port` binds
-the inference service's ports before its Ray cluster starts and passes them to the child process)."""
+"""The sockets a server command listens on, taken before anything else starts (`services.platform.ports`):
+bound by the command itself, or handed down by the parent that bound them (`nbake serve --inference-port`
+binds the inference service's ports before its Ray cluster starts and passes them to the child process)."""
 
 from __future__ import annotations
 

@@ -5,7 +5,6 @@ a SQLite job database and a local artifact directory), or parts of a scale-out v
 
 from __future__ import annotations
 
-import contextlib
 import ipaddress
 import os
 import shutil
@@ -19,18 +18,17 @@ from typing import Annotated
 import ray
 import ray._private.ray_constants as ray_constants
 import typer
-import uvicorn
-from uvicorn.config import STARTUP_FAILURE
 
 from services.api.app import create_app
-from services.api.auth import configured_tokens, generated_admin_token
 from services.api.grpc.server import with_grpc
-from services.api.ports import http_socket, reserved_port
 from services.api.settings import ServiceSettings
 from services.cli.errors import fail
-from services.cli.lifetime import die_with_parent
+from services.cli.lifetime import OutliveParent, die_with_parent
 from services.cli.listening import taken
 from services.jobs.ray_connection import RayConnection
+from services.platform.auth import configured_tokens, generated_admin_token
+from services.platform.ports import http_socket, reserved_port
+from services.platform.serving import serve_app
 
 RAY_TEMP_DIR_MAX = 40  # Ray's socket paths below its temp dir must stay under the 107-byte AF_UNIX limit
 
@@ -64,13 +62,7 @@ def serve_command(
     inference_grpc_port: Annotated[
         int, typer.Option(min=0, max=65535, help="gRPC port of that inference process.")
     ] = 50052,
-    outlive_parent: Annotated[
-        bool,
-        typer.Option(
-            "--outlive-parent/--die-with-parent",
-            help="Keep running when the program that started this one exits (by default the server stops).",
-        ),
-    ] = False,
+    outlive_parent: OutliveParent = False,
 ) -> None:
     """Serve the REST API (OpenAPI at /docs) and run submitted jobs on Ray.
 
@@ -107,12 +99,7 @@ def serve_command(
         inference = start_inference(inference_sockets, host, data_dir, log_level)
     try:
         app = with_grpc(create_app(settings, ray_connection), host, grpc_port, grpc_reservation)
-        config = uvicorn.Config(app, host=host, port=port, log_level=log_level, timeout_graceful_shutdown=5)
-        server = uvicorn.Server(config)
-        with contextlib.suppress(KeyboardInterrupt):  # uvicorn has shut down gracefully by then
-            server.run(sockets=[http])
-        if not server.started:
-            sys.exit(STARTUP_FAILURE)
+        serve_app(app, http, log_level)
     finally:
         if inference is not None:
             inference.terminate()

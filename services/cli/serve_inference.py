@@ -3,20 +3,18 @@ store and token database as `nbake serve` (same data dir or the same `NBAKE_*` s
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
-import uvicorn
-from uvicorn.config import STARTUP_FAILURE
 
-from services.api.ports import http_socket, reserved_port
 from services.cli.errors import fail
-from services.cli.lifetime import die_with_parent
+from services.cli.lifetime import OutliveParent, die_with_parent
 from services.cli.listening import inherited, taken
 from services.inference.app import create_inference_app
 from services.inference.settings import InferenceSettings
+from services.platform.ports import http_socket, reserved_port
+from services.platform.serving import serve_app
 
 
 def serve_inference_command(
@@ -69,13 +67,7 @@ def serve_inference_command(
     grpc_fd: Annotated[
         int | None, typer.Option(hidden=True, help="A reserved gRPC port handed down by `nbake serve`.")
     ] = None,
-    outlive_parent: Annotated[
-        bool,
-        typer.Option(
-            "--outlive-parent/--die-with-parent",
-            help="Keep running when the program that started this one exits (by default the server stops).",
-        ),
-    ] = False,
+    outlive_parent: OutliveParent = False,
 ) -> None:
     """Serve trained artifacts for queries and renders, over REST and gRPC.
 
@@ -99,7 +91,7 @@ def serve_inference_command(
     except ValueError as error:
         fail("settings", str(error))
     # Both ports are taken before the app loads models or opens the database, so a port in use is an error
-    # at once, and neither can be lost to another process while it starts (`services.api.ports`).
+    # at once, and neither can be lost to another process while it starts (`services.platform.ports`).
     if http_fd is not None:
         http = inherited("--http-fd", http_fd)
     else:
@@ -109,7 +101,4 @@ def serve_inference_command(
     else:
         reservation = taken("--grpc-port", reserved_port, host, grpc_port)
     app = create_inference_app(settings, host, reservation.getsockname()[1], reservation)
-    server = uvicorn.Server(uvicorn.Config(app, log_level=log_level, timeout_graceful_shutdown=5))
-    server.run(sockets=[http])
-    if not server.started:
-        sys.exit(STARTUP_FAILURE)
+    serve_app(app, http, log_level)

@@ -3,7 +3,7 @@ that `nbake serve` serves at `/ui` and that talk to the REST API with the token 
 
 Every response carries a Content-Security-Policy that allows only this origin's scripts and styles, so
 even a job field that escaped the dashboard's text-only rendering could not run a script (the app's
-`services.api.headers` middleware adds the headers every response carries)."""
+`services.platform.headers` middleware adds the headers every response carries)."""
 
 from __future__ import annotations
 

@@ -8,14 +8,15 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from services.api import headers, problems
-from services.api.limits import BodyLimit
 from services.inference.grpc_server import start_grpc_inference
 from services.inference.routes import artifacts, health, models
 from services.inference.service import InferenceService
 from services.inference.settings import InferenceSettings
 from services.inference.state import InferenceState
 from services.jobs.db import Database
+from services.jobs.problems import JOB_PROBLEMS
+from services.platform import headers, problems
+from services.platform.limits import BodyLimit
 
 
 def create_inference_app(
@@ -25,7 +26,7 @@ def create_inference_app(
     reservation: socket.socket | None = None,
 ):
     """The app; with a `grpc_port`, its lifespan serves gRPC there too (a `reservation` of that port, from
-    `services.api.ports.reserved_port`, closes once gRPC has bound it)."""
+    `services.platform.ports.reserved_port`, closes once gRPC has bound it)."""
     shared = settings.shared
     state = InferenceState(InferenceService(settings), Database(shared.db_url, shared.database_schema))
 
@@ -54,8 +55,8 @@ def create_inference_app(
         "`application/problem+json`.",
         lifespan=lifespan,
     )
-    app.state.services = state
-    problems.install(app)
+    app.state.inference, app.state.tokens = state, state.tokens
+    problems.install(app, JOB_PROBLEMS)
     app.add_middleware(
         BodyLimit, json_bytes=settings.max_body_bytes, upload_bytes=settings.max_body_bytes, upload_paths=()
     )

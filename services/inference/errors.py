@@ -1,39 +1,39 @@
-"""The inference service's errors a caller can act on. They are job-service errors (status, title,
+"""The inference service's errors a caller can act on. They are service errors (status, title,
 detail, field), so the REST problem handlers and the gRPC error mapping of `services/api` serve them
 unchanged."""
 
 from __future__ import annotations
 
-from services.jobs.errors import JobServiceError
+from services.platform.errors import ServiceError
 
 
-class InvalidQuery(JobServiceError):
+class InvalidQuery(ServiceError):
     """A body whose arrays or parameters do not fit the operation (shape, dtype, NaN, unknown names)."""
 
     status, title = 422, "Invalid query"
 
 
-class MalformedBody(JobServiceError):
+class MalformedBody(ServiceError):
     status, title = 400, "Malformed body"
 
 
-class UnsupportedOperation(JobServiceError):
+class UnsupportedOperation(ServiceError):
     status, title = 400, "Unsupported operation"
 
 
-class RequestTooLarge(JobServiceError):
+class RequestTooLarge(ServiceError):
     """More rows than a request may hold, or more working memory than the whole budget."""
 
     status, title = 413, "Request too large"
 
 
-class ArtifactRefused(JobServiceError):
+class ArtifactRefused(ServiceError):
     """The artifact exists but cannot be served: a file fails its digest, or it exceeds the memory budget."""
 
     status, title = 409, "Artifact refused"
 
 
-class Overloaded(JobServiceError):
+class Overloaded(ServiceError):
     status, title = 503, "Timed out"
     headers = {"Retry-After": "1"}  # noqa: RUF012
 

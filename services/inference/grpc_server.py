@@ -1,29 +1,26 @@
 """`InferenceService` over gRPC, beside the REST app on its own port: the same service core (cache,
-batching, limits), the same token check (`services.api.grpc.auth.TokenAuth`) and the same error
-statuses (`services.api.grpc.errors.ErrorMapping`) as the job server's gRPC API."""
+batching, limits), and the same server base, token check and error statuses as the job server's gRPC API
+(`services.platform.grpc`)."""
 
 from __future__ import annotations
 
 import socket
-from concurrent import futures
 
 import grpc
 import numpy as np
 from google.protobuf import struct_pb2
-from grpc_health.v1 import health, health_pb2, health_pb2_grpc
-from grpc_reflection.v1alpha import reflection
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
 from pydantic import ValidationError
 
-from services.api.grpc.auth import TokenAuth, principal
-from services.api.grpc.errors import ErrorMapping
-from services.api.grpc.server import GrpcServer
-from services.api.grpc.structs import json_values
 from services.inference import images
 from services.inference.errors import MalformedBody, UnsupportedOperation
 from services.inference.service import ModelInfo, server_timing
 from services.inference.state import InferenceState
 from services.inference.wire import ArrayHeader, array_bytes, decode_array
+from services.jobs.problems import JOB_PROBLEMS
+from services.platform.grpc.auth import principal
+from services.platform.grpc.server import GrpcLimits, GrpcServer, GrpcServices, start_grpc
+from services.platform.grpc.structs import json_values
 from workers.models.registry import QUERY, RENDER
 
 SERVICE = inference_pb2.DESCRIPTOR.services_by_name["InferenceService"].full_name
@@ -114,27 +111,12 @@ def start_grpc_inference(
     reservation: socket.socket | None = None,
 ) -> GrpcServer:
     """Serve InferenceService on `host:port` (0: any free port; `.port` says which). A `reservation`
-    (`services.api.ports.reserved_port`) held the port until now: it closes once the server has bound it."""
-    server = grpc.server(
-        futures.ThreadPoolExecutor(max_workers=MAX_WORKERS, thread_name_prefix="nbake-inference-grpc"),
-        interceptors=[ErrorMapping(), TokenAuth(state.db, needed_scope)],
-        options=[
-            ("grpc.max_receive_message_length", max_message_bytes),
-            ("grpc.max_send_message_length", max_message_bytes),
-        ],
-    )
-    inference_pb2_grpc.add_InferenceServiceServicer_to_server(InferenceServicer(state), server)
-    checker = health.HealthServicer()
-    health_pb2_grpc.add_HealthServicer_to_server(checker, server)
-    health_name = health_pb2.DESCRIPTOR.services_by_name["Health"].full_name
-    reflection.enable_server_reflection((SERVICE, health_name, reflection.SERVICE_NAME), server)
-    address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-    try:
-        bound = server.add_insecure_port(address)
-    finally:
-        if reservation is not None:
-            reservation.close()
-    server.start()
-    for name in ("", SERVICE):
-        checker.set(name, health_pb2.HealthCheckResponse.SERVING)
-    return GrpcServer(server, checker, bound)
+    (`services.platform.ports.reserved_port`) held the port until now: it closes once the server has bound
+    it."""
+
+    def add(server: grpc.Server) -> None:
+        inference_pb2_grpc.add_InferenceServiceServicer_to_server(InferenceServicer(state), server)
+
+    served = GrpcServices(add, (SERVICE,), needed_scope, JOB_PROBLEMS)
+    limits = GrpcLimits(MAX_WORKERS, max_message_bytes, thread_name="nbake-inference-grpc")
+    return start_grpc(served, state.tokens, limits, host, port, reservation)

@@ -34,7 +34,7 @@ from services.inference.inputs import checked_arrays, checked_params
 from services.inference.loader import Loaded, load_artifact
 from services.inference.metrics import InferenceMetrics
 from services.inference.settings import InferenceSettings
-from services.jobs.errors import JobServiceError
+from services.platform.errors import ServiceError
 from workers.models.registry import RENDER, Answer, Operation
 from workers.render.heap import return_freed_arrays
 
@@ -224,7 +224,7 @@ class InferenceService:
         try:
             yield
             status = 200
-        except JobServiceError as error:
+        except ServiceError as error:
             status = error.status
             raise
         except ArtifactNotFound:

@@ -1,20 +1,27 @@
 """What an inference server is configured with. The database (for tokens) and the artifact store come
-from the same `NBAKE_*` settings as the job server's, so both read one store and share one set of tokens."""
+from the same `NBAKE_*` settings as the job server's (`services.platform.settings`), so both read one store
+and share one set of tokens."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
+from typing import ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from services.api.settings import ServiceSettings
+from services.platform.settings import SharedSettings, env_values
 
 
 class InferenceSettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
+    ENV: ClassVar[dict[str, str]] = {
+        "memory_budget_bytes": "NBAKE_INFERENCE_MEMORY_BYTES",
+        "working_bytes": "NBAKE_INFERENCE_WORKING_BYTES",
+        "reading_bytes": "NBAKE_INFERENCE_READING_BYTES",
+        "device": "NBAKE_INFERENCE_DEVICE",
+    }
 
-    shared: ServiceSettings = Field(description="the job server's settings: its database and store")
+    shared: SharedSettings = Field(description="what the job server reads too: its database and store")
     memory_budget_bytes: int = Field(1 << 30, ge=1, description="loaded models beyond it evict the LRU one")
     working_bytes: int = Field(
         256 << 20,
@@ -48,14 +55,7 @@ class InferenceSettings(BaseModel):
 
     @classmethod
     def from_env(cls, data_dir: Path, **overrides) -> InferenceSettings:
-        env = {
-            "memory_budget_bytes": os.environ.get("NBAKE_INFERENCE_MEMORY_BYTES"),
-            "working_bytes": os.environ.get("NBAKE_INFERENCE_WORKING_BYTES"),
-            "reading_bytes": os.environ.get("NBAKE_INFERENCE_READING_BYTES"),
-            "device": os.environ.get("NBAKE_INFERENCE_DEVICE"),
-        }
-        values = {k: v for k, v in env.items() if v} | {k: v for k, v in overrides.items() if v is not None}
-        return cls(shared=ServiceSettings.from_env(data_dir), **values)
+        return cls(shared=SharedSettings.from_env(data_dir), **env_values(cls.ENV, overrides))
 
     @property
     def work_dir(self) -> Path:

@@ -15,8 +15,9 @@ import threading
 from collections import OrderedDict
 
 from services.artifacts.artifacts import ArtifactNotFound, ArtifactStore
-from services.jobs.errors import InvalidInput
-from services.jobs.tenants import Principal, Tenancy
+from services.jobs.tenants import Tenancy
+from services.platform.auth import Principal
+from services.platform.errors import InvalidInput
 from workers.models.registry import material_kind
 from workers.scene.format.spec import AggregateMaterial, SceneSpec
 from workers.scene.stored import StoredFile, artifact_folder

@@ -15,9 +15,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, defer
 
 from services.jobs.db import Database
-from services.jobs.errors import Conflict, InvalidInput, JobNotFound
+from services.jobs.errors import JobNotFound
 from services.jobs.states import JobState, check_transition
 from services.jobs.tables import Event, IdempotencyKey, Job, utcnow
+from services.platform.errors import Conflict, InvalidInput
 
 INSERT_ATTEMPTS = 3  # concurrent identical submissions on PostgreSQL: the loser retries and finds the winner
 REUSABLE = (JobState.QUEUED, JobState.RUNNING, JobState.SUCCEEDED)

@@ -22,13 +22,13 @@ from pathlib import Path
 import ray
 
 from services.artifacts.artifacts import ArtifactStore
-from services.jobs.errors import JobServiceError
 from services.jobs.metrics import ServiceMetrics
 from services.jobs.ray_connection import RayConnection
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.states import JobState
 from services.jobs.tables import Job
+from services.platform.errors import ServiceError
 from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
 
@@ -157,7 +157,7 @@ class Scheduler:
     def _launch(self, job: Job, message: str) -> None:
         try:
             spec = self._spec(job)
-        except (JobServiceError, LookupError, ValueError) as error:
+        except (ServiceError, LookupError, ValueError) as error:
             self._fail(job.id, f"cannot start: {error}")
             return
         try:

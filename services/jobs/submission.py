@@ -16,13 +16,14 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from services.jobs.errors import InvalidInput
 from services.jobs.identity import code_version, idempotency_key
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import ResolvedScene, SceneResolver, scene_field
 from services.jobs.states import JobState
 from services.jobs.tables import Job, utcnow
-from services.jobs.tenants import DEFAULT_TENANT, Principal
+from services.jobs.tenants import DEFAULT_TENANT
+from services.platform.auth import Principal
+from services.platform.errors import InvalidInput
 from workers.models.registry import UnknownKind, get_kind
 from workers.runtime.contract import Plan, PlanItem
 from workers.scene.format.errors import SceneError

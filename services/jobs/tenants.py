@@ -12,7 +12,6 @@ import re
 import threading
 from collections import OrderedDict
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
@@ -21,10 +20,11 @@ from services.artifacts.artifacts import ArtifactNotFound
 from services.artifacts.assets import AssetNotFound
 from services.artifacts.digests import known_digest
 from services.jobs.db import Database
-from services.jobs.errors import InvalidInput
 from services.jobs.tables import DEFAULT_TENANT, AssetOwner, Job
+from services.platform.auth import Principal
+from services.platform.errors import InvalidInput
 
-__all__ = ["DEFAULT_TENANT", "Principal", "Tenancy", "checked_tenant"]
+__all__ = ["DEFAULT_TENANT", "Tenancy", "checked_tenant"]
 TENANT_NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,63}")
 
 
@@ -32,24 +32,6 @@ def checked_tenant(name: str) -> str:
     if not isinstance(name, str) or TENANT_NAME.fullmatch(name) is None:
         raise InvalidInput("1 to 64 characters of a-z, 0-9, '-' and '_', starting alphanumeric", "tenant")
     return name
-
-
-@dataclass(frozen=True)
-class Principal:
-    """Who a request acts for: its token's tenant and scope (read < submit < admin)."""
-
-    tenant: str
-    scope: str
-
-    @property
-    def sees_all(self) -> bool:
-        """An admin token of the deployment sees every tenant's jobs, assets and artifacts."""
-        return self.scope == "admin"
-
-    @property
-    def visible_tenant(self) -> str | None:
-        """The tenant whose things this caller may see; None: every tenant's."""
-        return None if self.sees_all else self.tenant
 
 
 SEEN_CACHE_SIZE = 4096

@@ -19,8 +19,8 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from neuralbake_client.cli.main import app
 from typer.testing import CliRunner
 
-from services.api.ports import http_socket, reserved_port
 from services.cli import serve
+from services.platform.ports import http_socket, reserved_port
 from tests.support.ports import free_port
 
 

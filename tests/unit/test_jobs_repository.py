@@ -15,10 +15,10 @@ from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, text, update
 
 from services.jobs.db import Database, normalize_url
-from services.jobs.errors import Conflict, InvalidInput
 from services.jobs.repository import JobRepository
 from services.jobs.states import JobState
 from services.jobs.tables import Base, Job, utcnow
+from services.platform.errors import Conflict, InvalidInput
 
 POSTGRES_ENV = "NBAKE_TEST_POSTGRES_URL"
 

@@ -13,29 +13,19 @@ from alembic import command
 from alembic.config import Config
 from sqlalchemy import event, text
 
-from services.api.auth import (
-    TOKEN_CACHE_S,
-    Forbidden,
-    TokenCache,
-    Unauthorized,
-    authorize,
-    create_token,
-    list_tokens,
-    revoke_token,
-    store_tokens,
-    token_cache,
-    token_hash,
-)
 from services.artifacts.artifacts import ArtifactNotFound
 from services.artifacts.assets import AssetNotFound
 from services.artifacts.store import BlobStore
 from services.jobs.db import MIGRATIONS, Database
-from services.jobs.errors import Conflict, InvalidInput, JobNotFound
+from services.jobs.errors import JobNotFound
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
 from services.jobs.submission import JobRequest, Submitter
 from services.jobs.tables import utcnow
-from services.jobs.tenants import DEFAULT_TENANT, Principal, Tenancy
+from services.jobs.tenants import DEFAULT_TENANT, Tenancy
+from services.jobs.tokens import TOKEN_CACHE_S, DatabaseTokens, TokenCache, token_hash
+from services.platform.auth import Forbidden, Principal, Unauthorized, authorize
+from services.platform.errors import Conflict, InvalidInput
 from tests.unit.test_jobs_repository import db, new_job  # noqa: F401 (db is a fixture)
 
 A, B = Principal("acme", "submit"), Principal("bolt", "submit")
@@ -127,56 +117,60 @@ def test_artifacts_are_their_jobs_tenants_and_assets_their_uploaders(db, tmp_pat
 
 
 def test_tokens_are_hashed_kept_across_restarts_and_revoked_at_once(db):  # noqa: F811
-    store_tokens(db, {"configured-admin": "admin"})
-    row, secret = create_token(db, "acme", "read", "ci")
-    assert authorize(db, secret, "read", "") == Principal("acme", "read")
+    tokens = DatabaseTokens(db)
+    tokens.store_configured({"configured-admin": "admin"})
+    row, secret = tokens.create("acme", "read", "ci")
+    assert authorize(tokens, secret, "read", "") == Principal("acme", "read")
     with pytest.raises(Forbidden):
-        authorize(db, secret, "submit", "")
+        authorize(tokens, secret, "submit", "")
     with db.engine.connect() as connection:
         stored = [tuple(r) for r in connection.execute(text("SELECT * FROM api_tokens"))]
     assert not any(secret in str(value) for r in stored for value in r)
     assert hashlib.sha256(secret.encode()).hexdigest() in {r[0] for r in stored}
 
-    store_tokens(db, {"configured-admin": "admin"})  # the next start: created tokens stay
-    assert authorize(db, secret, "read", "").tenant == "acme"
-    assert {(t.tenant, t.scope, t.source) for t in list_tokens(db)} == {
+    tokens.store_configured({"configured-admin": "admin"})  # the next start: created tokens stay
+    assert authorize(tokens, secret, "read", "").tenant == "acme"
+    assert {(t.tenant, t.scope, t.source) for t in tokens.listing()} == {
         (DEFAULT_TENANT, "admin", "configured"),
         ("acme", "read", "created"),
     }
-    configured = next(t for t in list_tokens(db) if t.source == "configured")
+    configured = next(t for t in tokens.listing() if t.source == "configured")
     with pytest.raises(Conflict):
-        revoke_token(db, configured.id)
-    revoke_token(db, row.id)
+        tokens.revoke(configured.id)
+    tokens.revoke(row.id)
     with pytest.raises(Unauthorized, match="unknown token"):
-        authorize(db, secret, "read", "")
+        authorize(tokens, secret, "read", "")
     with pytest.raises(InvalidInput):
-        create_token(db, "Not A Tenant", "read")
+        tokens.create("Not A Tenant", "read")
 
 
 def test_a_token_revoked_on_another_replica_is_refused_once_its_cached_read_expires(db):  # noqa: F811
     """Each process trusts a token it read for `TOKEN_CACHE_S`: requests in between read no database, and a
     revocation on another replica (or a configured token dropped at its restart) holds after that bound."""
-    other = Database(db.url.render_as_string(hide_password=False), db.schema)  # a second API replica
+    replica_db = Database(db.url.render_as_string(hide_password=False), db.schema)  # a second API replica
+    tokens, other = DatabaseTokens(db), DatabaseTokens(replica_db)
     now = [0.0]
-    token_cache(other).clock = lambda: now[0]
+    other.cache.clock = lambda: now[0]
     reads = []
-    event.listen(other.engine, "before_cursor_execute", lambda *args: reads.append("api_tokens" in args[2]))
+    event.listen(
+        replica_db.engine, "before_cursor_execute", lambda *args: reads.append("api_tokens" in args[2])
+    )
     try:
-        store_tokens(db, {"configured-read": "read"})
-        row, secret = create_token(db, "acme", "submit")
+        tokens.store_configured({"configured-read": "read"})
+        row, secret = tokens.create("acme", "submit")
         for _ in range(3):
             assert authorize(other, secret, "read", "") == Principal("acme", "submit")
             with pytest.raises(Forbidden):  # the scope is checked on the cached answer too
                 authorize(other, secret, "admin", "")
         assert sum(reads) == 1  # one read for six checks
-        for replica in (db, other):
+        for replica in (tokens, other):
             authorize(replica, "configured-read", "read", "")
 
-        revoke_token(db, row.id)
-        store_tokens(db, {})  # the configured token is left out at a restart of the first replica
+        tokens.revoke(row.id)
+        tokens.store_configured({})  # the configured token is left out at a restart of the first replica
         for token in (secret, "configured-read"):  # refused at once there
             with pytest.raises(Unauthorized, match="unknown token"):
-                authorize(db, token, "read", "")
+                authorize(tokens, token, "read", "")
         now[0] += TOKEN_CACHE_S / 2
         assert authorize(other, secret, "read", "").tenant == "acme"  # the documented bound: still trusted
         now[0] += TOKEN_CACHE_S / 2
@@ -184,7 +178,7 @@ def test_a_token_revoked_on_another_replica_is_refused_once_its_cached_read_expi
             with pytest.raises(Unauthorized, match="unknown token"):
                 authorize(other, token, "read", "")
     finally:
-        other.dispose()
+        replica_db.dispose()
 
 
 def test_a_token_read_before_its_revocation_is_not_cached_after_it():
@@ -207,8 +201,8 @@ def test_replicas_starting_together_store_the_configured_tokens_once(db):  # noq
     try:
         for _ in range(5):
             with ThreadPoolExecutor(len(replicas)) as pool:
-                list(pool.map(lambda replica: store_tokens(replica, tokens), replicas))
+                list(pool.map(lambda replica: DatabaseTokens(replica).store_configured(tokens), replicas))
     finally:
         for replica in replicas:
             replica.dispose()
-    assert len([t for t in list_tokens(db) if t.source == "configured"]) == len(tokens)
+    assert len([t for t in DatabaseTokens(db).listing() if t.source == "configured"]) == len(tokens)

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 
 from neuralbake.v1 import artifacts_pb2, artifacts_pb2_grpc
 
-from services.api.grpc.auth import principal
 from services.api.grpc.messages import manifest_message
 from services.api.grpc.streams import StreamTracker
-from services.jobs.errors import InvalidInput
+from services.platform.errors import InvalidInput
+from services.platform.grpc.auth import principal
 
 if TYPE_CHECKING:  # annotations only: the inference service reuses this package
     from services.api.services import Services

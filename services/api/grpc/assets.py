@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, BinaryIO
 
 from neuralbake.v1 import assets_pb2, assets_pb2_grpc
 
-from services.api.grpc.auth import principal
 from services.api.grpc.messages import asset_message
 from services.api.grpc.streams import StreamTracker
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, UploadError
 from services.artifacts.uploads import ingest_upload, load_asset, save_asset
+from services.platform.grpc.auth import principal
 
 if TYPE_CHECKING:  # annotations only: the inference service reuses this package
     from services.api.services import Services

@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING
 import grpc
 from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
 
-from services.api.grpc.auth import principal
 from services.api.grpc.messages import STATE_NAMES, event_message, job_message, submit_fields
 from services.api.grpc.streams import StreamTracker, pause
-from services.jobs.errors import InvalidInput
 from services.jobs.following import follow
 from services.jobs.submission import JobRequest
+from services.platform.errors import InvalidInput
+from services.platform.grpc.auth import principal
 
 if TYPE_CHECKING:  # annotations only: the inference service reuses this package
     from services.api.services import Services

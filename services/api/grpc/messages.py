@@ -10,12 +10,12 @@ from typing import Any
 from google.protobuf import struct_pb2, timestamp_pb2
 from neuralbake.v1 import artifacts_pb2, assets_pb2, files_pb2, jobs_pb2
 
-from services.api.grpc.structs import json_values
 from services.api.schemas import JobView
 from services.artifacts.assets import Asset
 from services.artifacts.manifest import FileEntry, Manifest
 from services.jobs.states import JobState
 from services.jobs.tables import Event, Job
+from services.platform.grpc.structs import json_values
 
 STATES = {state: jobs_pb2.JobState.Value(f"JOB_STATE_{state.value}") for state in JobState}
 STATE_NAMES = {number: state for state, number in STATES.items()}

@@ -5,12 +5,12 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from services.api.auth import CanRead
 from services.api.deps import ServicesDep
 from services.api.files import blob_response
-from services.api.problems import PROBLEM_RESPONSES
 from services.artifacts.manifest import Manifest
 from services.artifacts.media_types import MEDIA_TYPES
+from services.platform.auth import CanRead
+from services.platform.problems import PROBLEM_RESPONSES
 
 router = APIRouter(
     prefix="/v1/artifacts",

@@ -6,10 +6,10 @@ from typing import Annotated
 
 from fastapi import APIRouter, File, Response, UploadFile
 
-from services.api.auth import CanRead, CanSubmit
 from services.api.deps import ServicesDep
-from services.api.problems import PROBLEM_RESPONSES
 from services.artifacts.uploads import Asset, ingest_upload, load_asset, save_asset
+from services.platform.auth import CanRead, CanSubmit
+from services.platform.problems import PROBLEM_RESPONSES
 
 router = APIRouter(prefix="/v1/assets", tags=["assets"], responses={401: PROBLEM_RESPONSES[401]})
 

@@ -7,7 +7,7 @@ from fastapi.responses import JSONResponse, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 from services.api.deps import ServicesDep
-from services.api.readiness import PROBE, readiness
+from services.platform.readiness import PROBE, readiness
 
 router = APIRouter(tags=["health"])
 

@@ -8,13 +8,13 @@ from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from services.api.auth import CanRead, CanSubmit
 from services.api.deps import ServicesDep
-from services.api.problems import PROBLEM_RESPONSES
 from services.api.schemas import EventView, JobList, JobView
 from services.api.sse import event_stream
 from services.jobs.states import JobState
 from services.jobs.submission import JobRequest
+from services.platform.auth import CanRead, CanSubmit
+from services.platform.problems import PROBLEM_RESPONSES
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses={401: PROBLEM_RESPONSES[401]})
 

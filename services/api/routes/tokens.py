@@ -9,11 +9,11 @@ from typing import Literal
 from fastapi import APIRouter, Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from services.api.auth import IsAdmin, create_token, list_tokens, revoke_token
 from services.api.deps import ServicesDep
-from services.api.problems import PROBLEM_RESPONSES
 from services.jobs.tables import ApiToken
 from services.jobs.tenants import DEFAULT_TENANT
+from services.platform.auth import IsAdmin
+from services.platform.problems import PROBLEM_RESPONSES
 
 router = APIRouter(
     prefix="/v1/tokens", tags=["tokens"], responses={s: PROBLEM_RESPONSES[s] for s in (401, 403)}
@@ -62,14 +62,14 @@ class TokenList(BaseModel):
 @router.post("", status_code=201, response_model=CreatedToken, responses={422: PROBLEM_RESPONSES[422]})
 def create(body: TokenRequest, svc: ServicesDep, _: IsAdmin) -> CreatedToken:
     """A new token of a tenant; keep its `token` now, it cannot be shown again."""
-    row, secret = create_token(svc.db, body.tenant, body.scope, body.name)
+    row, secret = svc.tokens.create(body.tenant, body.scope, body.name)
     return CreatedToken(**TokenView.of(row).model_dump(), token=secret)
 
 
 @router.get("", response_model=TokenList)
 def list_all(svc: ServicesDep, _: IsAdmin) -> TokenList:
     """Every token, configured and created, oldest first, without secrets."""
-    return TokenList(items=[TokenView.of(row) for row in list_tokens(svc.db)])
+    return TokenList(items=[TokenView.of(row) for row in svc.tokens.listing()])
 
 
 @router.delete(
@@ -81,5 +81,5 @@ def list_all(svc: ServicesDep, _: IsAdmin) -> TokenList:
 def revoke(token_id: str, svc: ServicesDep, _: IsAdmin) -> Response:
     """Revoke a created token: the next request with it gets 401. Configured tokens are removed from the
     configuration instead (409)."""
-    revoke_token(svc.db, token_id)
+    svc.tokens.revoke(token_id)
     return Response(status_code=204)

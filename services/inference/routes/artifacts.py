@@ -20,12 +20,12 @@ from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.types import Receive, Scope, Send
 
-from services.api.auth import CanRead
-from services.api.problems import PROBLEM_RESPONSES
 from services.inference import images, wire
 from services.inference.errors import MalformedBody
 from services.inference.service import InferenceService, server_timing
 from services.inference.state import StateDep
+from services.platform.auth import CanRead
+from services.platform.problems import PROBLEM_RESPONSES
 from workers.models.registry import RENDER
 
 router = APIRouter(prefix="/v1/artifacts", tags=["inference"])

@@ -5,11 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse, Response
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
-from sqlalchemy import select
 
-from services.api.readiness import PROBE, readiness
 from services.inference.state import StateDep
-from services.jobs.tables import ApiToken
+from services.platform.readiness import PROBE, readiness
 
 router = APIRouter(tags=["health"])
 
@@ -24,11 +22,7 @@ def healthz() -> dict[str, str]:
 def readyz(state: StateDep) -> JSONResponse:
     """The job database's tokens (start `nbake serve` once to create them) and the artifact store."""
 
-    def tokens() -> None:
-        with state.db.reading() as session:
-            session.execute(select(ApiToken.scope).limit(1))
-
-    checks = {"tokens": tokens, "store": lambda: state.service.blobs.exists(PROBE)}
+    checks = {"tokens": state.tokens.check, "store": lambda: state.service.blobs.exists(PROBE)}
     return readiness(checks, device=state.service.device)
 
 

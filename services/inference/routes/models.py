@@ -5,10 +5,10 @@ from __future__ import annotations
 from fastapi import APIRouter
 from starlette.concurrency import run_in_threadpool
 
-from services.api.auth import CanRead
-from services.api.problems import PROBLEM_RESPONSES
 from services.inference.service import ModelInfo
 from services.inference.state import StateDep
+from services.platform.auth import CanRead
+from services.platform.problems import PROBLEM_RESPONSES
 
 router = APIRouter(prefix="/v1/models", tags=["models"])
 

@@ -8,34 +8,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import grpc
-from neuralbake.v1 import artifacts_pb2, assets_pb2, jobs_pb2
 
-from services.api.auth import authorize
-from services.api.grpc.handlers import Behaviour, rewrap
-from services.jobs.db import Database
-from services.jobs.tenants import Principal
+from services.platform.auth import Principal, TokenStore, authorize
+from services.platform.grpc.handlers import Behaviour, rewrap
 
-PROTECTED = {
-    service.full_name: service
-    for module in (jobs_pb2, assets_pb2, artifacts_pb2)
-    for service in module.DESCRIPTOR.services_by_name.values()
-}
 MISSING = "send `authorization: Bearer <token>` metadata"
-SUBMIT_METHODS = frozenset(
-    {
-        "/neuralbake.v1.JobService/SubmitJob",
-        "/neuralbake.v1.JobService/CancelJob",
-        "/neuralbake.v1.AssetService/UploadAsset",
-    }
-)
-
-
-def needed_scope(method: str) -> str | None:
-    """The scope a full method name needs; None for the open (health, reflection) services."""
-    service = method.strip("/").split("/", 1)[0]
-    if service not in PROTECTED:
-        return None
-    return "submit" if method in SUBMIT_METHODS else "read"
 
 
 def bearer_token(context: grpc.ServicerContext) -> str | None:
@@ -63,11 +40,11 @@ def principal(context) -> Principal:
 
 
 class TokenAuth(grpc.ServerInterceptor):
-    """Checks the caller's token before the call's behaviour runs (in the call's worker thread).
-    `scope_for(method)` names the scope a method needs (None: open); the inference server passes its own."""
+    """Checks the caller's token against `tokens` before the call's behaviour runs (in the call's worker
+    thread). `scope_for(method)` names the scope a full method name needs (None: open)."""
 
-    def __init__(self, db: Database, scope_for: Callable[[str], str | None] = needed_scope):
-        self.db, self.scope_for = db, scope_for
+    def __init__(self, tokens: TokenStore, scope_for: Callable[[str], str | None]):
+        self.tokens, self.scope_for = tokens, scope_for
 
     def intercept_service(self, continuation, handler_call_details):
         handler = continuation(handler_call_details)
@@ -77,7 +54,7 @@ class TokenAuth(grpc.ServerInterceptor):
 
         def around(behaviour: Behaviour, streaming: bool) -> Behaviour:
             def checked(request, context):
-                caller = authorize(self.db, bearer_token(context), scope, MISSING)
+                caller = authorize(self.tokens, bearer_token(context), scope, MISSING)
                 return behaviour(request, AuthorizedContext(context, caller))
 
             return checked

@@ -1,6 +1,7 @@
-"""The job service's errors as gRPC statuses: the problem `services.api.errors` gives REST too (status,
-title, detail, field), carried as a status code, a message and rich details (`google.rpc.ErrorInfo` with
-the problem, `google.rpc.BadRequest` naming the field), so a client can act on it exactly as over HTTP.
+"""A server's errors as gRPC statuses: the problem its table (`services.platform.problem_table`) gives
+REST too (status, title, detail, field), carried as a status code, a message and rich details
+(`google.rpc.ErrorInfo` with the problem, `google.rpc.BadRequest` naming the field), so a client can act on
+it exactly as over HTTP.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from google.rpc import error_details_pb2, status_pb2
 from grpc_status import rpc_status
 from pydantic import ValidationError
 
-from services.api.errors import ProblemInfo, internal_problem, problem_for
-from services.api.grpc.handlers import Behaviour, rewrap
+from services.platform.grpc.handlers import Behaviour, rewrap
+from services.platform.problem_table import ProblemInfo, ProblemTable, internal_problem
 from workers.scene.io import dotted_path
 
 DOMAIN = "neuralbake"
@@ -33,14 +34,14 @@ CODES = {
 }
 
 
-def problem_of(error: Exception) -> ProblemInfo | None:
-    """The problem an error stands for, or None for a bug. A request message that fails its model (as
-    `JobRequest`) is this adapter's own bad input, like a REST body failing validation."""
+def problem_of(error: Exception, table: ProblemTable) -> ProblemInfo | None:
+    """The problem an error stands for in `table`, or None for a bug. A request message that fails its
+    model (as `JobRequest`) is this adapter's own bad input, like a REST body failing validation."""
     if isinstance(error, ValidationError):
         first = error.errors()[0]
         field = dotted_path(first["loc"], None) or "request"
         return ProblemInfo(422, "Invalid input", f"{field}: {first['msg']}", field)
-    return problem_for(error)
+    return table.problem_for(error)
 
 
 def to_status(problem: ProblemInfo) -> grpc.Status:
@@ -66,11 +67,12 @@ def to_status(problem: ProblemInfo) -> grpc.Status:
     return rpc_status.to_status(status_pb2.Status(code=code.value[0], message=message, details=packed))
 
 
-def abort(context: grpc.ServicerContext, error: Exception):
-    """End the call with the status `error` maps to; a bug is INTERNAL (and logged), never a leaked trace."""
+def abort(context: grpc.ServicerContext, error: Exception, table: ProblemTable):
+    """End the call with the status `error` maps to in `table`; a bug is INTERNAL (and logged), never a
+    leaked trace."""
     if context.code() is not None:  # already aborted (e.g. by an inner layer): keep that status
         raise error
-    problem = problem_of(error)
+    problem = problem_of(error, table)
     if problem is None:
         log.error("unhandled error in a gRPC call", exc_info=error)
         context.abort(grpc.StatusCode.INTERNAL, internal_problem(error).detail)
@@ -78,28 +80,30 @@ def abort(context: grpc.ServicerContext, error: Exception):
 
 
 class ErrorMapping(grpc.ServerInterceptor):
-    """Turns exceptions raised by a call (or while streaming its responses) into statuses."""
+    """Turns exceptions raised by a call (or while streaming its responses) into statuses by `table`."""
+
+    def __init__(self, table: ProblemTable):
+        self.table = table
 
     def intercept_service(self, continuation, handler_call_details):
         handler = continuation(handler_call_details)
-        return None if handler is None else rewrap(handler, _mapped)
+        return None if handler is None else rewrap(handler, self._mapped)
 
+    def _mapped(self, behaviour: Behaviour, streaming: bool) -> Behaviour:
+        if streaming:
 
-def _mapped(behaviour: Behaviour, streaming: bool) -> Behaviour:
-    if streaming:
+            def stream(request, context) -> Iterator:
+                try:
+                    yield from behaviour(request, context)
+                except Exception as error:
+                    abort(context, error, self.table)
 
-        def stream(request, context) -> Iterator:
+            return stream
+
+        def unary(request, context):
             try:
-                yield from behaviour(request, context)
+                return behaviour(request, context)
             except Exception as error:
-                abort(context, error)
+                abort(context, error, self.table)
 
-        return stream
-
-    def unary(request, context):
-        try:
-            return behaviour(request, context)
-        except Exception as error:
-            abort(context, error)
-
-    return unary
+        return unary

@@ -9,7 +9,7 @@ import json
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from services.api.problems import PROBLEM_JSON
+from services.platform.problems import PROBLEM_JSON
 
 MULTIPART_OVERHEAD = 1 << 20  # part headers and boundaries on top of the files themselves
 

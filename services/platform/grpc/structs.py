@@ -8,7 +8,7 @@ from typing import Any
 
 from google.protobuf import json_format, struct_pb2
 
-from services.jobs.errors import InvalidInput
+from services.platform.errors import InvalidInput
 
 
 def json_values(message: struct_pb2.Struct, field: str) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 """Every error answer is `application/problem+json` (RFC 9457) with a `detail` a person can act on and,
-for bad input, the `field` at fault. Bad input is always a 4xx; only a real bug is a 500. The service's own
-errors go through the table gRPC shares (`services.api.errors`); FastAPI's own errors are mapped here.
+for bad input, the `field` at fault. Bad input is always a 4xx; only a real bug is a 500. The server's own
+errors go through the table its gRPC server shares (`services.platform.problem_table`); FastAPI's own errors
+are mapped here.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from services.api.errors import ACTIONABLE, ProblemInfo, internal_problem, problem_for
+from services.platform.problem_table import ProblemInfo, ProblemTable, internal_problem
 from workers.scene.io import dotted_path
 
 PROBLEM_JSON = "application/problem+json"
@@ -59,13 +60,13 @@ def _document(request: Request, info: ProblemInfo) -> JSONResponse:
     return problem(request, info.status, info.title, info.detail, info.field, info.headers)
 
 
-def install(app: FastAPI) -> None:
-    """Register the handlers that turn every error into a problem document."""
+def install(app: FastAPI, table: ProblemTable) -> None:
+    """Register the handlers that turn every error into a problem document, the server's own by `table`."""
 
     async def _actionable(request: Request, error: Exception):
-        return _document(request, problem_for(error))
+        return _document(request, table.problem_for(error))
 
-    for error_type in ACTIONABLE:
+    for error_type in table.actionable:
         app.add_exception_handler(error_type, _actionable)
 
     @app.exception_handler(RequestValidationError)
