@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 
 
 def scenes_command() -> None:

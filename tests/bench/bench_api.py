@@ -30,7 +30,7 @@ from tests.integration.test_api_server import (
 )
 from workers.models.registry import get_kind
 from workers.render.render import render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SUBMISSIONS = 200

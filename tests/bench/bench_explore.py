@@ -79,8 +79,8 @@ from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import Progress, train_phases
-from workers.scene.builtin import get_builtin
 from workers.scene.format.variables import dimension_names
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 # EXPLORE_BENCH_SCENES (comma-separated) runs only those scenes

@@ -25,7 +25,7 @@ from tests.support.jobs import run_kind_job
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.models.registry import QUERY, get_inference
 from workers.render.heap import return_freed_memory
-from workers.scene.builtin import BUILTIN_SCENES, get_builtin
+from workers.scene.generators.builtin import BUILTIN_SCENES, get_builtin
 
 CHUNK = InferenceSettings.model_fields["chunk_rows"].default
 WIDTH, HEIGHT = 64, 48

@@ -21,7 +21,7 @@ from tests.bench.common import BenchSection, median_seconds
 from tests.integration.test_inference_server import frame_ms, install_tokens, run_and_publish, start_server
 from tests.unit.test_lsnif_model import instanced_scene
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SIZE, SPP, REPEATS = 64, 4, 3

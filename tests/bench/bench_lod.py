@@ -27,7 +27,6 @@ from tests.support.jobs import run_kind_job
 from workers.models.lod import artifact
 from workers.models.lod.evaluate import lod_tracer, timed_render
 from workers.render.render import RenderSettings
-from workers.scene.builtin import get_builtin, sun_and_sky
 from workers.scene.format.spec import (
     Camera,
     ConstantBackground,
@@ -38,6 +37,7 @@ from workers.scene.format.spec import (
     SceneObject,
     SceneSpec,
 )
+from workers.scene.generators.builtin import get_builtin, sun_and_sky
 from workers.scene.geometry.compile import compile_scene
 
 LEAK_SPP = 16

@@ -33,7 +33,7 @@ from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.runtime.view import PathTracedView
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 

@@ -50,7 +50,7 @@ from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.samplers import open_batches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train_phases
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SIZE = 32

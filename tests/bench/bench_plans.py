@@ -92,8 +92,8 @@ def probe() -> None:
 
     from workers.render.integrator import PathTracer
     from workers.render.render import RenderSettings, render
-    from workers.scene.builtin import get_builtin
     from workers.scene.format import spec
+    from workers.scene.generators.builtin import get_builtin
     from workers.scene.geometry.compile import compile_scene
     from workers.scene.geometry.shapes import shape_mesh
 

@@ -49,7 +49,7 @@ from workers.render.render import render
 from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.report import Report
 from workers.runtime.threads import torch_threads
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 PRESET = os.environ.get("PRT_BENCH_PRESET", "default")

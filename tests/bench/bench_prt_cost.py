@@ -20,7 +20,7 @@ from workers.models.prt.frame import render_frame
 from workers.models.prt.network import PrtNetwork
 from workers.models.registry import get_kind
 from workers.render.render import render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 SCENES = ("env_lit_objects", "glossy_row")

@@ -40,7 +40,7 @@ from tests.integration.test_inference_server import (
 from tests.support.ports import free_port
 from tests.support.postgres import PrivatePostgres
 from tests.unit.test_lsnif_model import instanced_scene
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 
 CLIENTS = 200
 DISTINCT = 300  # pieces of work

@@ -32,7 +32,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.embree import RayScene
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, plan_render, render, render_item
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 THREADS = 2
@@ -136,7 +136,7 @@ def relative_mse(image: np.ndarray, reference: np.ndarray) -> float:
 FIRST_RUN = """
 import time
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 scene = compile_scene(get_builtin("{scene}"))
 times = []

@@ -32,7 +32,7 @@ from workers.models.lod.plan import choose_asset, choose_resolutions, cube_exten
 from workers.models.lod.sampling import LodSource, LodSourceConfig, asset_triangles
 from workers.models.lsnif import KIND as LSNIF
 from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 BATCHES = 7  # timed batches per source (after one warm-up batch)

@@ -13,7 +13,7 @@ import yaml
 
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_server import NBAKE, TOKENS
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 served = grpc_server.served  # fixture
 SCRIPT = Path(__file__).with_name("ci_pipeline.sh")

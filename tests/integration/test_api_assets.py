@@ -13,7 +13,7 @@ import yaml
 from services.artifacts.staging import UploadLimits
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import ServerThread, events, problem_of, settings_for, submit
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 database = api.incidental_database  # fixture: the uploads' files, not the database, are tested
 LIMITS = UploadLimits(

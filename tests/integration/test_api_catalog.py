@@ -8,7 +8,7 @@ import pytest
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import DatabaseChoice, problem_of
 from workers.models.registry import PRESET_NAMES, get_kind, kind_names
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 
 server = api.server  # fixture
 

@@ -11,7 +11,7 @@ from tests.integration import test_api_server as api
 from tests.integration.test_api_server import QUICK_RENDER, events, submit, wait_for
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr
 

@@ -15,7 +15,7 @@ from neuralbake_client import Client
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_grpc_server import TINY
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 served = grpc_server.served  # fixture
 TINY_SETS = ["--set", "width=32", "--set", "height=32", "--set", "spp=4"]

@@ -156,7 +156,7 @@ def test_out_of_range_setting_names_the_option(tmp_path):
 
 
 def test_scenes_lists_every_builtin_with_its_description():
-    from workers.scene.builtin import BUILTIN_SCENES
+    from workers.scene.generators.builtin import BUILTIN_SCENES
 
     result = nbake("scenes")
     assert result.exit_code == 0

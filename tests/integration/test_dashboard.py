@@ -19,7 +19,7 @@ from playwright.sync_api import Browser, Page, expect, sync_playwright
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_server import TOKENS
 from tests.integration.test_grpc_server import LONG
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 served = grpc_server.served  # fixture: one real `nbake serve` on free ports, stopped after the last user
 

@@ -22,7 +22,7 @@ from workers.nn.metrics import dssim, mape
 from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.runtime.report import Report
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 SEED = 5

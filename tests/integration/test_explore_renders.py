@@ -11,7 +11,7 @@ from workers.models.explore import KIND
 from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.runtime.samplers import InProcessRenders, RenderPool
 from workers.runtime.sources import SourceSpec
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 CONFIG = KIND.resolve_config("quick", {"spp": 2})

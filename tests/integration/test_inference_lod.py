@@ -29,8 +29,8 @@ from tests.integration.test_inference_server import (
 )
 from workers.models.lod.infer import LodQuery, LodRender
 from workers.models.registry import get_inference
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import Camera
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.portable import StoredScene, load_scene, save_scene
 
 

@@ -28,7 +28,7 @@ from tests.integration.test_inference_server import (
     start_server,
 )
 from tests.unit.test_lsnif_model import instanced_scene
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 
 MB = 1 << 20
 WORKING_BYTES, READING_BYTES = 48 * MB, 16 * MB

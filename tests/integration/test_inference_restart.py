@@ -21,7 +21,7 @@ from services.artifacts.store import BlobStore
 from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.integration.test_inference_server import install_tokens, run_and_publish
 from tests.support.ports import free_port
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 from workers.scene.importers.image_io import read_exr
 
 CLIENTS = 4

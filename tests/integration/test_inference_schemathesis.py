@@ -13,7 +13,7 @@ from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from tests.integration.test_api_server import TOKENS
 from tests.integration.test_inference_server import install_tokens, run_and_publish, start_server
-from workers.scene.builtin import BUILTIN_SCENES
+from workers.scene.generators.builtin import BUILTIN_SCENES
 
 HEADERS = {"Authorization": f"Bearer {TOKENS['read']}"}
 EXAMPLES_PER_OPERATION = 25

@@ -13,7 +13,7 @@ import ray
 from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
 from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr, read_exr_channels
 

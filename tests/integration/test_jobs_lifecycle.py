@@ -20,7 +20,7 @@ from tests.integration.test_api_server import (
     wait_for,
 )
 from workers.driver.jobs import NAMESPACE, actor_name
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 database, server, client = api.database, api.server, api.client  # fixtures
 LONG_RENDER = {**QUICK_RENDER, "config": {"spp": 1 << 16}, "force": True}  # many passes: runs for minutes

@@ -23,7 +23,7 @@ from tests.support.ports import free_port
 from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.runtime.checkpoints import COMMIT_MARKER
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr
 

@@ -23,7 +23,7 @@ from workers.models.registry import get_inference, get_kind, kind_names
 from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.contract import JobContext, imported
 from workers.runtime.report import PATH_TRACING_SPP, Report
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 SEED = 5

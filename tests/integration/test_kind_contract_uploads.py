@@ -26,7 +26,7 @@ from tests.support.cluster import LocalCluster, ServeReplica
 from tests.support.user_assets import user_folder
 from workers.models.registry import get_kind, kind_names
 from workers.runtime.contract import merge_nested
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.timeout(1200)

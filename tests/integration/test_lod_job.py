@@ -27,7 +27,7 @@ from workers.models.lod.evaluate import evaluate_levels, lod_tracer
 from workers.models.registry import get_kind
 from workers.render.render import RenderSettings, render
 from workers.runtime.report import Report
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 

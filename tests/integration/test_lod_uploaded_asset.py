@@ -11,7 +11,7 @@ import yaml
 
 from services.jobs.scheduler import WARNING_ANNOTATION
 from tests.integration.test_api_server import DatabaseChoice, ServerThread, events, settings_for, submit
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 
 def blob_obj() -> bytes:

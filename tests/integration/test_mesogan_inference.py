@@ -32,7 +32,7 @@ from tests.integration.test_inference_server import Server, install_tokens, star
 from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.registry import get_inference
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 WINDOW = {"origin": [-3, 5], "size": [12, 7], "seed": 4, "structure": {"length": 0.5}}
 AUTH = (("authorization", f"Bearer {TOKENS['read']}"),)

@@ -37,8 +37,8 @@ from tests.support.ports import free_port
 from workers.models.registry import get_inference, get_kind, register_materials
 from workers.render import aggregate_materials
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr_channels
 from workers.scene.io import load_scene, scene_from_dict

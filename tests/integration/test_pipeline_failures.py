@@ -12,7 +12,7 @@ from workers.driver import jobs
 from workers.models.lod.run import LodMethod
 from workers.runtime.pipeline import run_method
 from workers.runtime.sources import SourceSpec
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 
 class DyingLod(LodMethod):

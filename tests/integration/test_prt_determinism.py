@@ -20,7 +20,7 @@ from services.artifacts.store import BlobStore
 from tests.integration.test_inference_server import publish
 from tests.support.jobs import run_kind_job
 from workers.models.prt.artifact import load
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 SCENE = "env_lit_objects"
 SEED = 3

@@ -27,7 +27,7 @@ from workers.models.prt.config import FRAME_SPP
 from workers.models.prt.infer import INFERENCE, PrtQuery, PrtRender
 from workers.models.registry import QUERY, RENDER
 from workers.runtime.report import Report
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.importers.image_io import read_exr
 
 SEED = 5  # the contract test's: in one pytest process the traced rows (cached per process) are shared

@@ -34,8 +34,8 @@ from PIL import Image
 
 from tests.support.mitsuba_scene import render_mitsuba
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import cornell_box, cornell_glossy, ground
 from workers.scene.format import spec
+from workers.scene.generators.builtin import cornell_box, cornell_glossy, ground
 from workers.scene.geometry import shapes
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import load_scene

@@ -30,7 +30,7 @@ from neuralbake_client import models as sdk_models
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_server import TOKENS
 from tests.integration.test_grpc_server import LONG, TINY
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 served = grpc_server.served  # fixture
 

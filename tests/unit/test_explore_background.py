@@ -18,7 +18,6 @@ from workers.models.explore.network import PixelGenerator
 from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import (
     Camera,
     Conductor,
@@ -26,6 +25,7 @@ from workers.scene.format.spec import (
     EnvironmentRotationVariable,
     SceneSpec,
 )
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 SIZE = 24

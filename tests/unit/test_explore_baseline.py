@@ -8,7 +8,7 @@ import pytest
 from tests.unit.test_explore_model import explore_run
 from workers.models.explore.baseline import equal_time_steps, uniform_config
 from workers.models.explore.config import PRESETS, UNIFORM, ExploreConfig
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 
 
 def counts(seconds=60.0, target=15.0, render=6.0, reuse=27.0, timed_reuses=270, generated=30, reused=270):

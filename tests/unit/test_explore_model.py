@@ -20,8 +20,8 @@ from workers.nn.configs import HashGridConfig, MLPConfig
 from workers.runtime.samplers import InProcessRenders
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import TrainConfig, train_phases
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import SceneSpec
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 K = 3

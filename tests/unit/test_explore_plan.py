@@ -10,8 +10,8 @@ import trimesh
 
 from workers.models.explore import KIND
 from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.io import scene_from_dict
 from workers.scene.reference import SceneRef
 from workers.scene.stored import CACHE_ENV, StoredScene

@@ -13,8 +13,8 @@ from workers.models.explore.source import demodulated
 from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.render.integrator import PathTracer
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import Conductor, SceneSpec
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SIZE = 20

@@ -40,7 +40,7 @@ from workers.render.render import RenderSettings, render
 from workers.runtime.samplers import InProcessBatches
 from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.reference import SceneRef
 

@@ -20,8 +20,8 @@ from workers.models.lod.plan import (
     plan,
 )
 from workers.models.registry import get_kind
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 

@@ -16,7 +16,7 @@ from tests.support.lod import OracleVisibility
 from workers.models.lod.grid import LodGrid
 from workers.models.lod.sampling import asset_tracer, asset_triangles, boundary_pairs, first_asset_hits
 from workers.models.lod.thresholds import best_thresholds, f_measure, optimise_thresholds
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 

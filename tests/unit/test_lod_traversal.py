@@ -28,7 +28,7 @@ from workers.models.lod.thresholds import optimise_thresholds
 from workers.models.lod.traversal import LodAggregate, survival_floor
 from workers.render.render import RenderSettings, render
 from workers.render.voxels import first_occupied
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 INF = np.inf

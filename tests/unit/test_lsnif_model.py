@@ -26,8 +26,8 @@ from workers.render.integrator import PathTracer
 from workers.render.materials import MaterialTable
 from workers.render.voxels import boundary_points
 from workers.runtime.pipeline import round_to_storage
-from workers.scene.builtin import cornell_box
 from workers.scene.format.spec import SceneObject, SphereShape, Transform
+from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.shapes import MeshData
 from workers.scene.reference import SceneRef

@@ -30,7 +30,6 @@ from workers.models.mesogan.volume import mip_stack
 from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import ground
 from workers.scene.format.spec import (
     Appearance,
     BoxShape,
@@ -47,6 +46,7 @@ from workers.scene.format.spec import (
     Structure,
     Transform,
 )
+from workers.scene.generators.builtin import ground
 from workers.scene.geometry.compile import compile_scene
 
 SIGMA = 0.8  # extinction per shell height

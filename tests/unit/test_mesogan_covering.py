@@ -17,8 +17,8 @@ from workers.models.mesogan.material import draw
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.registry import register_materials
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import MesoganMaterial
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import scene_from_dict
 

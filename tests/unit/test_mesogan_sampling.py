@@ -24,7 +24,7 @@ from workers.models.mesogan.sampling import (
 from workers.models.mesogan.slab import march
 from workers.models.mesogan.volume import mip_level
 from workers.render.camera import PinholeCamera
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 

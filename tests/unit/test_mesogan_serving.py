@@ -15,9 +15,9 @@ from workers.models.mesogan import KIND, artifact
 from workers.models.mesogan.infer import uploaded_mesh
 from workers.models.mesogan.networks import MesoGAN
 from workers.models.registry import get_inference
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Diffuse, SceneObject
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.portable import neutral_scene
 from workers.scene.reference import SceneRef

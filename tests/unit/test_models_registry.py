@@ -2,7 +2,7 @@ import pytest
 from pydantic import ValidationError
 
 from workers.models.registry import PRESET_NAMES, Kind, UnknownKind, get_kind, kind_names
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 

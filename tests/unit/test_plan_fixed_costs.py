@@ -8,8 +8,8 @@ import pytest
 from workers.models.registry import get_kind, kind_names
 from workers.runtime import fixed_costs as costs
 from workers.runtime.fixed_costs import fixed_costs, report_view
-from workers.scene.builtin import get_builtin
 from workers.scene.format.spec import SceneObject, SphereShape
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.reference import SceneRef
 
 EXTRA_S = 1000.0

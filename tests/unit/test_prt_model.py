@@ -31,9 +31,9 @@ from workers.nn.cubemap import cubemap_solid_angles, direction_to_texel
 from workers.nn.haar import cubemap_from_wavelets
 from workers.render.environment import EnvironmentMapLight
 from workers.runtime.contract import resolve_preset
-from workers.scene.envmaps import texel_directions
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Camera, EnvironmentMap, euler_xyz
+from workers.scene.generators.envmaps import texel_directions
 
 SIZES = [1, 2, 4, 8, 16, 32]
 
@@ -370,7 +370,7 @@ def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wa
 
 def test_a_pooled_batch_lights_each_group_by_one_lighting_of_a_pool_built_once():
     from workers.models.prt.source import PrtSource, PrtSourceConfig, lighting_pool
-    from workers.scene.builtin import get_builtin
+    from workers.scene.generators.builtin import get_builtin
     from workers.scene.reference import SceneRef
 
     config = resolve_preset(PrtConfig, PRESETS, "quick", {"lighting_pool": 3, "lightings_per_step": 4})
@@ -393,7 +393,7 @@ def test_the_denoised_direct_light_is_closer_to_a_converged_one(monkeypatch, sam
     from workers.models.prt.lighting import relit_tracer, uniform_cube
     from workers.models.prt.views import pixel_rays
     from workers.render.denoise import interior
-    from workers.scene.builtin import get_builtin
+    from workers.scene.generators.builtin import get_builtin
     from workers.scene.geometry.compile import compile_scene
 
     monkeypatch.setattr(frame, "SAMPLER", sampler)

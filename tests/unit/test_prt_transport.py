@@ -11,8 +11,8 @@ from workers.models.prt.lighting import CubeMapLight, relit_tracer, uniform_cube
 from workers.models.prt.transport import BACKGROUND, DIRECT, INDIRECT, trace_rows
 from workers.models.prt.views import pixel_rays
 from workers.render.stratified import StratifiedUniforms
-from workers.scene.builtin import get_builtin
 from workers.scene.format import spec
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SIZE = 4

@@ -13,8 +13,8 @@ from workers.render import aggregate_materials
 from workers.render.aggregate import AggregateEvents
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import scene_from_dict
 

@@ -10,8 +10,8 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
 from workers.render.render import ImageAccumulator, RenderSettings, plan_render, render, render_item
-from workers.scene.builtin import cornell_box
 from workers.scene.format import spec
+from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import compile_scene
 
 

@@ -10,7 +10,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 SIZE = 24

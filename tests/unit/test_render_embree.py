@@ -10,7 +10,7 @@ import mmap
 import numpy as np
 
 from workers.render.embree import _PACKET_WORDS, RayScene, _intersect16_through, _occluded16_through
-from workers.scene.builtin import cornell_box
+from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import compile_scene
 
 

@@ -11,8 +11,8 @@ from workers.render.bsdf import BSDF, MaterialParameters, SurfaceBatch, bsdf_cod
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.render.sampling import INV_PI, square_to_cosine_hemisphere
-from workers.scene.builtin import cornell_box
 from workers.scene.format import spec
+from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import CompiledScene, compile_scene
 
 

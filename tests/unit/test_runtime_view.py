@@ -11,7 +11,7 @@ from workers.render import render as render_module
 from workers.render.render import RenderSettings
 from workers.runtime import view as view_module
 from workers.runtime.view import PathTracedView
-from workers.scene.builtin import get_builtin
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 
 

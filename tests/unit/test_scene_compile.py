@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from workers.scene.builtin import BUILTIN_SCENES
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import BUILTIN_SCENES
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.shapes import box
 

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from workers.scene.envmaps import (
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
+from workers.scene.generators.envmaps import (
     builtin_environment_names,
     check_environment,
     direction_to_uv,
@@ -13,8 +15,6 @@ from workers.scene.envmaps import (
     texel_solid_angles,
     uv_to_direction,
 )
-from workers.scene.format import spec
-from workers.scene.format.errors import SceneError
 from workers.scene.importers.image_io import write_exr
 
 BUILTIN_HDRIS = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]

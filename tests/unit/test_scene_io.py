@@ -8,9 +8,9 @@ import pytest
 import trimesh
 from pydantic import ValidationError
 
-from workers.scene.builtin import BUILTIN_SCENES, cornell_box
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.builtin import BUILTIN_SCENES, cornell_box
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.io import dump_scene, load_scene
 

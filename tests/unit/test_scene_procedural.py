@@ -5,9 +5,9 @@ import pytest
 
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Structure
+from workers.scene.generators.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, local_strands
+from workers.scene.generators.procedural import GENERATORS, generate, gradient_noise
 from workers.scene.geometry.shapes import check_mesh
-from workers.scene.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, local_strands
-from workers.scene.procedural import GENERATORS, generate, gradient_noise
 
 SMALL = {
     "ground_plane": {},
@@ -275,7 +275,7 @@ def test_lod_asset_params_are_checked(name, params, field, problem):
 
 def test_lod_builtin_scenes_compile_with_named_assets():
     from workers.render.embree import RayScene
-    from workers.scene.builtin import BUILTIN_SCENES
+    from workers.scene.generators.builtin import BUILTIN_SCENES
     from workers.scene.geometry.compile import compile_scene
 
     names = {"menger_sponge": "sponge", "thin_walls": "rooms", "closed_box": "box"}

@@ -8,9 +8,9 @@ import pytest
 
 from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.format.variables import dimension_names, switch_index, vector_from_values
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry import compile as compile_module
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.variable_scene import CompiledVariableScene

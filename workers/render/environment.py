@@ -160,8 +160,9 @@ def _guide(cdf: np.ndarray) -> np.ndarray:
 
 @kernels.scalar
 def _lat_long(dx, dy, dz, rotation):
-    """Lat-long (u, v) of world direction d in the map's frame (`workers.scene.envmaps.direction_to_uv`),
-    and sin(theta) (theta = pi v, from the direction: no third inverse-trigonometric call)."""
+    """Lat-long (u, v) of world direction d in the map's frame
+    (`workers.scene.generators.envmaps.direction_to_uv`), and sin(theta) (theta = pi v, from the direction:
+    no third inverse-trigonometric call)."""
     x = dx * rotation[0, 0] + dy * rotation[1, 0] + dz * rotation[2, 0]
     y = dx * rotation[0, 1] + dy * rotation[1, 1] + dz * rotation[2, 1]
     z = dx * rotation[0, 2] + dy * rotation[1, 2] + dz * rotation[2, 2]

@@ -21,9 +21,9 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from workers.scene.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
+from workers.scene.generators.builtin import BUILTIN_SCENES, get_builtin
 from workers.scene.importers.gltf import GLTF_SUFFIXES, import_gltf
 from workers.scene.importers.usd import USD_SUFFIXES, import_usd
 

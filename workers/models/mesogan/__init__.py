@@ -1,7 +1,7 @@
 """The `mesogan` kind: a generative neural mesoscale material (fur, grass, carpet) rendered on meshes
 through shell mapping (Diolatzis 2022, Ch. 6; published as MesoGAN, EGSR 2023).
 
-`sampling` path-traces labelled views of random procedural slabs (`workers.scene.mesoscale`);
+`sampling` path-traces labelled views of random procedural slabs (`workers.scene.generators.mesoscale`);
 `networks` holds the infinite plane generator, the decoder and the discriminator, `slab` renders the
 generated slab as training does, `train` the GAN's phases; `shell` is the prism map, `aggregate` the
 material inside our path tracer, `covering` lays the plane over a scene's surfaces, `material` is the

@@ -13,7 +13,7 @@ from workers.nn.configs import MLPConfig
 from workers.runtime.kind_config import TrainedKindConfig
 from workers.runtime.training import OptimizerConfig, Schedule, TrainConfig
 from workers.scene.format.spec import Appearance, Structure
-from workers.scene.mesoscale import MaterialKind
+from workers.scene.generators.mesoscale import MaterialKind
 
 # The structure parameters training instances are drawn from: each uniform in its range.
 STRUCTURE_RANGES = {"length": (0.4, 1.0), "density": (10.0, 80.0), "curliness": (0.0, 1.0)}

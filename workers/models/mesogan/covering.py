@@ -25,9 +25,9 @@ from workers.models.mesogan.slab import Window, draw_noise, generate_planes
 from workers.models.mesogan.volume import mip_stack
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Appearance, Camera, Diffuse, ShellHeight, Structure
+from workers.scene.generators.mesoscale import grow_on_triangles
 from workers.scene.geometry.compile import CompiledScene, ObjectGeometry
 from workers.scene.geometry.shapes import MeshData
-from workers.scene.mesoscale import grow_on_triangles
 
 MAX_PLANE = 4096  # texels per side of a generated plane
 

@@ -36,7 +36,6 @@ from workers.runtime.view_render import (
     refuse_missing_scene,
     render_view,
 )
-from workers.scene.builtin import get_builtin
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import (
     Appearance,
@@ -48,6 +47,7 @@ from workers.scene.format.spec import (
     SphereShape,
     Structure,
 )
+from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import CompiledScene, compile_scene
 from workers.scene.portable import framing_camera, load_scene, neutral_scene
 

@@ -21,15 +21,15 @@ from workers.nn.cubemap import FACE_FRAMES, cubemap_directions, latlong_to_cubem
 from workers.render.integrator import PathTracer
 from workers.render.jit import njit
 from workers.render.sampling import luminance
-from workers.scene.envmaps import (
+from workers.scene.format import spec
+from workers.scene.format.errors import SceneError
+from workers.scene.generators.envmaps import (
     HDRI_DIR,
     PROCEDURAL_MAPS,
     check_environment,
     load_environment,
     uv_to_direction,
 )
-from workers.scene.format import spec
-from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import CompiledScene
 from workers.scene.importers.image_io import read_exr
 

@@ -216,7 +216,7 @@ Unit = Annotated[FiniteFloat, Field(ge=0, le=1)]
 
 class Structure(Model):
     """The geometric parameters a generated mesoscale instance is drawn from (what the mapping network
-    sees; `workers.scene.mesoscale`)."""
+    sees; `workers.scene.generators.mesoscale`)."""
 
     length: Annotated[FiniteFloat, Field(gt=0, le=1, description="strand length / slab height")] = 0.8
     density: Annotated[FiniteFloat, Field(gt=0, le=400, description="strands per squared slab height")] = 40.0
@@ -353,7 +353,8 @@ class BoxShape(Model):
 
 
 class ProceduralShape(Model):
-    """Geometry made by a named generator in `workers.scene.procedural`, deterministic for its params."""
+    """Geometry made by a named generator (`workers.scene.generators.procedural`), deterministic for its
+    params."""
 
     type: Literal["procedural"] = "procedural"
     generator: str
@@ -456,7 +457,7 @@ Light = Annotated[PointLight | DirectionalLight | SpotLight, Field(discriminator
 class EnvironmentMap(Model):
     """A lat-long HDR map (Mitsuba's convention: u = atan2(x, -z) / 2pi, v = acos(y) / pi).
 
-    `path` is an EXR file, `procedural` names a generator in `workers.scene.envmaps`
+    `path` is an EXR file, `procedural` names a generator in `workers.scene.generators.envmaps`
     (`sky`, `studio`) with `params`, and `builtin` names an HDRI shipped in `assets/hdri`.
     """
 

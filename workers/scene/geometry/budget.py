@@ -36,7 +36,7 @@ def shape_triangles(shape: spec.Shape, field: str) -> int | None:
         case spec.SphereShape():
             return 20 * 4**shape.subdivisions  # an icosphere: each subdivision splits a face in four
         case spec.ProceduralShape():
-            from workers.scene.procedural import generated_triangles
+            from workers.scene.generators.procedural import generated_triangles
 
             return generated_triangles(shape.generator, shape.params, field)
         case _:

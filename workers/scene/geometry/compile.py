@@ -157,7 +157,7 @@ def compile_scene(
         vertex_colors=_vertex_colors(chunks["col"], chunks["pos"]),
     )
     if isinstance(scene.environment, spec.EnvironmentMap):
-        from workers.scene.envmaps import load_environment
+        from workers.scene.generators.envmaps import load_environment
 
         image = load_environment(scene.environment, "environment", base)
         compiled.environment_image = (image * scene.environment.scale).astype(np.float32)

@@ -90,7 +90,7 @@ def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> M
                 path = base_dir / path
             mesh = load_mesh_file(path, f"{field}.path")
         case spec.ProceduralShape():
-            from workers.scene.procedural import generate
+            from workers.scene.generators.procedural import generate
 
             mesh = generate(shape.generator, shape.params, field)
         case spec.GltfShape():

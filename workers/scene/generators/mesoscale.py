@@ -16,8 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from workers.scene.format.spec import Structure
-from workers.scene.geometry.shapes import MeshData
-from workers.scene.procedural import (
+from workers.scene.generators.procedural import (
     GroundPlaneParams,
     Params,
     PositiveFloat,
@@ -28,6 +27,7 @@ from workers.scene.procedural import (
     orthonormal_frames,
     tubes,
 )
+from workers.scene.geometry.shapes import MeshData
 
 MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]

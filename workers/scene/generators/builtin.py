@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from workers.scene.envmaps import sun_direction
 from workers.scene.format.spec import AlbedoVariable as _Albedo
 from workers.scene.format.spec import (
     BoxShape,
@@ -28,6 +27,7 @@ from workers.scene.format.spec import LightIntensityVariable as _LightIntensity
 from workers.scene.format.spec import LightPositionVariable as _LightPosition
 from workers.scene.format.spec import RoughnessVariable as _Roughness
 from workers.scene.format.spec import TranslateVariable as _Translate
+from workers.scene.generators.envmaps import sun_direction
 
 BUILTIN_SCENES: dict[str, Callable[[], SceneSpec]] = {}
 

@@ -666,4 +666,4 @@ def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
     return grid_surface(occupied, edges)
 
 
-from workers.scene import mesoscale  # noqa: E402, F401  (registers the mesoscale generators)
+from workers.scene.generators import mesoscale  # noqa: E402, F401  (registers the mesoscale generators)

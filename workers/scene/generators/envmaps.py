@@ -16,11 +16,11 @@ from pydantic import BaseModel, ConfigDict, Field, FiniteFloat
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.generators.procedural import parse_params
 from workers.scene.importers.image_io import read_exr
 from workers.scene.importers.textures import check_exr_size
-from workers.scene.procedural import parse_params
 
-HDRI_DIR = Path(__file__).resolve().parents[2] / "assets" / "hdri"
+HDRI_DIR = Path(__file__).resolve().parents[3] / "assets" / "hdri"
 NEGATIVE_RINGING = 0.05  # negatives within 5% of the mean are lossy-compression ringing, clamped to 0
 
 Size = Annotated[int, Field(ge=2, le=16384)]
