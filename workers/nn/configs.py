@@ -37,8 +37,10 @@ class HashTableConfig(StrictModel):
     """The feature table of a multiresolution hash grid (instant-ngp): F features per vertex and T = 2^k
     rows per level; levels with more vertices than T hash into it."""
 
-    features_per_level: int = Field(2, ge=1, le=16, description="F: features per lattice vertex and level")
-    log2_table_size: int = Field(19, ge=8, le=24, description="log2 T: rows per level (hashed beyond)")
+    features_per_level: int = Field(2, ge=1, le=16, description="F: features per lattice vertex and level.")
+    log2_table_size: int = Field(
+        19, ge=8, le=24, description="log2 T: rows per level; finer levels hash into them."
+    )
 
     def build_on(self, geometry: GridGeometry) -> HashGrid:
         """The hash grid of this table on a lattice the caller derives."""
@@ -59,11 +61,11 @@ class HashGridConfig(HashTableConfig):
     """A hash grid with its own lattice: L levels of resolution floor(N_min * b^l) (instant-ngp Eq. 2).
     The defaults are instant-ngp's."""
 
-    type: Literal["hash_grid"] = "hash_grid"
-    levels: int = Field(16, ge=1, le=32, description="L: grid levels")
-    base_resolution: int = Field(16, ge=2, le=1 << 16, description="N_min: resolution of the coarsest level")
+    type: Literal["hash_grid"] = Field("hash_grid", description="Names this encoding.")
+    levels: int = Field(16, ge=1, le=32, description="L: grid levels.")
+    base_resolution: int = Field(16, ge=2, le=1 << 16, description="N_min: resolution of the coarsest level.")
     per_level_scale: float = Field(
-        2.0, ge=1.0, le=8.0, description="b: resolution growth from one level to the next"
+        2.0, ge=1.0, le=8.0, description="b: resolution growth from one level to the next."
     )
 
     def geometry(self, n_input_dims: int) -> GridGeometry:
@@ -82,8 +84,10 @@ class HashGridConfig(HashTableConfig):
 class SphericalHarmonicsConfig(StrictModel):
     """Real spherical harmonics of directions up to `degree`: (degree + 1)^2 features."""
 
-    type: Literal["spherical_harmonics"] = "spherical_harmonics"
-    degree: int = Field(4, ge=0, le=MAX_DEGREE)
+    type: Literal["spherical_harmonics"] = Field("spherical_harmonics", description="Names this encoding.")
+    degree: int = Field(
+        4, ge=0, le=MAX_DEGREE, description="The highest degree: (degree + 1)^2 features (0: constant)."
+    )
 
     def build(self, n_input_dims: int = 3) -> SphericalHarmonics:
         if n_input_dims != 3:
@@ -94,10 +98,10 @@ class SphericalHarmonicsConfig(StrictModel):
 class FrequencyConfig(StrictModel):
     """NeRF's positional encoding: sin and cos of base * 2^k x_i for k < n_frequencies (and x itself)."""
 
-    type: Literal["frequency"] = "frequency"
-    n_frequencies: int = Field(6, ge=1, le=32)
-    base: float = Field(math.pi, gt=0, description="the lowest frequency")
-    include_input: bool = True
+    type: Literal["frequency"] = Field("frequency", description="Names this encoding.")
+    n_frequencies: int = Field(6, ge=1, le=32, description="Octaves of sin and cos per coordinate.")
+    base: float = Field(math.pi, gt=0, description="The lowest frequency.")
+    include_input: bool = Field(True, description="Also pass the coordinates themselves.")
 
     def build(self, n_input_dims: int) -> FourierFeatures:
         return FourierFeatures(
@@ -108,8 +112,8 @@ class FrequencyConfig(StrictModel):
 class OneBlobConfig(StrictModel):
     """A soft one-hot of each coordinate in [0, 1] over `n_bins` bins (Müller et al. 2019)."""
 
-    type: Literal["one_blob"] = "one_blob"
-    n_bins: int = Field(32, ge=2, le=1024)
+    type: Literal["one_blob"] = Field("one_blob", description="Names this encoding.")
+    n_bins: int = Field(32, ge=2, le=1024, description="Bins per coordinate.")
 
     def build(self, n_input_dims: int) -> OneBlob:
         return OneBlob(n_input_dims, self.n_bins)
@@ -118,9 +122,9 @@ class OneBlobConfig(StrictModel):
 class SharedInputsConfig(StrictModel):
     """One `encoding` shared by `n_inputs` points packed side by side (Weier et al. 2023, Sec. 4.3)."""
 
-    type: Literal["shared_inputs"] = "shared_inputs"
-    n_inputs: int = Field(2, ge=1, le=64)
-    encoding: EncodingConfig
+    type: Literal["shared_inputs"] = Field("shared_inputs", description="Names this encoding.")
+    n_inputs: int = Field(2, ge=1, le=64, description="Points packed side by side in the input.")
+    encoding: EncodingConfig = Field(description="The encoding every point goes through.")
 
     def build(self, n_input_dims: int) -> SharedInputsEncoding:
         if n_input_dims % self.n_inputs:
@@ -141,10 +145,10 @@ class MLPConfig(StrictModel):
     """`depth` hidden layers of `width` units with `activation` (He-initialised), then a linear output
     layer and `output_activation`."""
 
-    width: int = Field(64, ge=8, le=1024, description="units per hidden layer")
-    depth: int = Field(2, ge=1, le=8, description="hidden layers")
-    activation: Activation = "relu"
-    output_activation: Activation = "none"
+    width: int = Field(64, ge=8, le=1024, description="Units per hidden layer.")
+    depth: int = Field(2, ge=1, le=8, description="Hidden layers.")
+    activation: Activation = Field("relu", description="The hidden layers' activation.")
+    output_activation: Activation = Field("none", description="The output layer's activation.")
 
     def build(self, n_input_dims: int, n_output_dims: int) -> MLP:
         return MLP(

@@ -18,10 +18,18 @@ from workers.runtime.training import TrainConfig
 from workers.scene.format.strict import StrictModel
 
 
+def results_link(kind: str, anchor: str) -> str:
+    """A link from a field's description to the entry of `docs/results/<kind>.md` that chose its default,
+    relative to the kinds' parameter pages (`docs/kinds/<kind>.md`) that show the descriptions."""
+    return f"([results](../../docs/results/{kind}.md#{anchor}))"
+
+
 class KindConfig(StrictModel):
-    samplers: int = Field(1, ge=0, le=1024, description="Ray sampler actors; 0 makes batches in the driver")
+    samplers: int = Field(
+        1, ge=0, le=1024, description="Ray sampler actors making batches; 0 makes them in the driver."
+    )
     num_gpus: float = Field(
-        0, ge=0, le=64, description="GPUs for the driver (used when the cluster has them)"
+        0, ge=0, le=64, description="GPUs for the driver, used when the cluster has them."
     )
 
     @model_validator(mode="before")
@@ -40,20 +48,22 @@ class KindConfig(StrictModel):
 class TrainedKindConfig(KindConfig):
     """A kind that trains a model and reports it against path tracing of one view."""
 
-    train: TrainConfig = TrainConfig()
-    evaluation_spp: int = Field(16, ge=1, le=65536, description="spp of the model's frame in the report")
+    train: TrainConfig = Field(TrainConfig(), description="The training loop: steps, Adam and checkpoints.")
+    evaluation_spp: int = Field(
+        16, ge=1, le=65536, description="Samples per pixel of the model's frame in the report."
+    )
     reference_spp: int = Field(
         1024,
         ge=2,
         le=1 << 20,
-        description="spp of the converged path-traced image the report measures against",
+        description="Samples per pixel of the converged path-traced image the report measures against.",
     )
     torch_threads: int | None = Field(
         None,
         ge=1,
         le=256,
         description="torch's intra-op threads while the job runs (None: the process's setting); kinds of "
-        "small networks set 1, since extra threads only busy-wait on their tiny ops",
+        "small networks set 1, since extra threads only busy-wait on their tiny ops.",
     )
 
     @model_validator(mode="after")

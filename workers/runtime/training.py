@@ -61,12 +61,22 @@ class TrainingDiverged(RuntimeError):
 class Schedule(StrictModel):
     """Learning rate against step: linear warmup, then constant, exponential decay or cosine decay."""
 
-    lr: float = Field(1e-3, gt=0)
-    kind: Literal["constant", "exponential", "cosine"] = "constant"
-    warmup_steps: int = Field(0, ge=0, le=10_000_000)
-    decay_rate: float = Field(0.1, gt=0, le=1)  # exponential: factor reached after `decay_steps`
-    decay_steps: int = Field(10_000, ge=1, le=10_000_000)
-    final_lr_fraction: float = Field(0.0, ge=0, le=1)  # cosine: the floor, as a fraction of `lr`
+    lr: float = Field(1e-3, gt=0, description="The peak learning rate.")
+    kind: Literal["constant", "exponential", "cosine"] = Field(
+        "constant", description="The rate's shape after warmup: constant, exponential or cosine decay."
+    )
+    warmup_steps: int = Field(
+        0, ge=0, le=10_000_000, description="Steps of linear warmup from lr / warmup_steps to lr."
+    )
+    decay_rate: float = Field(
+        0.1, gt=0, le=1, description="Exponential decay: the factor reached after `decay_steps`."
+    )
+    decay_steps: int = Field(
+        10_000, ge=1, le=10_000_000, description="Exponential decay: steps to reach `decay_rate`."
+    )
+    final_lr_fraction: float = Field(
+        0.0, ge=0, le=1, description="Cosine decay: the floor at the last step, as a fraction of `lr`."
+    )
 
     def at(self, step: int, total_steps: int) -> float:
         if step < self.warmup_steps:
@@ -84,15 +94,20 @@ class Schedule(StrictModel):
 class OptimizerConfig(StrictModel):
     """One Adam's knobs: its learning-rate schedule, moment decays, weight decay and gradient clipping."""
 
-    schedule: Schedule = Schedule()
-    betas: tuple[float, float] = (0.9, 0.99)
-    eps: float = Field(1e-15, gt=0)
-    weight_decay: float = Field(0.0, ge=0)
-    grad_clip_norm: float | None = Field(None, gt=0)
-    # PyTorch's fused Adam: the whole update of a parameter in one kernel rather than a pass over it per
-    # operation (prt's default network, 773k parameters, one thread: 7.2 -> 0.7 CPU ms a step). The same
-    # update rounded differently, so off unless a kind measured it (`PrtConfig.train`).
-    fused: bool = False
+    schedule: Schedule = Field(Schedule(), description="The learning rate against the step.")
+    betas: tuple[float, float] = Field(
+        (0.9, 0.99), description="Adam's decays of its first and second moment estimates."
+    )
+    eps: float = Field(1e-15, gt=0, description="Adam's epsilon, added to the second moment's root.")
+    weight_decay: float = Field(0.0, ge=0, description="Adam's L2 weight decay.")
+    grad_clip_norm: float | None = Field(
+        None, gt=0, description="Clip the gradients' global norm to this (null: no clipping)."
+    )
+    fused: bool = Field(
+        False,
+        description="PyTorch's fused Adam, one kernel per parameter's update (prt's network: 7.2 -> 0.7 CPU "
+        "ms a step); it rounds differently, so off unless a kind measured it.",
+    )
 
 
 class TrainConfig(OptimizerConfig):
@@ -102,11 +117,21 @@ class TrainConfig(OptimizerConfig):
     one network sets them directly, a GAN sets `optimizers["generator"]` and `["discriminator"]`.
     """
 
-    steps: int = Field(1000, ge=1, le=10_000_000)
-    optimizers: dict[str, OptimizerConfig] = Field(default_factory=dict)
-    mixed_precision: bool = True  # honoured on CUDA only; CPU runs stay in float32
-    checkpoint_every: int = Field(500, ge=1, le=10_000_000)
-    progress_every: int = Field(10, ge=1, le=10_000_000)
+    steps: int = Field(1000, ge=1, le=10_000_000, description="Optimizer steps of the whole run.")
+    optimizers: dict[str, OptimizerConfig] = Field(
+        default_factory=dict,
+        description="Per-phase optimizers by phase name (a GAN's `generator` and `discriminator`); a phase "
+        "not named uses the loop's own settings.",
+    )
+    mixed_precision: bool = Field(
+        True, description="Mixed precision with a grad scaler, on CUDA only; CPU runs stay in float32."
+    )
+    checkpoint_every: int = Field(
+        500, ge=1, le=10_000_000, description="Steps between checkpoints the job resumes from."
+    )
+    progress_every: int = Field(
+        10, ge=1, le=10_000_000, description="Steps between progress reports (loss, rate, ETA)."
+    )
 
     def optimizer(self, phase: str) -> OptimizerConfig:
         """The settings of the named phase's optimizer: its entry in `optimizers`, else the loop's own."""

@@ -1,11 +1,15 @@
-"""The `render` kind's config and presets: a reference path-traced image, sized for CI, this CPU or GPUs."""
+"""The `render` kind's config and presets (`presets/*.yaml`): a reference path-traced image, sized for CI,
+a 2-core CPU or GPUs."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from pydantic import Field, model_validator
 
 from workers.render.render import RenderSettings
 from workers.runtime.kind_config import KindConfig
+from workers.runtime.presets import load_presets
 
 # Refused before planning (a plan of a 16384^2 image at 2^20 spp took seconds to enumerate): the film of
 # 8192^2 pixels with its AOVs is about 3.5 GB of float32; 2^36 samples is 16 times the `paper` preset.
@@ -16,16 +20,23 @@ MAX_SAMPLES = 1 << 36
 class RenderConfig(KindConfig):
     """What to render; the seed is not here because it belongs to the job (it is part of its identity)."""
 
-    spp: int = Field(256, ge=1, le=1 << 20)
-    width: int = Field(256, ge=1, le=16384)
-    height: int = Field(256, ge=1, le=16384)
-    max_depth: int = Field(8, ge=1, le=1024)
-    rr_depth: int = Field(5, ge=1, le=1024)
-    tile_size: int = Field(64, ge=8, le=1024)
-    aovs: bool = Field(True, description="also write the G-buffers (position, normal, albedo, ...)")
-    samplers: int = Field(2, ge=0, le=1024, description="Ray sampler actors; 0 renders inside the driver")
-    # Checkpoint after a pass once this many seconds have passed since the last one; 0: after every pass.
-    checkpoint_interval_s: float = Field(10.0, ge=0, le=86_400)
+    spp: int = Field(256, ge=1, le=1 << 20, description="Samples per pixel.")
+    width: int = Field(256, ge=1, le=16384, description="Image width, pixels.")
+    height: int = Field(256, ge=1, le=16384, description="Image height, pixels.")
+    max_depth: int = Field(8, ge=1, le=1024, description="Most path segments a sample traces.")
+    rr_depth: int = Field(5, ge=1, le=1024, description="Path depth from which Russian roulette ends paths.")
+    tile_size: int = Field(64, ge=8, le=1024, description="Side of the square tiles samplers render, pixels.")
+    aovs: bool = Field(True, description="Also write the G-buffers (position, normal, albedo, ...).")
+    samplers: int = Field(
+        2, ge=0, le=1024, description="Ray sampler actors rendering tiles; 0 renders inside the driver."
+    )
+    checkpoint_interval_s: float = Field(
+        10.0,
+        ge=0,
+        le=86_400,
+        description="Checkpoint after a pass once this many seconds have passed since the last one; 0: "
+        "after every pass.",
+    )
 
     @model_validator(mode="after")
     def _bounded(self) -> RenderConfig:
@@ -52,8 +63,4 @@ class RenderConfig(KindConfig):
         )
 
 
-PRESETS: dict[str, dict] = {
-    "quick": {"width": 64, "height": 64, "spp": 16, "tile_size": 32, "checkpoint_interval_s": 0},
-    "default": {"width": 256, "height": 256, "spp": 256},
-    "paper": {"width": 1024, "height": 1024, "spp": 4096, "samplers": 8, "checkpoint_interval_s": 60},
-}
+PRESETS = load_presets(RenderConfig, Path(__file__).with_name("presets"))
