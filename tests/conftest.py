@@ -11,7 +11,7 @@ import shutil
 import tempfile
 
 import workers  # noqa: F401
-from workers.scene.stored import CACHE_ENV
+from workers.scene.portability.stored import CACHE_ENV
 
 if CACHE_ENV not in os.environ:
     os.environ[CACHE_ENV] = tempfile.mkdtemp(prefix="nbake-test-scenes-")

@@ -16,7 +16,7 @@ from services.artifacts.manifest import store_file
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, Staging, UploadError, UploadLimits
 from services.artifacts.store import BlobStore, read_chunks
 from services.artifacts.validation import validate_scene
-from workers.scene.io import IMPORTED_SCENE_SUFFIXES, SCENE_FILE_SUFFIXES
+from workers.scene.portability.io import IMPORTED_SCENE_SUFFIXES, SCENE_FILE_SUFFIXES
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses

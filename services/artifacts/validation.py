@@ -18,7 +18,7 @@ from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.textures import check_texture_size, image_textures
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses

@@ -14,7 +14,7 @@ import typer
 from pydantic import ValidationError
 
 from workers.scene.format.errors import SceneError
-from workers.scene.io import dotted_path
+from workers.scene.portability.io import dotted_path
 
 USER_ERROR_EXIT = 2
 

@@ -18,7 +18,7 @@ from workers.models.registry import register_materials
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.scene.format.spec import Camera
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 DEFAULT_OUTPUT_DIR = Path("out")
 

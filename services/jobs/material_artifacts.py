@@ -5,8 +5,8 @@ renders it in any number of scenes without uploading it again.
 At each submission the artifact must exist, be the submitting tenant's, and be of the kind that draws the
 material (`workers.models.registry.material_kind`); an id that does not exist and another tenant's get the
 same answer, so ids cannot be probed. When the job starts, the artifact's files join the scene's under
-`.artifacts/<hex>/` of its folder (`workers.scene.stored.artifact_folder`): a worker on any node fetches
-them by digest with the scene's own files (`StoredScene`), and the material loads them from there.
+`.artifacts/<hex>/` of its folder (`workers.scene.portability.stored.artifact_folder`): a worker on any node
+fetches them by digest with the scene's own files (`StoredScene`), and the material loads them from there.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from services.platform.auth import Principal
 from services.platform.errors import InvalidInput
 from workers.models.registry import material_kind
 from workers.scene.format.spec import AggregateMaterial, SceneSpec
-from workers.scene.stored import StoredFile, artifact_folder
+from workers.scene.portability.stored import StoredFile, artifact_folder
 
 KINDS_CACHE_SIZE = 4096  # artifact id -> kind; a manifest never changes, so a repeated submission reads none
 

@@ -25,8 +25,8 @@ from services.jobs.tenants import Principal, Tenancy
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
 from workers.scene.generators.builtin import BUILTIN_SCENES, get_builtin
-from workers.scene.io import check_nesting, load_scene, scene_from_dict
-from workers.scene.stored import ARTIFACTS_FOLDER, StoredFile, StoredScene
+from workers.scene.portability.io import check_nesting, load_scene, scene_from_dict
+from workers.scene.portability.stored import ARTIFACTS_FOLDER, StoredFile, StoredScene
 
 ASSET_PREFIX = "sha256:"
 if TYPE_CHECKING:

@@ -29,8 +29,8 @@ from workers.runtime.contract import Plan, PlanItem
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import MeshShape, SceneSpec
 from workers.scene.geometry.budget import scene_triangles
-from workers.scene.io import dotted_path
-from workers.scene.reference import SceneRef
+from workers.scene.portability.io import dotted_path
+from workers.scene.portability.reference import SceneRef
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses

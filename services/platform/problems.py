@@ -18,7 +18,7 @@ from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from services.platform.problem_table import ProblemInfo, ProblemTable, internal_problem
-from workers.scene.io import dotted_path
+from workers.scene.portability.io import dotted_path
 
 PROBLEM_JSON = "application/problem+json"
 log = logging.getLogger(__name__)

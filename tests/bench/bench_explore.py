@@ -81,7 +81,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import Progress, train_phases
 from workers.scene.format.variables import dimension_names
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 # EXPLORE_BENCH_SCENES (comma-separated) runs only those scenes
 SCENES = tuple(os.environ.get("EXPLORE_BENCH_SCENES", "cornell_variable,mirror_variable").split(","))

@@ -35,7 +35,7 @@ from workers.runtime.training import train
 from workers.runtime.view import PathTracedView
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 CURVE_STEPS = 300
 IMAGE_SIZE = 64

@@ -50,7 +50,7 @@ from workers.runtime.equal_time import seconds_at_error
 from workers.runtime.report import Report
 from workers.runtime.threads import torch_threads
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 PRESET = os.environ.get("PRT_BENCH_PRESET", "default")
 OVERRIDES = json.loads(os.environ.get("PRT_BENCH_OVERRIDES", "{}"))

@@ -21,7 +21,7 @@ from workers.models.prt.network import PrtNetwork
 from workers.models.registry import get_kind
 from workers.render.render import render
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SCENES = ("env_lit_objects", "glossy_row")
 REPEATS = 5

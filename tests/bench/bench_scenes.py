@@ -13,7 +13,7 @@ from tests.bench.common import BenchSection, median_seconds
 from workers.render.bsdf import SurfaceBatch, bsdf_code, bsdf_family, eval_bsdf, sample_bsdf
 from workers.scene.format import spec
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import dump_scene, load_scene
+from workers.scene.portability.io import dump_scene, load_scene
 
 N = 1 << 18
 

@@ -33,7 +33,7 @@ from workers.models.lod.sampling import LodSource, LodSourceConfig, asset_triang
 from workers.models.lsnif import KIND as LSNIF
 from workers.models.lsnif.sampling import ObjectRaySource, ObjectSourceConfig
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 BATCHES = 7  # timed batches per source (after one warm-up batch)
 PEER_ROUNDS = 3  # alternating processes per tree with BENCH_SOURCES_PEER

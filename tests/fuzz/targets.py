@@ -23,7 +23,7 @@ with atheris.instrument_imports(include=["services", "workers"]):
     from services.inference.errors import MalformedBody
     from services.inference.wire import decode_binary
     from workers.scene.format.errors import SceneError
-    from workers.scene.io import load_scene
+    from workers.scene.portability.io import load_scene
 
 # NBAKE_FUZZ_DIR: a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
 WORK = Path(tempfile.mkdtemp(prefix="nbake-fuzz-", dir=os.environ.get("NBAKE_FUZZ_DIR")))

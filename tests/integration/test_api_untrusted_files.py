@@ -20,9 +20,9 @@ from tests.integration.test_api_server import (
     settings_for,
 )
 from tests.support import hostile_inputs as hostile
-from workers.scene import io
 from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
-from workers.scene.io import MAX_SCENE_VALUES
+from workers.scene.portability import io
+from workers.scene.portability.io import MAX_SCENE_VALUES
 
 PEAK_GROWTH_BYTES = 256 << 20  # the 5.7 MiB list took +1 GB in the API process, the glTF bomb +1.9 GB
 

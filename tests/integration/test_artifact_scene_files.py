@@ -26,7 +26,7 @@ from workers.models.prt.network import PrtNetwork
 from workers.models.registry import RENDER, get_kind
 from workers.scene.format.spec import TranslateVariable
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.stored import CACHE_ENV
+from workers.scene.portability.stored import CACHE_ENV
 
 
 def served(tmp_path: Path, kind: str, files: dict, config, job: Path):

@@ -23,7 +23,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.gbuffer import primary_gbuffers
 from workers.runtime.report import Report
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SEED = 5
 KIND = get_kind("explore")

@@ -12,7 +12,7 @@ from workers.models.explore.source import PatchRequest, PatchSource, PatchSource
 from workers.runtime.samplers import InProcessRenders, RenderPool
 from workers.runtime.sources import SourceSpec
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 CONFIG = KIND.resolve_config("quick", {"spp": 2})
 SPEC = SourceSpec(PatchSource, PatchSourceConfig(SceneRef(get_builtin("cornell_moving_light")), CONFIG), 3)

@@ -10,7 +10,7 @@ import trimesh
 
 from tests.integration.test_render_vs_mitsuba import compare
 from tests.support.gltf_files import GltfBuilder, quad
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 mi = pytest.importorskip("mitsuba")
 pytestmark = [pytest.mark.mitsuba, pytest.mark.slow]

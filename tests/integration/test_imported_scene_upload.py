@@ -23,7 +23,7 @@ from workers.models.render.config import RenderConfig
 from workers.render.render import render
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 SEED = 3
 

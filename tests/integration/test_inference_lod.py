@@ -31,7 +31,7 @@ from workers.models.lod.infer import LodQuery, LodRender
 from workers.models.registry import get_inference
 from workers.scene.format.spec import Camera
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.portable import StoredScene, load_scene, save_scene
+from workers.scene.portability.portable import StoredScene, load_scene, save_scene
 
 
 @pytest.fixture(scope="module")

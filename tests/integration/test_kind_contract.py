@@ -24,7 +24,7 @@ from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.contract import JobContext, imported
 from workers.runtime.report import PATH_TRACING_SPP, Report
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SEED = 5
 TRAINING_KINDS = [name for name in kind_names() if get_kind(name).method is not None]

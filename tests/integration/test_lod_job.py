@@ -29,7 +29,7 @@ from workers.render.render import RenderSettings, render
 from workers.runtime.report import Report
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SEED = 3
 OVERRIDES = {"samplers": 0}

@@ -41,8 +41,8 @@ from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import read_exr_channels
-from workers.scene.io import load_scene, scene_from_dict
-from workers.scene.reference import SceneRef
+from workers.scene.portability.io import load_scene, scene_from_dict
+from workers.scene.portability.reference import SceneRef
 
 database, server, client = api.incidental_database, api.server, api.client  # fixtures
 SEED = 5

@@ -38,7 +38,7 @@ from workers.scene.format import spec
 from workers.scene.generators.builtin import cornell_box, cornell_glossy, ground
 from workers.scene.geometry import shapes
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 mi = pytest.importorskip("mitsuba")
 pytestmark = pytest.mark.mitsuba

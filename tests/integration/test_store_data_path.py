@@ -27,8 +27,8 @@ from workers.driver.jobs import JobEvent, JobSpec, run_job
 from workers.models.registry import get_kind
 from workers.runtime.checkpoints import COMMIT_MARKER, CheckpointStore
 from workers.scene.importers.image_io import read_exr
-from workers.scene.io import load_scene
-from workers.scene.stored import StoredScene
+from workers.scene.portability.io import load_scene
+from workers.scene.portability.stored import StoredScene
 
 
 def in_store(url: str, store_url: str) -> bool:

@@ -14,7 +14,7 @@ from workers.runtime.checkpoints import CheckpointStore
 from workers.runtime.contract import JobContext, imported
 from workers.runtime.pipeline import Trainable, round_to_storage
 from workers.scene.format.spec import SceneSpec
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 
 def run_kind_job(

@@ -14,7 +14,7 @@ from services.artifacts.store import BlobCorrupted, BlobStore
 from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 SCENE = """\
 name: uploaded

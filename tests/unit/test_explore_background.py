@@ -26,7 +26,7 @@ from workers.scene.format.spec import (
     SceneSpec,
 )
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SIZE = 24
 SUN_AHEAD = {"sun_elevation": 10.0, "sun_azimuth": 0.0, "sun_irradiance": 1.0}  # its glow turns with the sky

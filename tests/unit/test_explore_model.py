@@ -22,7 +22,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import TrainConfig, train_phases
 from workers.scene.format.spec import SceneSpec
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 K = 3
 QUICK = ExploreConfig.model_validate(PRESETS["quick"])

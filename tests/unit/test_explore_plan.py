@@ -12,9 +12,9 @@ from workers.models.explore import KIND
 from workers.models.explore.source import PatchRequest, PatchSource, PatchSourceConfig
 from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.io import scene_from_dict
-from workers.scene.reference import SceneRef
-from workers.scene.stored import CACHE_ENV, StoredScene
+from workers.scene.portability.io import scene_from_dict
+from workers.scene.portability.reference import SceneRef
+from workers.scene.portability.stored import CACHE_ENV, StoredScene
 
 CONFIG = KIND.resolve_config("quick", {})
 

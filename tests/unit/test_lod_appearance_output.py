@@ -24,7 +24,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.format.spec import ConstantBackground, Diffuse, ProceduralShape, SceneObject, SceneSpec
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 STEPS = 150
 HELD_OUT_BATCHES = 4

@@ -42,7 +42,7 @@ from workers.runtime.sources import SourceSpec
 from workers.runtime.training import train
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SEED = 0
 STEPS = 120

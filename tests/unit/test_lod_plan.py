@@ -22,7 +22,7 @@ from workers.models.lod.plan import (
 from workers.models.registry import get_kind
 from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 
 def quick(**overrides) -> LodConfig:

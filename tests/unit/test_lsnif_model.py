@@ -30,7 +30,7 @@ from workers.scene.format.spec import SceneObject, SphereShape, Transform
 from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.shapes import MeshData
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 QUICK = LsnifConfig.model_validate({**PRESETS["quick"], "min_triangles": 1000})
 

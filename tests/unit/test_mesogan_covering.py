@@ -20,7 +20,7 @@ from workers.render.render import RenderSettings, render
 from workers.scene.format.spec import MesoganMaterial
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import scene_from_dict
+from workers.scene.portability.io import scene_from_dict
 
 RELATIVE = 0.04
 

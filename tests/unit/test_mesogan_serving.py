@@ -19,8 +19,8 @@ from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Diffuse, SceneObject
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.portable import neutral_scene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.portable import neutral_scene
+from workers.scene.portability.reference import SceneRef
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,7 @@ from pydantic import ValidationError
 
 from workers.models.registry import PRESET_NAMES, Kind, UnknownKind, get_kind, kind_names
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 
 @pytest.fixture(scope="module")

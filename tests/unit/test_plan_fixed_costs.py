@@ -10,7 +10,7 @@ from workers.runtime import fixed_costs as costs
 from workers.runtime.fixed_costs import fixed_costs, report_view
 from workers.scene.format.spec import SceneObject, SphereShape
 from workers.scene.generators.builtin import get_builtin
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 EXTRA_S = 1000.0
 

@@ -1,7 +1,8 @@
-"""The scene an artifact keeps (`workers.scene.portable`) and the parameters of a path-traced `:render`
-(`workers.runtime.view_render`): stand-ins keep their objects' placements and enclose their bounds, the
-files a scene reads travel with it (verified) and outlive the job's folder and the download, a scene whose
-files cannot be kept is refused with the reason, and a camera's given fields override the view's own."""
+"""The scene an artifact keeps (`workers.scene.portability.portable`) and the parameters of a path-traced
+`:render` (`workers.runtime.view_render`): stand-ins keep their objects' placements and enclose their
+bounds, the files a scene reads travel with it (verified) and outlive the job's folder and the download, a
+scene whose files cannot be kept is refused with the reason, and a camera's given fields override the view's
+own."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from workers.scene.format.spec import (
 )
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import write_exr, write_png
-from workers.scene.portable import (
+from workers.scene.portability.portable import (
     NEUTRAL_RADIANCE,
     StoredScene,
     framing_camera,
@@ -35,7 +36,7 @@ from workers.scene.portable import (
     portable_scene,
     save_scene,
 )
-from workers.scene.stored import CACHE_ENV
+from workers.scene.portability.stored import CACHE_ENV
 
 BALL_BOUNDS = np.array([[-0.3, -0.3, -0.3], [0.3, 0.3, 0.3]])
 

@@ -371,7 +371,7 @@ def test_a_batch_of_several_lightings_lights_each_pixel_group_through_its_own_wa
 def test_a_pooled_batch_lights_each_group_by_one_lighting_of_a_pool_built_once():
     from workers.models.prt.source import PrtSource, PrtSourceConfig, lighting_pool
     from workers.scene.generators.builtin import get_builtin
-    from workers.scene.reference import SceneRef
+    from workers.scene.portability.reference import SceneRef
 
     config = resolve_preset(PrtConfig, PRESETS, "quick", {"lighting_pool": 3, "lightings_per_step": 4})
     source = PrtSource(PrtSourceConfig(SceneRef(get_builtin("env_lit_objects")), config), seed=0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from workers.models.registry import get_kind
 from workers.scene.format import spec
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 
 def convex_box() -> spec.SceneSpec:

@@ -16,7 +16,7 @@ from workers.render.render import RenderSettings, render
 from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import scene_from_dict
+from workers.scene.portability.io import scene_from_dict
 
 BASE = {"type": "plastic", "diffuse": [0.2, 0.6, 0.3], "roughness": 0.3}
 built: list[tuple[dict, object]] = []

@@ -17,7 +17,7 @@ from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.importers.image_io import srgb_to_linear
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 S = math.sqrt(0.5)
 

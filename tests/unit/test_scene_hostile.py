@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from workers.scene.format.errors import SceneError
-from workers.scene.io import (
+from workers.scene.portability.io import (
     MAX_SCENE_DEPTH,
     MAX_SCENE_FILE_BYTES,
     MAX_SCENE_VALUES,

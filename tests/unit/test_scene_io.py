@@ -12,7 +12,7 @@ from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import BUILTIN_SCENES, cornell_box
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import dump_scene, load_scene
+from workers.scene.portability.io import dump_scene, load_scene
 
 YAML_SCENE = """\
 name: teapotless

@@ -18,7 +18,7 @@ from tests.support.gltf_files import QUAD_INDICES, QUAD_NORMALS, QUAD_POSITIONS,
 from workers.render.render import RenderSettings, render
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 FOV = 43.0
 
@@ -223,7 +223,7 @@ def test_a_scene_file_imports_a_usd_file_and_overrides_its_camera(tmp_path):
 def test_model_kinds_plan_on_imported_scenes(tmp_path, kind_name):
     """What `nbake submit model.glb --kind lod` plans on: the imported objects, the same from either file."""
     from workers.models.registry import get_kind
-    from workers.scene.reference import SceneRef
+    from workers.scene.portability.reference import SceneRef
 
     kind = get_kind(kind_name)
     summaries = []

@@ -14,7 +14,7 @@ from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry import compile as compile_module
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.variable_scene import CompiledVariableScene
-from workers.scene.io import scene_from_dict
+from workers.scene.portability.io import scene_from_dict
 
 
 def cornell(variables: list[dict], **extra) -> dict:

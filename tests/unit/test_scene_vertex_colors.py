@@ -19,7 +19,7 @@ from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.shapes import MeshData, check_mesh
 from workers.scene.importers.image_io import srgb_to_linear
 from workers.scene.importers.meshio import load_mesh_file
-from workers.scene.io import load_scene
+from workers.scene.portability.io import load_scene
 
 # Per quad corner: red grows along +x, green along +y, blue is constant (affine, so interpolation is exact).
 QUAD_COLORS = np.stack(

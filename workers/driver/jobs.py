@@ -48,8 +48,8 @@ from workers.runtime.contract import (
 from workers.runtime.pipeline import run_method
 from workers.runtime.resources import ResourceRequest, actor_options
 from workers.scene.format.errors import SceneError
-from workers.scene.reference import SceneRef
-from workers.scene.stored import StoredScene
+from workers.scene.portability.reference import SceneRef
+from workers.scene.portability.stored import StoredScene
 
 NAMESPACE = "neuralbake"
 MAX_BUFFERED_EVENTS = 10_000  # a service that stops polling loses the oldest events, not the driver's memory

@@ -23,7 +23,7 @@ import numpy as np
 
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import AggregateMaterial, Camera
-from workers.scene.stored import artifact_folder
+from workers.scene.portability.stored import artifact_folder
 
 if TYPE_CHECKING:
     from workers.render.aggregate import Aggregate

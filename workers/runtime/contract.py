@@ -18,7 +18,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from workers.runtime.checkpoints import CheckpointStore
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 PRESET_NAMES = ("quick", "default", "paper")
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from workers.runtime.contract import PlanItem
 from workers.runtime.kind_config import KindConfig, TrainedKindConfig
 from workers.runtime.report import PATH_TRACING_SPP
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 # Scheduler to the kind's first line: Ray starts the driver actor's worker process, which imports the
 # driver, torch (the runtime's batch streams need it), Numba and Embree: a warm `render` job's first log

@@ -20,7 +20,7 @@ from workers.render.render import RenderResult, RenderSettings, render
 from workers.runtime.threads import torch_threads
 from workers.scene.format.spec import Camera, Vec3
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.portable import StoredScene
+from workers.scene.portability.portable import StoredScene
 
 SCENE, NEUTRAL = "scene", "neutral"
 MAX_SIZE = 4096

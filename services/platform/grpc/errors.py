@@ -17,7 +17,7 @@ from pydantic import ValidationError
 
 from services.platform.grpc.handlers import Behaviour, rewrap
 from services.platform.problem_table import ProblemInfo, ProblemTable, internal_problem
-from workers.scene.io import dotted_path
+from workers.scene.portability.io import dotted_path
 
 DOMAIN = "neuralbake"
 log = logging.getLogger(__name__)

@@ -1,6 +1,6 @@
 """An `explore` artifact: the network's weights (safetensors, float16), a manifest (config, the scene's
 dimensions by name, the box positions are normalised by) and the scene with its variables
-(`workers.scene.portable`), from which serving computes G-buffers at any v.
+(`workers.scene.portability.portable`), from which serving computes G-buffers at any v.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from workers.models.explore.config import ExploreConfig
 from workers.models.explore.network import PixelGenerator
 from workers.scene.format.spec import SceneSpec
 from workers.scene.format.variables import dimension_names
-from workers.scene.portable import load_scene, portable_scene, save_scene
+from workers.scene.portability.portable import load_scene, portable_scene, save_scene
 
 MANIFEST = "explore.json"
 WEIGHTS = "explore.safetensors"

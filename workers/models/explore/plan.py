@@ -24,7 +24,7 @@ from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import RoughnessVariable, SceneSpec
 from workers.scene.format.variables import dimension_labels, variable_slices
 from workers.scene.geometry.variable_scene import CompiledVariableScene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 PROBE_SIZE = 16
 PROBE_SPP = 4

@@ -23,7 +23,7 @@ from workers.render.render import RenderSettings, render
 from workers.render.variable_tracer import VariableTracer
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.geometry.variable_scene import CompiledVariableScene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 
 @dataclass(frozen=True)

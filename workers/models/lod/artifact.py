@@ -1,6 +1,7 @@
 """A `lod` artifact: the sparse grid with its thresholds and both networks in one safetensors file (the
 networks in float16, as the paper stores them), a JSON manifest (config, objects, LoDs) and the scene
-around the asset (`workers.scene.portable`: the asset's objects as stand-ins, whose place the LoD takes).
+around the asset (`workers.scene.portability.portable`: the asset's objects as stand-ins, whose place the
+LoD takes).
 
 `load` rebuilds everything exactly, and `aggregate` hands the path tracer the asset at any built LoD.
 """
@@ -21,7 +22,7 @@ from workers.models.lod.networks import LodNetworks
 from workers.models.lod.plan import octaves
 from workers.models.lod.traversal import LodAggregate
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.portable import portable_scene, save_scene
+from workers.scene.portability.portable import portable_scene, save_scene
 
 MANIFEST = "lod.json"
 WEIGHTS = "lod.safetensors"

@@ -38,7 +38,7 @@ from workers.runtime.view_render import (
 )
 from workers.scene.format.spec import Camera, Diffuse, SceneObject
 from workers.scene.geometry.compile import CompiledScene, compile_scene
-from workers.scene.portable import (
+from workers.scene.portability.portable import (
     StoredScene,
     framing_camera,
     load_scene,

@@ -21,7 +21,7 @@ from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Camera, SceneSpec
 from workers.scene.geometry.shapes import MeshData
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 TRAINING_SAMPLES_PER_SECOND = 60_000.0  # voxel samples per second, one idle 2-core CPU, default sizes
 # quick menger_sponge: 24,128 occupied voxels x 64 samples took 1.3-3.0 s at loads 6-7 (0.5-1.2M a second);

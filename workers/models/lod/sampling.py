@@ -42,7 +42,7 @@ from workers.render.integrator import PathTracer
 from workers.render.intersector import Hits
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 RR_MAX_SURVIVAL = 0.95
 

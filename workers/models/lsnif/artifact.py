@@ -2,7 +2,7 @@
 MLP in float16 as the paper's sizes assume; see `LsnifObject.round_to_storage`), plus a JSON
 manifest with the config, the material lists and the instance mapping (which scene objects use which
 network, with their transforms at training time) and the materials' definitions, and the scene the
-objects were trained in (`workers.scene.portable`: objects read from files become stand-ins).
+objects were trained in (`workers.scene.portability.portable`: objects read from files become stand-ins).
 
 The grid's vertex keys are not stored: they follow from the voxels (see `encoding`). Loading rebuilds
 each object exactly, and `intersector` places the networks wherever a scene puts the same-named objects,
@@ -26,7 +26,7 @@ from workers.models.lsnif.network import STORAGE_DTYPE, LsnifObject
 from workers.render.voxels import VoxelGrid
 from workers.scene.format.spec import Material, SceneSpec
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.portable import portable_scene, reads_file, save_scene, untextured
+from workers.scene.portability.portable import portable_scene, reads_file, save_scene, untextured
 
 MANIFEST = "lsnif.json"
 SAFETENSORS = "application/vnd.neuralbake.safetensors"

@@ -39,7 +39,13 @@ from workers.runtime.view_render import (
 )
 from workers.scene.format.spec import Camera, Diffuse, SceneObject, Transform
 from workers.scene.geometry.compile import CompiledScene, compile_scene
-from workers.scene.portable import StoredScene, framing_camera, load_scene, neutral_scene, standin_shape
+from workers.scene.portability.portable import (
+    StoredScene,
+    framing_camera,
+    load_scene,
+    neutral_scene,
+    standin_shape,
+)
 
 TRIANGLES, LSNIF = "triangles", "lsnif"
 # Working memory of a ray query: the outputs (37 bytes a ray) and their encoded copy; and per ray of a

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from workers.models.lsnif.config import LsnifConfig
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import fixed_costs, report_view
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 LSNIF = "lsnif"
 EMBREE = "embree"

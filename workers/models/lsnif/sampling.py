@@ -27,7 +27,7 @@ from workers.render.voxels import VoxelGrid, voxelize
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.geometry.compile import CompiledScene
 from workers.scene.geometry.shapes import MeshData
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SURFACE_SEARCH_ROUNDS = 8
 

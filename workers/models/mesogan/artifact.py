@@ -1,6 +1,6 @@
 """A mesogan artifact: the generator's mapping, synthesis and decoder weights (safetensors, float16 as
 trained and measured; the discriminator is training-only), a JSON manifest with the config, and the
-scene it was trained for (`workers.scene.portable`), so the inference service can render it there.
+scene it was trained for (`workers.scene.portability.portable`), so the inference service can render it there.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import torch
 from workers.models.mesogan.config import MesoganConfig
 from workers.models.mesogan.networks import MesoGAN
 from workers.scene.format.spec import SceneSpec
-from workers.scene.portable import portable_scene, save_scene
+from workers.scene.portability.portable import portable_scene, save_scene
 
 MANIFEST = "mesogan.json"
 WEIGHTS = "mesogan.safetensors"

@@ -49,7 +49,7 @@ from workers.scene.format.spec import (
 )
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import CompiledScene, compile_scene
-from workers.scene.portable import framing_camera, load_scene, neutral_scene
+from workers.scene.portability.portable import framing_camera, load_scene, neutral_scene
 
 GENERATE = "generate"
 MAX_WINDOW = 2048

@@ -14,7 +14,7 @@ from workers.models.mesogan.covering import build_shell, covering
 from workers.models.mesogan.sampling import cone_radius, widest_footprint
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import fixed_costs, report_view
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 SECONDS_PER_IMAGE = 0.5  # path tracing one training view (quick sizes, one idle core)
 SECONDS_PER_STEP_PER_VIEW = 0.02  # generator + discriminator phases per batch element at 16^2, 6 samples

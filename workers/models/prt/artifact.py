@@ -1,6 +1,6 @@
 """A `prt` artifact: the network (S, W, U, f) in safetensors at float16, a JSON manifest with the config
-and the hash grid's box, and the scene with the files it reads (`workers.scene.portable`): relighting
-needs the scene's geometry for the G-buffer and the direct light."""
+and the hash grid's box, and the scene with the files it reads (`workers.scene.portability.portable`):
+relighting needs the scene's geometry for the G-buffer and the direct light."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import torch
 from workers.models.prt.config import PrtConfig
 from workers.models.prt.network import PrtNetwork
 from workers.scene.format.spec import SceneSpec
-from workers.scene.portable import StoredScene, load_scene, portable_scene, save_scene
+from workers.scene.portability.portable import StoredScene, load_scene, portable_scene, save_scene
 
 MANIFEST = "prt.json"
 WEIGHTS = "prt.safetensors"

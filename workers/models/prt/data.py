@@ -34,7 +34,7 @@ from workers.models.prt.views import FAR, NEAR, TRAIN, pixel_rays, trajectory_ca
 from workers.nn.haar import cubemap_wavelets
 from workers.render.integrator import PathTracer
 from workers.scene.format.spec import Camera
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 BOX_PADDING = 0.02  # of the box's diagonal, around every point a view sees
 PIXEL_MAPS = ("uniform", "glossy", "transport_detail")

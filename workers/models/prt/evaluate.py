@@ -26,7 +26,7 @@ from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, render
 from workers.runtime.view import PathTracedView
 from workers.scene.format.spec import Camera
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 TRUTH_SEED = 1000  # the direct ground truth's noise is independent of the frame's
 

@@ -16,7 +16,7 @@ from workers.models.prt.data import scene_box
 from workers.models.prt.probe import probe_objects
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import fixed_costs, report_view
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 # Measured on this 2-core CPU (prt17, one thread, beside two default jobs): a default job's 147k
 # rows at 128 spp took 0.54-0.62 CPU s a view, 96 views, ~320k binned paths a second. (The figures before,

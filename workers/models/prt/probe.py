@@ -15,7 +15,7 @@ from workers.models.prt.gbuffer import surface_inputs
 from workers.models.prt.transport import DIRECT, INDIRECT, trace_rows
 from workers.models.prt.views import TRAIN, pixel_rays
 from workers.render.sampling import luminance
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 MIN_INDIRECT_SHARE = 0.01  # of an object's light under a white sky: below, indirect is not worth a network
 PROBE_VIEWS = 3

@@ -25,7 +25,7 @@ from workers.models.prt.probe import modelled_objects
 from workers.models.prt.selection import RankedWavelets, ranked_wavelets, training_selection
 from workers.runtime.sources import Batch, batch_rng
 from workers.runtime.threads import torch_threads
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 POOL_STREAM = 2**41  # the pool's random stream; batch indices never reach it
 

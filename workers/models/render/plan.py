@@ -8,7 +8,7 @@ from workers.render.render import MAX_PATHS_PER_ITEM, plan_render
 from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import fixed_costs
 from workers.scene.format.spec import AggregateMaterial
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 RAYS_PER_SECOND_PER_CORE = 2.5e6  # Embree closest hits plus NumPy shading, measured on the build machines
 RAYS_PER_SAMPLE = 8  # camera ray, bounces and shadow rays of an average path at max_depth 8

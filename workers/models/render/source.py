@@ -15,7 +15,7 @@ from workers.render.camera import PinholeCamera
 from workers.render.integrator import PathTracer
 from workers.render.render import RenderSettings, TileResult, plan_render, render_item, rendered_view
 from workers.runtime.sources import Batch
-from workers.scene.reference import SceneRef
+from workers.scene.portability.reference import SceneRef
 
 RADIANCE = "radiance"
 RAYS = "rays_traced"

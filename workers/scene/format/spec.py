@@ -247,7 +247,8 @@ class AggregateMaterial(Model):
     The model is an artifact of the kind that declares the material's `type` (`Kind.materials`), named
     by exactly one of `path`, its folder relative to the scene file (as `nbake download` writes it), or
     `artifact`, its id in the job server's store (`sha256:...`, as a finished job reports it), which the
-    server checks at submission and fetches into the job's folder (`workers.scene.stored.artifact_folder`).
+    server checks at submission and fetches into the job's folder
+    (`workers.scene.portability.stored.artifact_folder`).
     """
 
     base: SurfaceMaterial = Diffuse()

@@ -12,8 +12,8 @@ numbers (candela and lux read as W/sr and W/m^2: one photometric unit per radiom
 without a photometric scale do). The first perspective camera in node order is the view.
 
 Defaults, each recorded in `SceneSpec.notes` (job plans list them): no camera gives a camera framing the
-scene's bounds (`workers.scene.portable.framing_camera`); no light and no emission gives the `studio`
-environment. Unsupported optional features are listed as ignored; an unsupported extension in
+scene's bounds (`workers.scene.portability.portable.framing_camera`); no light and no emission gives the
+`studio` environment. Unsupported optional features are listed as ignored; an unsupported extension in
 `extensionsRequired`, a non-triangle primitive, a sparse accessor or a reference leaving the file's
 folder is a SceneError naming it.
 """
@@ -429,7 +429,7 @@ def _bounds(geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[in
 def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
     """The scene of the glTF file at `path`; its paths are relative to the folder `prefix` names
     (`posixpath.join(prefix, name)`: "" when the scene file is the glTF file itself)."""
-    from workers.scene.portable import framing_camera
+    from workers.scene.portability.portable import framing_camera
 
     file = read_gltf(path)
     doc = file.document

@@ -293,7 +293,7 @@ def _world(prim, time) -> np.ndarray:
 
 def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
     """The scene of the USD file at `path`; paths relative to the folder `prefix` names (as for glTF)."""
-    from workers.scene.portable import framing_camera
+    from workers.scene.portability.portable import framing_camera
 
     _, usd, usd_geom, usd_lux, usd_shade = _pxr()
     path = Path(path)

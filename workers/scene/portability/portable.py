@@ -5,7 +5,7 @@ An artifact keeps the scene as JSON (`scene.json`) and the files it reads under 
 job's folder, so the spec's relative paths resolve unchanged: meshes, glTF buffers and USD layers, image
 textures, an EXR environment, the folder of an artifact a material draws. The store keeps each file once
 by its digest, so artifacts of one scene share them. Serving puts them in the node's scene cache, keyed by
-their digests (`workers.scene.stored`), where they outlive the download folder.
+their digests (`workers.scene.portability.stored`), where they outlive the download folder.
 
 Objects a model replaces become stand-ins: their shape is a coarse sphere around their local bounds, with
 their name, material, transform and instances unchanged. Their triangles are never traced, but their
@@ -45,8 +45,8 @@ from workers.scene.format.spec import (
     UsdShape,
 )
 from workers.scene.geometry.compile import CompiledScene, compile_scene
-from workers.scene.stored import StoredFile, artifact_folder
-from workers.scene.stored import StoredScene as StoredFiles
+from workers.scene.portability.stored import StoredFile, artifact_folder
+from workers.scene.portability.stored import StoredScene as StoredFiles
 
 SCENE_FILE = "scene.json"
 SCENE_FILES = "scene"  # the folder of the files the scene reads, in an artifact

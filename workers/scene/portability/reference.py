@@ -19,8 +19,8 @@ from workers.scene.format.spec import SceneSpec
 from workers.scene.geometry.budget import shape_triangles
 from workers.scene.geometry.compile import CompiledScene, compile_scene
 from workers.scene.geometry.shapes import shape_mesh
-from workers.scene.io import scene_from_dict
-from workers.scene.stored import StoredScene
+from workers.scene.portability.io import scene_from_dict
+from workers.scene.portability.stored import StoredScene
 
 COMPILED_CACHE_SIZE = 4  # scenes kept compiled per process; a driver needs one, a test process a few
 
