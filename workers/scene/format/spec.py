@@ -25,6 +25,7 @@ from pydantic import (
 )
 
 from workers.scene.format.strict import StrictModel
+from workers.scene.format.variables import apply_variables, check_variables, scene_dimensions
 
 Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 NonNegRGB = tuple[
@@ -673,22 +674,16 @@ class SceneSpec(Model):
 
     @model_validator(mode="after")
     def _variables_valid(self):
-        from workers.scene.format.variables import check_variables
-
         check_variables(self)
         return self
 
     @property
     def dimensions(self) -> int:
         """K, the length of the scene vector."""
-        from workers.scene.format.variables import scene_dimensions
-
         return scene_dimensions(self)
 
     def at(self, v) -> SceneSpec:
         """The concrete scene (no variables) at the scene vector `v` in [0, 1]^K."""
-        from workers.scene.format.variables import apply_variables
-
         return apply_variables(self, v)
 
     def emitters_present(self) -> bool:

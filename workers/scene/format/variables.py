@@ -21,10 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydantic import ValidationError
 
-from workers.scene.format import spec as s
-
-if TYPE_CHECKING:
-    from workers.scene.format.spec import SceneSpec, Variable
+if TYPE_CHECKING:  # the spec imports this module to check and apply its variables
+    from workers.scene.format.spec import Material, SceneSpec, Variable
 
 VECTOR_RANGES = {
     "translate": ("min", "max"),
@@ -173,7 +171,7 @@ def _check_target(scene: SceneSpec, variable: Variable, where: str) -> None:
             if variable.type == "light_position" and kind == "lights" and scene.lights[index].type != "point":
                 raise ValueError("a directional light has no position")
         elif variable.type == "environment_rotation":
-            if not isinstance(scene.environment, s.EnvironmentMap):
+            if scene.environment is None or scene.environment.type != "envmap":
                 raise ValueError("the scene has no environment map to rotate")
         elif variable.type == "camera":
             lo = np.maximum(
@@ -212,7 +210,7 @@ def _check_material(scene: SceneSpec, variable: Variable) -> None:
         raise ValueError("the material's colour is a texture; a variable can only change a constant colour")
 
 
-def _material_field(material: s.Material, what: str) -> str | None:
+def _material_field(material: Material, what: str) -> str | None:
     """The field of `material` that a variable of type `what` sets, or None when it has none."""
     fields = {
         "albedo": {"diffuse": "reflectance", "plastic": "diffuse"},
@@ -324,7 +322,7 @@ def apply_variables(scene: SceneSpec, v: Sequence[float] | np.ndarray) -> SceneS
         m[:3, 3] += offsets.get(i, np.zeros(3))
         data["objects"][i]["transform"] = {"matrix": tuple(tuple(float(x) for x in row) for row in m[:3])}
     data["objects"] = [obj for i, obj in enumerate(data["objects"]) if i not in hidden]
-    return s.SceneSpec.model_validate(data)
+    return type(scene).model_validate(data)
 
 
 def _apply_light(scene: SceneSpec, data: dict, variable: Variable, u: np.ndarray, offsets: dict) -> None:
