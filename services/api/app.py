@@ -9,7 +9,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from services.api.routes import artifacts, assets, catalog, health, jobs, tokens
+from services.api.routes import artifacts, assets, catalog, health, jobs, quotas, tokens
 from services.api.services import Services
 from services.api.settings import ServiceSettings
 from services.dashboard import mount_dashboard
@@ -53,7 +53,7 @@ def create_app(settings: ServiceSettings, ray_connection: RayConnection | None =
         upload_paths=("/v1/assets",),
     )
     headers.install(app)
-    for module in (jobs, assets, artifacts, catalog, tokens, health):
+    for module in (jobs, assets, artifacts, catalog, tokens, quotas, health):
         app.include_router(module.router)
     mount_dashboard(app)
     return app

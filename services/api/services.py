@@ -14,6 +14,7 @@ from services.artifacts.store import BlobStore
 from services.geometry import GeometryProcesses
 from services.jobs.db import Database
 from services.jobs.metrics import ServiceMetrics
+from services.jobs.quotas import Quotas
 from services.jobs.ray_connection import RayConnection
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
@@ -39,6 +40,7 @@ class Services:
     geometry: GeometryProcesses
     tenancy: Tenancy
     tokens: DatabaseTokens
+    quotas: Quotas
     ray_connection: RayConnection | None = None  # None: the one `ray.init` made, joined again as it was
     admin_token_file: Path | None = None
 
@@ -60,8 +62,9 @@ class Services:
             max_running=settings.max_running,
             lease_s=settings.lease_s,
         )
-        scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics)
-        submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds)
+        quotas = Quotas(db, settings.tenant_quotas)
+        scheduler = Scheduler(scheduler_settings, jobs, artifacts, scenes, metrics, quotas)
+        submitter = Submitter(jobs, scenes, settings.max_attempts, geometry, settings.max_job_seconds, quotas)
         return cls(
             settings,
             db,
@@ -75,6 +78,7 @@ class Services:
             geometry,
             tenancy,
             DatabaseTokens(db),
+            quotas,
             ray_connection,
         )
 

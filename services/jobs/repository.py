@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import base64
 import binascii
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Sequence
 from datetime import timedelta
 from typing import Any
 
@@ -57,7 +57,12 @@ class JobRepository:
             return session.scalars(_REUSABLE_JOB, {"key": content_key}).one_or_none()
 
     def create(
-        self, job: Job, content_key: str | None, header_key: str | None, absent: bool = False
+        self,
+        job: Job,
+        content_key: str | None,
+        header_key: str | None,
+        absent: bool = False,
+        admit: Callable[[Session, Job], None] | None = None,
     ) -> tuple[Job, bool]:
         """Insert `job`, or return the job an idempotency key already names: (job, created).
 
@@ -69,12 +74,15 @@ class JobRepository:
         `absent`: the caller has just found no job under `content_key` (`reusable`), so the first attempt
         inserts the key without reading it first, a round trip less. If it is there after all (failed work
         this job takes over, or a concurrent identical submission), that insert fails and the retry reads it.
+
+        `admit` (the tenant's quotas) may refuse the job by raising, in the transaction that would insert it:
+        only once no existing job is reused, so reusing one never counts against them.
         """
         for attempt in range(INSERT_ATTEMPTS):
             try:
                 with self.db.writing() as session:
                     read = not (absent and attempt == 0)
-                    return self._create(session, job, content_key, header_key, read)
+                    return self._create(session, job, content_key, header_key, read, admit)
             except IntegrityError:
                 if attempt == INSERT_ATTEMPTS - 1:
                     raise
@@ -82,7 +90,13 @@ class JobRepository:
         raise AssertionError("unreachable")
 
     def _create(
-        self, session: Session, job: Job, content_key: str | None, header_key: str | None, read_key: bool
+        self,
+        session: Session,
+        job: Job,
+        content_key: str | None,
+        header_key: str | None,
+        read_key: bool,
+        admit: Callable[[Session, Job], None] | None,
     ) -> tuple[Job, bool]:
         request_hash = job.idempotency_key
         if header_key is not None and (row := _locked_key(session, header_key)) is not None:
@@ -96,6 +110,8 @@ class JobRepository:
             if header_key is not None:
                 session.add(IdempotencyKey(key=header_key, job_id=existing.id, request_hash=request_hash))
             return existing, False
+        if admit is not None:
+            admit(session, job)
         submitted = self._event(job, "state", {"state": job.state, "message": "submitted"})
         session.add(job)  # numbered first, so its row goes in as it stays: no UPDATE after the INSERT
         session.flush()  # before the rows that refer to it (no ORM relationship orders the tables)
@@ -150,14 +166,19 @@ class JobRepository:
             rows = session.execute(select(Job.state, func.count()).group_by(Job.state)).all()
         return {state: count for state, count in rows}
 
-    def queued(self, limit: int) -> list[Job]:
-        """The next jobs to start: highest priority first, then oldest."""
+    def queued(self, limit: int, held: Collection[str] = (), skip: Collection[str] = ()) -> list[Job]:
+        """The next jobs to start, none of the `held` tenants' nor those `skip` names: highest priority
+        first, then oldest."""
         query = (
             select(Job)
             .where(Job.state == JobState.QUEUED)
             .order_by(Job.priority.desc(), Job.seq)
             .limit(limit)
         )
+        if held:
+            query = query.where(Job.tenant.not_in(sorted(held)))
+        if skip:
+            query = query.where(Job.id.not_in(list(skip)))
         with self.db.reading() as session:
             return list(session.scalars(query))
 

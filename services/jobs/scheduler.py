@@ -3,10 +3,11 @@
 Each tick it polls the drivers it owns (persisting their events), finishes jobs with an outcome
 (publishing the artifact, retrying infrastructure failures a bounded number of times, deleting
 checkpoints of finished jobs), passes cancellations on, starts queued jobs within the concurrency limit
-and renews its leases. RUNNING jobs with no live driver (after a server restart, or whose owner stopped
-renewing its lease) are adopted and restarted from their checkpoints with the same JobSpec. When the Ray
-cluster is lost, the jobs running on it are infrastructure failures (retried, so they resume from their
-checkpoints) and nothing touches Ray until the connection is made again.
+(and each tenant's running quota) and renews its leases. RUNNING jobs with no live driver (after a server
+restart, or whose owner stopped renewing its lease) are adopted and restarted from their checkpoints with
+the same JobSpec. When the Ray cluster is lost, the jobs running on it are infrastructure failures
+(retried, so they resume from their checkpoints) and nothing touches Ray until the connection is made
+again.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import ray
 
 from services.artifacts.artifacts import ArtifactStore
 from services.jobs.metrics import ServiceMetrics
+from services.jobs.quotas import Quotas
 from services.jobs.ray_connection import RayConnection
 from services.jobs.repository import JobRepository
 from services.jobs.scenes import SceneResolver
@@ -63,6 +65,7 @@ class Scheduler:
         artifacts: ArtifactStore,
         scenes: SceneResolver,
         metrics: ServiceMetrics,
+        quotas: Quotas,
     ):
         self.settings, self.jobs, self.artifacts, self.scenes, self.metrics = (
             settings,
@@ -71,6 +74,7 @@ class Scheduler:
             scenes,
             metrics,
         )
+        self.quotas = quotas
         self.ray: RayConnection | None = None  # from `start`, when this process is connected to Ray
         self.running: dict[str, Running] = {}
         self._wake = threading.Event()
@@ -128,10 +132,11 @@ class Scheduler:
     # ------------------------------------------------------------------ starting
 
     def _start_queued(self) -> None:
+        """Start the next queued jobs this scheduler has room for, none of a tenant at its running quota."""
         free = self.settings.max_running - len(self.running)
         if free <= 0:
             return
-        for queued in self.jobs.queued(free):
+        for queued in self.quotas.startable(self.jobs, free):
             job = self.jobs.claim(queued.id, self.settings.owner, self.settings.lease_s)
             if job is None:
                 continue

@@ -34,6 +34,7 @@ from workers.scene.portability.reference import SceneRef
 
 if TYPE_CHECKING:
     from services.geometry import GeometryProcesses
+    from services.jobs.quotas import Quotas
 
 MAX_IDEMPOTENCY_HEADER = 255
 # A scene without mesh files and at most this many triangles is planned in the API process: building it
@@ -63,7 +64,7 @@ class JobRequest(BaseModel):
 
 class Submitter:
     """Plans run in `geometry`'s child processes when given (a server: plans may build meshes), and are
-    cached per kind, scene content and resolved config."""
+    cached per kind, scene content and resolved config. A new job is admitted by the tenant's `quotas`."""
 
     def __init__(
         self,
@@ -72,9 +73,10 @@ class Submitter:
         max_attempts: int,
         geometry: GeometryProcesses | None = None,
         max_job_seconds: float = math.inf,
+        quotas: Quotas | None = None,
     ):
         self.jobs, self.scenes, self.max_attempts, self.geometry = jobs, scenes, max_attempts, geometry
-        self.max_job_seconds = max_job_seconds
+        self.max_job_seconds, self.quotas = max_job_seconds, quotas
         self._plans: OrderedDict[tuple[str, str, str], Plan] = OrderedDict()
         self._plans_lock = threading.Lock()
         self._creating: dict[str, threading.Event] = {}  # content keys being created by this process
@@ -140,7 +142,8 @@ class Submitter:
                 last_event_seq=0,
                 created_at=utcnow(),
             )
-            return self.jobs.create(job, content_key, header, absent=reusing)
+            admit = self.quotas.admit if self.quotas else None  # once no existing job is reused
+            return self.jobs.create(job, content_key, header, absent=reusing, admit=admit)
 
     @contextmanager
     def _first(self, content_key: str | None) -> Iterator[bool]:

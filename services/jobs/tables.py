@@ -1,5 +1,5 @@
-"""The job database schema (SQLAlchemy 2 ORM): jobs, their events, idempotency keys, API tokens and
-which tenants own which uploaded assets.
+"""The job database schema (SQLAlchemy 2 ORM): jobs, their events, idempotency keys, API tokens, which
+tenants own which uploaded assets, and tenants' own quotas.
 
 Alembic migrations in `migrations/` create exactly these tables; `test_jobs_db` checks that they agree.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any, ClassVar
 
-from sqlalchemy import JSON, BigInteger, DateTime, ForeignKey, Integer, String, Text, TypeDecorator
+from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, String, Text, TypeDecorator
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -124,3 +124,16 @@ class AssetOwner(Base):
     asset_id: Mapped[str] = mapped_column(String(80), primary_key=True)
     tenant: Mapped[str] = mapped_column(String(64), primary_key=True)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class TenantQuota(Base):
+    """A tenant's own limits (`services.jobs.quotas`); a NULL column takes the deployment's default."""
+
+    __tablename__ = "tenant_quotas"
+
+    tenant: Mapped[str] = mapped_column(String(64), primary_key=True)
+    max_running: Mapped[int | None] = mapped_column(Integer)
+    max_queued: Mapped[int | None] = mapped_column(Integer)
+    max_compute_s: Mapped[float | None] = mapped_column(Float)
+    max_priority: Mapped[int | None] = mapped_column(Integer)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)

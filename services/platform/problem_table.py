@@ -23,6 +23,7 @@ class ProblemInfo:
     detail: str
     field: str | None = None
     headers: dict[str, str] | None = None  # only HTTP has somewhere to put them
+    extensions: dict[str, Any] | None = None  # members beside the standard ones (RFC 9457 extensions)
 
 
 Rule = Callable[[Any], ProblemInfo]
@@ -72,7 +73,7 @@ class ProblemTable:
 
 PLATFORM_PROBLEMS = ProblemTable(
     {
-        ServiceError: lambda e: ProblemInfo(e.status, e.title, e.detail, e.field, e.headers),
+        ServiceError: lambda e: ProblemInfo(e.status, e.title, e.detail, e.field, e.headers, e.extensions),
         OperationalError: _database_unavailable,
         InterfaceError: _database_unavailable,
     }

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -34,11 +35,21 @@ class Problem(BaseModel):
 
 
 def problem(
-    request: Request, status: int, title: str, detail: str, field: str | None = None, headers=None
+    request: Request,
+    status: int,
+    title: str,
+    detail: str,
+    field: str | None = None,
+    headers=None,
+    extensions: dict[str, Any] | None = None,
 ) -> JSONResponse:
+    """The document; `extensions` are members beside the standard ones, which they cannot replace."""
     body = Problem(title=title, status=status, detail=detail, instance=request.url.path, field=field)
     return JSONResponse(
-        body.model_dump(exclude_none=True), status_code=status, media_type=PROBLEM_JSON, headers=headers
+        (extensions or {}) | body.model_dump(exclude_none=True),
+        status_code=status,
+        media_type=PROBLEM_JSON,
+        headers=headers,
     )
 
 
@@ -52,12 +63,13 @@ PROBLEM_RESPONSES = {
         409: "Conflict",
         413: "Request body too large",
         422: "Invalid input (the `field` names it)",
+        429: "A quota is used up: retry after `Retry-After` seconds (`quota`, its `limit`, `current` use)",
     }.items()
 }
 
 
 def _document(request: Request, info: ProblemInfo) -> JSONResponse:
-    return problem(request, info.status, info.title, info.detail, info.field, info.headers)
+    return problem(request, info.status, info.title, info.detail, info.field, info.headers, info.extensions)
 
 
 def install(app: FastAPI, table: ProblemTable) -> None:

@@ -36,7 +36,8 @@ ARTIFACT, ASSET = "sha256:" + "a" * 64, "sha256:" + "b" * 64
 
 def test_migration_0002_puts_existing_jobs_and_keys_in_the_default_tenant(db):  # noqa: F811
     with db.engine.begin() as connection:
-        for table in ("asset_owners", "job_events", "idempotency_keys", "jobs", "api_tokens"):
+        tables = ("tenant_quotas", "asset_owners", "job_events", "idempotency_keys", "jobs", "api_tokens")
+        for table in tables:
             connection.execute(text(f"DROP TABLE {table}"))
         connection.execute(text("DROP TABLE alembic_version"))
         config = Config()

@@ -24,7 +24,7 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"], responses={401: PROBLEM_RES
     status_code=201,
     response_model=JobView,
     responses={200: {"model": JobView, "description": "An identical job of this tenant exists: that job"}}
-    | {s: PROBLEM_RESPONSES[s] for s in (400, 403, 409, 413, 422)},
+    | {s: PROBLEM_RESPONSES[s] for s in (400, 403, 409, 413, 422, 429)},
 )
 async def submit_job(
     body: JobRequest,

@@ -1,7 +1,8 @@
 """A server's errors as gRPC statuses: the problem its table (`services.platform.problem_table`) gives
-REST too (status, title, detail, field), carried as a status code, a message and rich details
-(`google.rpc.ErrorInfo` with the problem, `google.rpc.BadRequest` naming the field), so a client can act on
-it exactly as over HTTP.
+REST too (status, title, detail, field, extension members), carried as a status code, a message and rich
+details (`google.rpc.ErrorInfo` with the problem, `google.rpc.BadRequest` naming the field,
+`google.rpc.RetryInfo` for a Retry-After, `google.rpc.QuotaFailure` naming a used-up quota), so a client
+can act on it exactly as over HTTP.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import logging
 from collections.abc import Iterator
 
 import grpc
-from google.protobuf import any_pb2
+from google.protobuf import any_pb2, duration_pb2
 from google.rpc import error_details_pb2, status_pb2
 from grpc_status import rpc_status
 from pydantic import ValidationError
@@ -30,6 +31,7 @@ CODES = {
     409: grpc.StatusCode.FAILED_PRECONDITION,
     413: grpc.StatusCode.RESOURCE_EXHAUSTED,
     422: grpc.StatusCode.INVALID_ARGUMENT,
+    429: grpc.StatusCode.RESOURCE_EXHAUSTED,
     503: grpc.StatusCode.UNAVAILABLE,
 }
 
@@ -48,7 +50,8 @@ def to_status(problem: ProblemInfo) -> grpc.Status:
     info = error_details_pb2.ErrorInfo(
         reason=problem.title.upper().replace(" ", "_"),
         domain=DOMAIN,
-        metadata={"status": str(problem.status), "title": problem.title}
+        metadata={name: str(value) for name, value in (problem.extensions or {}).items()}
+        | {"status": str(problem.status), "title": problem.title}
         | ({"field": problem.field} if problem.field else {}),
     )
     details = [info]
@@ -57,6 +60,12 @@ def to_status(problem: ProblemInfo) -> grpc.Status:
             field=problem.field, description=problem.detail
         )
         details.append(error_details_pb2.BadRequest(field_violations=[violation]))
+    if retry_after := (problem.headers or {}).get("Retry-After"):
+        delay = duration_pb2.Duration(seconds=int(retry_after))
+        details.append(error_details_pb2.RetryInfo(retry_delay=delay))
+    if quota := (problem.extensions or {}).get("quota"):
+        used_up = error_details_pb2.QuotaFailure.Violation(subject=quota, description=problem.detail)
+        details.append(error_details_pb2.QuotaFailure(violations=[used_up]))
     packed = []
     for detail in details:
         wrapper = any_pb2.Any()
