@@ -18,10 +18,11 @@ from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.assets import AssetNotFound, load_asset, materialize
 from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
-from services.jobs.errors import InvalidInput
 from services.jobs.identity import scene_hash, sha256_of
 from services.jobs.material_artifacts import MaterialArtifacts, named_artifacts
-from services.jobs.tenants import Principal, Tenancy
+from services.jobs.tenants import Tenancy
+from services.platform.auth import Principal
+from services.platform.errors import InvalidInput
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import SceneSpec
 from workers.scene.generators.builtin import BUILTIN_SCENES, get_builtin

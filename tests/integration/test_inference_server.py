@@ -22,12 +22,12 @@ import httpx
 import numpy as np
 import pytest
 from neuralbake.v1 import inference_pb2, inference_pb2_grpc
-from services.api.auth import store_tokens
 
 from services.artifacts.artifacts import ArtifactStore
 from services.artifacts.store import BlobStore
 from services.inference.wire import OCTET_STREAM, decode_binary, encode_binary
 from services.jobs.db import Database
+from services.jobs.tokens import DatabaseTokens
 from tests.integration.test_api_headers import assert_security_headers
 from tests.integration.test_api_server import NBAKE, TOKENS
 from tests.support.jobs import run_kind_job
@@ -115,7 +115,7 @@ def install_tokens(data_dir: Path) -> None:
     """What `nbake serve` leaves in its data dir: a migrated job database holding the tokens."""
     db = Database(f"sqlite:///{data_dir / 'jobs.db'}")
     db.migrate()
-    store_tokens(db, {token: scope for scope, token in TOKENS.items()})
+    DatabaseTokens(db).store_configured({token: scope for scope, token in TOKENS.items()})
     db.dispose()
 
 

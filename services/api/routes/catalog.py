@@ -9,9 +9,9 @@ from typing import Any
 from fastapi import APIRouter, Depends
 from pydantic import BaseModel, Field
 
-from services.api.auth import require
-from services.api.problems import PROBLEM_RESPONSES
 from services.jobs.errors import KindNotFound
+from services.platform.auth import require
+from services.platform.problems import PROBLEM_RESPONSES
 from workers.models.registry import PRESET_NAMES, UnknownKind, get_kind, kind_names
 from workers.runtime.contract import Kind
 from workers.scene.generators.builtin import BUILTIN_SCENES
