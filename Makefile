@@ -6,7 +6,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 export PIP_CONSTRAINT := $(CURDIR)/constraints.txt
 
-.PHONY: venv lock run test test-all bench lint clean proto test-packages
+.PHONY: venv lock run test test-all bench lint clean proto docs test-packages
 
 venv: $(STAMP)
 
@@ -67,6 +67,11 @@ lint: venv
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
 	$(VENV)/bin/hadolint docker/Dockerfile
+
+## Rewrite docs/kinds/<kind>.md, every registered kind's parameter table, from its config's schema and
+## presets (scripts/kind_docs.py); tests/unit/test_kind_docs.py fails while a page is stale.
+docs: venv
+	$(PY) -m scripts.kind_docs
 
 ## Regenerate the gRPC stubs from proto/ into the client package (the server imports them from there).
 PROTO_OUT ?= clients/python
