@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import json
 import os
+import queue
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator, Mapping
@@ -24,7 +26,7 @@ from urllib.parse import urlsplit
 
 from neuralbake_client.archive import upload_parts
 from neuralbake_client.download import DownloadedFile, download_file
-from neuralbake_client.errors import RETRYABLE, NeuralbakeError
+from neuralbake_client.errors import RETRYABLE, NeuralbakeError, WaitTimeout
 from neuralbake_client.models import (
     Asset,
     CreatedToken,
@@ -35,6 +37,8 @@ from neuralbake_client.models import (
     Manifest,
     ModelInfo,
     Progress,
+    QuotaLimits,
+    TenantQuotas,
     Token,
 )
 from neuralbake_client.references import artifact_id_of, job_id_of
@@ -241,12 +245,12 @@ class Client:
                     if event.final:
                         return
                 return
-            except RETRYABLE:
+            except RETRYABLE as error:
                 delays = delays or self.retry.delays()
                 delay = next(delays, None)
                 if delay is None:
                     raise
-                time.sleep(delay)
+                time.sleep(self.retry.wait(delay, error))
 
     def wait(
         self,
@@ -254,14 +258,42 @@ class Client:
         on_progress: Callable[[Progress], None] | None = None,
         *,
         on_event: Callable[[JobEvent], None] | None = None,
+        timeout: float | None = None,
     ) -> Job:
-        """Follow the job to its final state and return it (SUCCEEDED, FAILED or CANCELLED)."""
-        for event in self.events(job):
+        """Follow the job to its final state and return it (SUCCEEDED, FAILED or CANCELLED). With
+        `timeout` (seconds), raise `WaitTimeout` when it has not ended by then; the job goes on."""
+        events = self.events(job) if timeout is None else self._events_within(job, timeout)
+        for event in events:
             if on_event:
                 on_event(event)
             if on_progress and event.progress is not None:
                 on_progress(event.progress)
         return self.get(job)
+
+    def _events_within(self, job: JobRef, timeout: float) -> Iterator[JobEvent]:
+        """`events(job)` until `timeout` seconds have passed. The stream is read in a daemon thread, which
+        a blocked read cannot keep from giving up; it ends with the stream (the job's end, or `close()`)."""
+        ident, deadline, received = self.job_id(job), time.monotonic() + timeout, queue.Queue()
+
+        def read() -> None:
+            try:
+                for event in self.events(ident):
+                    received.put(event)
+            except Exception as error:  # handed to the reader below, which raises it
+                received.put(error)
+            received.put(None)
+
+        threading.Thread(target=read, name=f"nbake-wait-{ident}", daemon=True).start()
+        while True:
+            try:
+                item = received.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise WaitTimeout(ident, timeout) from None
+            if item is None:
+                return
+            if isinstance(item, Exception):
+                raise item
+            yield item
 
     # ------------------------------------------------------------------ artifacts
 
@@ -286,7 +318,7 @@ class Client:
             for entry in entries
         ]
 
-    # ------------------------------------------------------------------ tokens (admin, REST only)
+    # ------------------------------------------------------------------ tokens and quotas (admin, REST only)
 
     def create_token(self, tenant: str = "default", scope: str = "read", name: str = "") -> CreatedToken:
         """A new token of `tenant` (its jobs, assets and artifacts are all it sees) with `scope` (read,
@@ -302,9 +334,17 @@ class Client:
         ident = token.id if isinstance(token, Token) else token
         self.retry.call(lambda: self._token_admin().revoke_token(ident))
 
+    def quotas(self, tenant: str) -> TenantQuotas:
+        """`tenant`'s quotas in force, its own, the deployment's defaults and what its jobs use now."""
+        return self.retry.call(lambda: self._token_admin().get_quotas(tenant))
+
+    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
+        """Replace `tenant`'s own quotas (a None field: the deployment's default); its quotas now."""
+        return self.retry.call(lambda: self._token_admin().set_quotas(tenant, limits))
+
     def _token_admin(self) -> HttpTransport:
         if not hasattr(self.transport, "create_token"):
-            raise NeuralbakeError("tokens are managed over REST: connect with an http(s):// URL")
+            raise NeuralbakeError("tokens and quotas are managed over REST: connect with an http(s):// URL")
         return self.transport
 
     # ------------------------------------------------------------------ inference

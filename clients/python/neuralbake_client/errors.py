@@ -21,6 +21,15 @@ class ApiError(NeuralbakeError):
         super().__init__(f"{status} {title}: {self.where}{detail}")
 
     @property
+    def retry_after(self) -> float | None:
+        """Seconds the server asked the caller to wait before trying again (`Retry-After`), if it did."""
+        value = self.extra.get("retry_after")
+        try:
+            return max(0.0, float(value)) if value is not None else None
+        except (TypeError, ValueError):  # an HTTP date: waiting the usual backoff is as good
+            return None
+
+    @property
     def where(self) -> str:
         """`field: ` when the detail does not already start with the field, so a message names it once."""
         return f"{self.field}: " if self.field and not self.detail.startswith(self.field) else ""
@@ -55,6 +64,11 @@ class TooLarge(ApiError):
     """413 (RESOURCE_EXHAUSTED): an upload or body over the server's limits."""
 
 
+class TooManyRequests(ApiError):
+    """429 (a tenant's quota of queued jobs or compute is used up): retried after the server's
+    `Retry-After` before it reaches the caller."""
+
+
 class ServerError(ApiError):
     """500: a bug on the server."""
 
@@ -65,6 +79,14 @@ class Unavailable(ApiError):
 
 class ConnectionFailed(NeuralbakeError):
     """The server could not be reached (after the retries)."""
+
+
+class WaitTimeout(NeuralbakeError):
+    """`wait(timeout=...)` ran out of time; the job itself goes on (`job_id` names it)."""
+
+    def __init__(self, job_id: str, timeout: float):
+        self.job_id, self.timeout = job_id, timeout
+        super().__init__(f"job {job_id} has not ended after {timeout:g} s; it goes on running")
 
 
 class ChecksumMismatch(NeuralbakeError):
@@ -79,6 +101,7 @@ BY_STATUS: dict[int, type[ApiError]] = {
     409: Conflict,
     413: TooLarge,
     422: InvalidRequest,
+    429: TooManyRequests,
     500: ServerError,
     503: Unavailable,
 }
@@ -91,4 +114,4 @@ def api_error(status: int, title: str, detail: str, field: str | None = None, **
     return cls(status, title, detail, field, **extra)
 
 
-RETRYABLE = (Unavailable, ConnectionFailed)
+RETRYABLE = (Unavailable, TooManyRequests, ConnectionFailed)

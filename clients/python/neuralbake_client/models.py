@@ -7,7 +7,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, PrivateAttr
 
 from neuralbake_client.states import JobState
 
@@ -36,6 +36,13 @@ class Job(BaseModel):
     started_at: datetime | None = None
     finished_at: datetime | None = None
     links: dict[str, str] = Field(default_factory=dict, description="REST links (empty over gRPC).")
+    _reused: bool = PrivateAttr(False)
+
+    @property
+    def reused(self) -> bool:
+        """True when a submission got an existing job back (identical work, or the same idempotency key):
+        the server answered 200 rather than 201 (gRPC: `created` false)."""
+        return self._reused
 
 
 class JobList(BaseModel):
@@ -129,6 +136,32 @@ class Token(BaseModel):
 
 class CreatedToken(Token):
     token: str = Field(description="The secret, shown only when the token is created.")
+
+
+class QuotaLimits(BaseModel):
+    """A tenant's limits; None: no limit (in `TenantQuotas.own`: the deployment's default holds)."""
+
+    max_running: int | None = None
+    max_queued: int | None = None
+    max_compute_s: float | None = None
+    max_priority: int | None = None
+
+
+class QuotaUse(BaseModel):
+    running: int
+    queued: int
+    compute_s: float = Field(description="The plans' estimated seconds of the queued and running jobs.")
+
+
+class TenantQuotas(BaseModel):
+    """A tenant's quotas: in force (`limits`), its own, the deployment's defaults, and its use now."""
+
+    tenant: str
+    limits: QuotaLimits
+    own: QuotaLimits
+    defaults: QuotaLimits
+    use: QuotaUse
+    updated_at: datetime | None = None
 
 
 class ModelInfo(BaseModel):

@@ -1,6 +1,7 @@
 """Retries with exponential backoff and jitter for what a later attempt can fix: the server unreachable
-(connection refused or reset, a restart in progress) or answering 503 / UNAVAILABLE. Anything else
-(a bad request, a missing job) fails at once.
+(connection refused or reset, a restart in progress) or answering 503 / UNAVAILABLE or 429 (a quota used
+up). When the server says how long to wait (`Retry-After`), the wait is at least that, up to
+`max_retry_after_s`. Anything else (a bad request, a missing job) fails at once.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ class Retry:
     attempts: int = 4  # tries in all (1: no retries)
     backoff_s: float = 0.25  # wait before the second try; doubles after each further failure
     max_backoff_s: float = 4.0
+    max_retry_after_s: float = 60.0  # a longer Retry-After is the caller's to wait for, not a retry's
 
     def delays(self) -> Iterator[float]:
         """The waits between tries: jittered, doubling up to the cap."""
@@ -31,9 +33,14 @@ class Retry:
         for delay in self.delays():
             try:
                 return operation()
-            except RETRYABLE:
-                time.sleep(delay)
+            except RETRYABLE as error:
+                time.sleep(self.wait(delay, error))
         return operation()
+
+    def wait(self, delay: float, error: Exception) -> float:
+        """The backoff `delay`, or the server's `Retry-After` when it asks for longer (capped)."""
+        asked = getattr(error, "retry_after", None)
+        return delay if asked is None else min(self.max_retry_after_s, max(delay, asked))
 
 
 DEFAULT_RETRY = Retry()

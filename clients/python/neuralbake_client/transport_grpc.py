@@ -59,7 +59,8 @@ def call_error(error: grpc.RpcError) -> NeuralbakeError:
         return ConnectionFailed(detail)
     http_status = int(metadata.get("status", HTTP_STATUS.get(code, 500)))
     title = metadata.get("title", code.name.replace("_", " ").capitalize())
-    return api_error(http_status, title, detail, metadata.get("field"), grpc_code=code.name)
+    extra = {"retry_after": metadata["retry_after"]} if "retry_after" in metadata else {}
+    return api_error(http_status, title, detail, metadata.get("field"), grpc_code=code.name, **extra)
 
 
 def plain(value: Any) -> Any:
@@ -150,7 +151,9 @@ class GrpcTransport:
             **{k: body[k] for k in ("preset", "seed", "priority") if body.get(k) is not None},
         )
         response = self._unary(self.jobs.SubmitJob, request, (("idempotency-key", idempotency_key),))
-        return job_model(response.job)
+        job = job_model(response.job)
+        job._reused = not response.created
+        return job
 
     def get_job(self, job_id: str) -> Job:
         return job_model(self._unary(self.jobs.GetJob, jobs_pb2.GetJobRequest(job_id=job_id)).job)

@@ -9,7 +9,17 @@ from typing import Any, BinaryIO
 import httpx
 
 from neuralbake_client.errors import ApiError, ConnectionFailed, api_error
-from neuralbake_client.models import Asset, CreatedToken, Job, JobEvent, JobList, Manifest, Token
+from neuralbake_client.models import (
+    Asset,
+    CreatedToken,
+    Job,
+    JobEvent,
+    JobList,
+    Manifest,
+    QuotaLimits,
+    TenantQuotas,
+    Token,
+)
 
 STREAM_READ_TIMEOUT_S = 60.0  # the server sends a keep-alive comment every 15 s
 
@@ -25,6 +35,8 @@ def problem_error(response: httpx.Response) -> ApiError:
     title = body.pop("title", None) or response.reason_phrase
     field = body.pop("field", None)
     body.pop("status", None)
+    if "Retry-After" in response.headers:
+        body["retry_after"] = response.headers["Retry-After"]
     return api_error(response.status_code, title, str(detail), field, **body)
 
 
@@ -62,7 +74,9 @@ class HttpTransport:
 
     def submit(self, body: dict[str, Any], idempotency_key: str) -> Job:
         response = self.send("POST", "/v1/jobs", json=body, headers={"Idempotency-Key": idempotency_key})
-        return Job.model_validate(response.json())
+        job = Job.model_validate(response.json())
+        job._reused = response.status_code == 200  # 201: created
+        return job
 
     def get_job(self, job_id: str) -> Job:
         return Job.model_validate(self.send("GET", f"/v1/jobs/{job_id}").json())
@@ -131,3 +145,10 @@ class HttpTransport:
 
     def revoke_token(self, token_id: str) -> None:
         self.send("DELETE", f"/v1/tokens/{token_id}")
+
+    def get_quotas(self, tenant: str) -> TenantQuotas:
+        return TenantQuotas.model_validate(self.send("GET", f"/v1/tenants/{tenant}/quotas").json())
+
+    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
+        body = limits.model_dump()
+        return TenantQuotas.model_validate(self.send("PUT", f"/v1/tenants/{tenant}/quotas", json=body).json())

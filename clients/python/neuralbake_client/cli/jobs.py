@@ -14,6 +14,7 @@ from neuralbake_client.cli.output import Output
 from neuralbake_client.cli.overrides import SetOption, parse_sets
 from neuralbake_client.cli.remote import (
     EXIT_BY_STATE,
+    TIMED_OUT,
     USAGE,
     JsonOption,
     TokenOption,
@@ -35,10 +36,31 @@ def scene_argument(scene: str) -> str | Path:
     return path if path.exists() else scene
 
 
-def follow(client: Client, job: Job, out: Output) -> None:
-    """Print the job's events until its final state, then the job; exit with the state's status."""
-    with out.following(job) as on_event:
-        final = client.wait(job, on_event=on_event)
+TimeoutOption = Annotated[
+    str | None,
+    typer.Option(
+        "--timeout", help="Give up waiting after this long (e.g. 90s, 30m): exit 6; the job goes on."
+    ),
+]
+
+
+def follow(client: Client, job: Job, out: Output, timeout: str | None = None) -> None:
+    """Print the job's events until its final state, then the job; exit with the state's status (6 when
+    `timeout` passes first)."""
+    from neuralbake_client.durations import seconds
+    from neuralbake_client.errors import WaitTimeout
+
+    try:
+        limit = seconds(timeout) if timeout is not None else None
+    except ValueError as error:
+        exit_with(USAGE, f"error: --timeout: {error}")
+    try:
+        with out.following(job) as on_event:
+            final = client.wait(job, on_event=on_event, timeout=limit)
+    except WaitTimeout as error:
+        if out.json:
+            out.line("timeout", job_id=error.job_id, timeout_s=error.timeout)
+        exit_with(TIMED_OUT, f"error: {error} (`nbake watch {error.job_id}` follows it again)")
     warning = client.manifest(final.artifact_id).annotations.get("warning") if final.artifact_id else None
     out.job(final, event="result", warning=warning)
     raise typer.Exit(EXIT_BY_STATE[final.state])
@@ -56,12 +78,14 @@ def submit_command(
     seed: Annotated[int | None, typer.Option(min=0, help="Seed of every sampler.")] = None,
     priority: Annotated[int | None, typer.Option(help="Higher starts first.")] = None,
     wait: Annotated[bool, typer.Option("--wait", help="Follow the job; exit with its outcome.")] = False,
+    timeout: TimeoutOption = None,
     force: Annotated[bool, typer.Option("--force", help="Run even if identical work exists.")] = False,
     json_lines: JsonOption = False,
     url: UrlOption = None,
     token: TokenOption = None,
 ) -> None:
-    """Submit a job. With --wait, exit 0 succeeded, 1 failed, 3 cancelled."""
+    """Submit a job (or get the identical one already there: said as `reused`). With --wait, exit 0
+    succeeded, 1 failed, 3 cancelled, 6 --timeout passed."""
     out, config = Output(json_lines), parse_sets(set_ or [])
     with remote_errors(), connect(url, token) as client:
         job = client.submit(
@@ -73,9 +97,9 @@ def submit_command(
             priority=priority,
             force=force,
         )
-        out.job(job, event="submitted")
+        out.job(job, event="reused" if job.reused else "submitted")
         if wait:
-            follow(client, job, out)
+            follow(client, job, out, timeout)
 
 
 def jobs_command(
@@ -107,14 +131,15 @@ def show_command(
 
 def watch_command(
     job: Annotated[str, typer.Argument(help="A job id, or an artifact id (its job).")],
+    timeout: TimeoutOption = None,
     json_lines: JsonOption = False,
     url: UrlOption = None,
     token: TokenOption = None,
 ) -> None:
-    """Follow a job to its end: exit 0 succeeded, 1 failed, 3 cancelled."""
+    """Follow a job to its end: exit 0 succeeded, 1 failed, 3 cancelled, 6 --timeout passed."""
     out = Output(json_lines)
     with remote_errors(), connect(url, token) as client:
-        follow(client, client.get(job), out)
+        follow(client, client.get(job), out, timeout)
 
 
 def cancel_command(

@@ -10,6 +10,7 @@ from typing import Any
 import typer
 from typer.core import TyperGroup
 
+from neuralbake_client.cli.bake import bake_command, diff_command
 from neuralbake_client.cli.jobs import register as register_job_commands
 from neuralbake_client.cli.plugins import LazyCommand, plugin_commands
 from neuralbake_client.cli.query import query_command
@@ -39,6 +40,8 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,  # locals hold whole images and meshes
 )
 register_job_commands(app)  # submit, jobs, show, watch, cancel, download
+app.command("bake")(bake_command)
+app.command("diff")(diff_command)
 app.command("query")(query_command)
 app.command("render", cls=SceneOrArtifact)(render_command)
 app.add_typer(tokens_app)  # tokens create | list | revoke

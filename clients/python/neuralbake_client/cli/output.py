@@ -78,6 +78,8 @@ class Output:
 def summary(job: Job) -> str:
     scene = job.scene.get("name") or job.scene.get("asset_id") or next(iter(job.scene.values()), "")
     text = f"{job.id}  {job.state:<9}  {job.kind}  {scene}  preset={job.preset}"
+    if job.reused:
+        text += "  (reused: identical work was already there)"
     if job.progress and job.progress.get("total"):
         text += f"  step {job.progress.get('step')}/{job.progress['total']}"
     if job.error:

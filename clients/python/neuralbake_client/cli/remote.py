@@ -4,7 +4,8 @@ The job server and token come from `--url` / `--token`, else `NBAKE_URL` / `NBAK
 config file (`NBAKE_CONFIG`, default `~/.config/nbake/config.toml`, keys `url` and `token`); the inference
 service from `--inference-url`, else `NBAKE_INFERENCE_URL`, else the file's `inference_url`, else the job
 server's host at the inference service's default port. Exit statuses are what a pipeline branches on:
-0 succeeded, 1 job failed, 2 usage or validation error, 3 cancelled, 4 server unreachable or auth error.
+0 succeeded, 1 job failed, 2 usage or validation error, 3 cancelled, 4 server unreachable or auth error,
+5 a build's quality gate failed (`nbake bake`), 6 a wait or a build ran out of time (`--timeout`).
 
 The SDK is imported when a command connects, not when `nbake` starts.
 """
@@ -34,7 +35,7 @@ from neuralbake_client.errors import (
 if TYPE_CHECKING:
     from neuralbake_client.client import Client
 
-SUCCEEDED, FAILED, USAGE, CANCELLED, UNREACHABLE = 0, 1, 2, 3, 4
+SUCCEEDED, FAILED, USAGE, CANCELLED, UNREACHABLE, GATES_FAILED, TIMED_OUT = 0, 1, 2, 3, 4, 5, 6
 EXIT_BY_STATE = {"SUCCEEDED": SUCCEEDED, "FAILED": FAILED, "CANCELLED": CANCELLED}  # by JobState
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_CONFIG = Path("~/.config/nbake/config.toml")
