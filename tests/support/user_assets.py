@@ -10,7 +10,8 @@ import trimesh
 import yaml
 
 from workers.scene.format.spec import SceneSpec
-from workers.scene.geometry.shapes import MeshData, shape_mesh
+from workers.scene.geometry.mesh import MeshData
+from workers.scene.geometry.shapes import shape_mesh
 
 
 def trimesh_of(mesh: MeshData) -> trimesh.Trimesh:

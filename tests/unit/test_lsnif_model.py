@@ -29,7 +29,7 @@ from workers.runtime.pipeline import round_to_storage
 from workers.scene.format.spec import SceneObject, SphereShape, Transform
 from workers.scene.generators.builtin import cornell_box
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
 from workers.scene.portability.reference import SceneRef
 
 QUICK = LsnifConfig.model_validate({**PRESETS["quick"], "min_triangles": 1000})

@@ -26,11 +26,11 @@ from workers.scene.format.spec import (
     SphereShape,
 )
 from workers.scene.geometry.compile import compile_scene
+from workers.scene.geometry.framing import framing_camera
 from workers.scene.importers.image_io import write_exr, write_png
 from workers.scene.portability.portable import (
     NEUTRAL_RADIANCE,
     StoredScene,
-    framing_camera,
     load_scene,
     neutral_scene,
     portable_scene,

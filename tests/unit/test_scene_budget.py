@@ -8,7 +8,7 @@ import pytest
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.generators.procedural import GENERATORS, generate, generated_triangles
+from workers.scene.generators.catalogue import GENERATORS, generate, generated_triangles
 from workers.scene.geometry.budget import MAX_SCENE_TRIANGLES_ENV, scene_triangles, shape_triangles
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.geometry.shapes import shape_mesh

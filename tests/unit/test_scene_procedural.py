@@ -5,8 +5,9 @@ import pytest
 
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Structure
+from workers.scene.generators.catalogue import GENERATORS, generate
 from workers.scene.generators.mesoscale import MATERIAL_KINDS, MesoscaleSlabParams, local_strands
-from workers.scene.generators.procedural import GENERATORS, generate, gradient_noise
+from workers.scene.generators.procedural import gradient_noise
 from workers.scene.geometry.shapes import check_mesh
 
 SMALL = {

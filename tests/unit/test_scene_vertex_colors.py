@@ -16,7 +16,8 @@ from workers.render.render import RenderSettings, render
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.geometry.shapes import MeshData, check_mesh
+from workers.scene.geometry.mesh import MeshData
+from workers.scene.geometry.shapes import check_mesh
 from workers.scene.importers.image_io import srgb_to_linear
 from workers.scene.importers.meshio import load_mesh_file
 from workers.scene.portability.io import load_scene

@@ -20,7 +20,7 @@ from workers.runtime.contract import Plan, PlanItem
 from workers.runtime.fixed_costs import Evaluation, fixed_costs, report_view
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Camera, SceneSpec
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
 from workers.scene.portability.reference import SceneRef
 
 TRAINING_SAMPLES_PER_SECOND = 60_000.0  # voxel samples per second, one idle 2-core CPU, default sizes

@@ -39,9 +39,9 @@ from workers.runtime.view_render import (
 )
 from workers.scene.format.spec import Camera, Diffuse, SceneObject, Transform
 from workers.scene.geometry.compile import CompiledScene, compile_scene
+from workers.scene.geometry.framing import framing_camera
 from workers.scene.portability.portable import (
     StoredScene,
-    framing_camera,
     load_scene,
     neutral_scene,
     standin_shape,

@@ -26,7 +26,7 @@ from workers.render.sampling import coordinate_frame, square_to_cosine_hemispher
 from workers.render.voxels import VoxelGrid, voxelize
 from workers.runtime.sources import Batch, batch_rng
 from workers.scene.geometry.compile import CompiledScene
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
 from workers.scene.portability.reference import SceneRef
 
 SURFACE_SEARCH_ROUNDS = 8

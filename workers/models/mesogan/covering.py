@@ -27,7 +27,7 @@ from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Appearance, Camera, Diffuse, ShellHeight, Structure
 from workers.scene.generators.mesoscale import grow_on_triangles
 from workers.scene.geometry.compile import CompiledScene, ObjectGeometry
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
 
 MAX_PLANE = 4096  # texels per side of a generated plane
 

@@ -49,7 +49,8 @@ from workers.scene.format.spec import (
 )
 from workers.scene.generators.builtin import get_builtin
 from workers.scene.geometry.compile import CompiledScene, compile_scene
-from workers.scene.portability.portable import framing_camera, load_scene, neutral_scene
+from workers.scene.geometry.framing import framing_camera
+from workers.scene.portability.portable import load_scene, neutral_scene
 
 GENERATE = "generate"
 MAX_WINDOW = 2048

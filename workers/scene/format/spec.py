@@ -355,7 +355,7 @@ class BoxShape(Model):
 
 
 class ProceduralShape(Model):
-    """Geometry made by a named generator (`workers.scene.generators.procedural`), deterministic for its
+    """Geometry made by a named generator (`workers.scene.generators.catalogue`), deterministic for its
     params."""
 
     type: Literal["procedural"] = "procedural"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import AlbedoVariable as _Albedo
 from workers.scene.format.spec import (
     BoxShape,
@@ -38,8 +39,6 @@ def builtin(fn: Callable[[], SceneSpec]) -> Callable[[], SceneSpec]:
 
 
 def get_builtin(name: str) -> SceneSpec:
-    from workers.scene.format.errors import SceneError
-
     if name not in BUILTIN_SCENES:
         raise SceneError(
             "scene", f"unknown built-in scene {name!r}; known: {', '.join(sorted(BUILTIN_SCENES))}"

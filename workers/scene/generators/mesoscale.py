@@ -17,22 +17,23 @@ from pydantic import Field
 
 from workers.scene.format.spec import Structure
 from workers.scene.generators.procedural import (
+    Generators,
     GroundPlaneParams,
     Params,
     PositiveFloat,
     Seed,
-    generator,
     ground_plane,
     normalized,
     orthonormal_frames,
     tubes,
 )
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
 
 MATERIAL_KINDS = ("fur", "grass", "carpet")
 MaterialKind = Literal["fur", "grass", "carpet"]
 SEGMENTS = 5  # polyline points per strand minus one: enough for a curl of half a turn
 SIDES = 3  # a strand is a triangular prism
+GENERATORS = Generators()
 
 
 def local_strands(rng: np.random.Generator, n: int, kind: str, s: Structure) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +83,7 @@ class MesoscaleSlabParams(Params):
         return self.strands_per_tile() * self.tiles**2 * SEGMENTS * SIDES * 2
 
 
-@generator(MesoscaleSlabParams)
+@GENERATORS.add(MesoscaleSlabParams)
 def mesoscale_slab(p: MesoscaleSlabParams) -> MeshData:
     """Strands of one periodic tile repeated over `tiles`^2 tiles centred on the origin, on a base plane
     (y = 0, facing +y, scene axes) and cropped at y = `height`; the strands only (the base is
@@ -110,7 +111,7 @@ class MesoscaleBaseParams(Params):
         return GroundPlaneParams(size=self.tile * self.tiles).triangles()
 
 
-@generator(MesoscaleBaseParams)
+@GENERATORS.add(MesoscaleBaseParams)
 def mesoscale_base(p: MesoscaleBaseParams) -> MeshData:
     """The base (skin) under `mesoscale_slab` with the same tiling."""
     return ground_plane(GroundPlaneParams(size=p.tile * p.tiles))

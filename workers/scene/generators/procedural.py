@@ -1,8 +1,8 @@
 """Named procedural geometry generators, deterministic for their `seed`, fully vectorised.
 
-`generate(name, params, field)` validates `params` with the generator's pydantic model,
-so a typo or an out-of-range value names `field.params.<key>` instead of failing later.
-Generators build a scene's heavy content (foliage, a ~1M-triangle displaced object, fur)
+`generate(name, params, field)` (`workers.scene.generators.catalogue`) validates `params` with the
+generator's pydantic model, so a typo or an out-of-range value names `field.params.<key>` instead of failing
+later. Generators build a scene's heavy content (foliage, a ~1M-triangle displaced object, fur)
 without shipping mesh files, keeping a SceneSpec small and hashable.
 """
 
@@ -26,7 +26,8 @@ from pydantic import (
 
 from workers.scene.format.errors import SceneError
 from workers.scene.format.spec import Vec3
-from workers.scene.geometry.shapes import MeshData, box
+from workers.scene.geometry.mesh import MeshData
+from workers.scene.geometry.shapes import box
 
 PositiveFloat = Annotated[FiniteFloat, Field(gt=0)]
 Seed = Annotated[int, Field(ge=0, lt=2**63)]
@@ -43,48 +44,22 @@ class Params(BaseModel):
         parameters alone: what a budget checks before anything is built."""
 
 
-GENERATORS: dict[str, tuple[type[Params], Callable[[Any], MeshData]]] = {}
+class Generators(dict[str, tuple[type[Params], Callable[[Any], MeshData]]]):
+    """Generators by name, each with its parameters' model. A module's generators register in its own table
+    (`@GENERATORS.add(ParamsModel)`), and `workers.scene.generators.catalogue` joins the tables: a generator
+    is known because the catalogue imports its module, not because something imported it for its effect."""
+
+    def add(self, params_model: type[Params]):
+        """Register a function `fn(params) -> MeshData` under its own name."""
+
+        def register(fn: Callable[[Any], MeshData]) -> Callable[[Any], MeshData]:
+            self[fn.__name__] = (params_model, fn)
+            return fn
+
+        return register
 
 
-def generator(params_model: type[Params]):
-    """Register a function `fn(params) -> MeshData` under its own name."""
-
-    def register(fn: Callable[[Any], MeshData]) -> Callable[[Any], MeshData]:
-        GENERATORS[fn.__name__] = (params_model, fn)
-        return fn
-
-    return register
-
-
-def generate(name: str, params: dict[str, Any], field: str, max_triangles: int | None = None) -> MeshData:
-    """The mesh of generator `name` with `params`; errors name `field.generator` or `field.params.<key>`.
-
-    A generator that would make more than `max_triangles` is refused before it runs.
-    """
-    params_model, fn = GENERATORS[_known(name, field)]
-    parsed = parse_params(params_model, params, f"{field}.params")
-    if max_triangles is not None and parsed.triangles() > max_triangles:
-        raise SceneError(
-            f"{field}.params",
-            f"{name} makes {parsed.triangles():,} triangles with these parameters, "
-            f"over the limit of {max_triangles:,}",
-        )
-    return fn(parsed)
-
-
-def generated_triangles(name: str, params: dict[str, Any], field: str) -> int:
-    """What `generate(name, params, field)` would make, without making it."""
-    params_model, _ = GENERATORS[_known(name, field)]
-    return parse_params(params_model, params, f"{field}.params").triangles()
-
-
-def _known(name: str, field: str) -> str:
-    if name not in GENERATORS:
-        raise SceneError(
-            f"{field}.generator",
-            f"unknown procedural generator {name!r}; known: {', '.join(sorted(GENERATORS))}",
-        )
-    return name
+GENERATORS = Generators()  # this module's; the catalogue has every generator
 
 
 def parse_params(model: type[BaseModel], params: dict[str, Any], field: str):
@@ -280,7 +255,7 @@ class GroundPlaneParams(Params):
         return 2
 
 
-@generator(GroundPlaneParams)
+@GENERATORS.add(GroundPlaneParams)
 def ground_plane(p: GroundPlaneParams) -> MeshData:
     """A square of side `size` in the y = 0 plane facing +y, centred on the origin."""
     h = p.size / 2.0
@@ -319,7 +294,7 @@ class FractalTreeParams(Params):
         )
 
 
-@generator(FractalTreeParams)
+@GENERATORS.add(FractalTreeParams)
 def fractal_tree(p: FractalTreeParams) -> MeshData:
     """A recursive tree of tapered prisms standing on the origin along +y, with thin leaf quads at the tips.
 
@@ -383,7 +358,7 @@ class DisplacedSphereParams(Params):
         return 4 * self.resolution * (self.resolution - 1)  # 2r columns: a fan at each pole, quads between
 
 
-@generator(DisplacedSphereParams)
+@GENERATORS.add(DisplacedSphereParams)
 def displaced_sphere(p: DisplacedSphereParams) -> MeshData:
     """A UV sphere of `resolution` rings x 2 `resolution` columns displaced along its radius by seeded fBm.
 
@@ -441,7 +416,7 @@ class FurParams(Params):
         return 2 + 2 * self.strands * self.segments * self.sides  # the base, then each strand's quads
 
 
-@generator(FurParams)
+@GENERATORS.add(FurParams)
 def fur(p: FurParams) -> MeshData:
     """A square base plane (y = 0, facing +y) with `strands` curved tapered prisms growing from it.
 
@@ -482,7 +457,7 @@ class MengerSpongeParams(Params):
         return 2 * squares
 
 
-@generator(MengerSpongeParams)
+@GENERATORS.add(MengerSpongeParams)
 def menger_sponge(p: MengerSpongeParams) -> MeshData:
     """A Menger sponge: the cells of a 3^level grid with no base-3 place where two coordinates have a 1.
 
@@ -519,7 +494,7 @@ class HollowBoxParams(Params):
         return 24
 
 
-@generator(HollowBoxParams)
+@GENERATORS.add(HollowBoxParams)
 def hollow_box(p: HollowBoxParams) -> MeshData:
     """A sealed thin-walled cube: a closed outward cube of edge `size` around a closed inward-facing cube.
 
@@ -583,7 +558,7 @@ WINDOW_WIDTH, WINDOW_SILL, WINDOW_TOP = 0.5, 0.3, 0.75  # of the room width; of 
 DOOR_WIDTH, DOOR_TOP = 0.3, 0.7
 
 
-@generator(ThinWallRoomsParams)
+@GENERATORS.add(ThinWallRoomsParams)
 def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
     """A building shell of cells_x x cells_z rooms on cells_y storeys, all thin axis-aligned slabs.
 
@@ -664,6 +639,3 @@ def thin_wall_rooms(p: ThinWallRoomsParams) -> MeshData:
     occupied &= ~openings(window_z, wall_z, interval_labels(mx, *x_window), y_window, 2)
     occupied &= ~openings(door_z, wall_z, interval_labels(mx, *x_door), y_door, 2)
     return grid_surface(occupied, edges)
-
-
-from workers.scene.generators import mesoscale  # noqa: E402, F401  (registers the mesoscale generators)

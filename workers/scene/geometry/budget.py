@@ -12,6 +12,7 @@ import os
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
+from workers.scene.geometry.registry import SHAPE_TRIANGLES, registered
 
 MAX_SCENE_TRIANGLES_ENV = "NBAKE_MAX_SCENE_TRIANGLES"
 DEFAULT_MAX_SCENE_TRIANGLES = 8_000_000
@@ -28,19 +29,8 @@ def max_scene_triangles() -> int:
 def shape_triangles(shape: spec.Shape, field: str) -> int | None:
     """Triangles of one placement of `shape` (an upper bound for random generators), or None for a mesh
     file, whose count is known only once it is read. Bad generator parameters raise a SceneError."""
-    match shape:
-        case spec.RectangleShape():
-            return 2
-        case spec.BoxShape():
-            return 12
-        case spec.SphereShape():
-            return 20 * 4**shape.subdivisions  # an icosphere: each subdivision splits a face in four
-        case spec.ProceduralShape():
-            from workers.scene.generators.procedural import generated_triangles
-
-            return generated_triangles(shape.generator, shape.params, field)
-        case _:
-            return None
+    count = registered(SHAPE_TRIANGLES, shape.type)
+    return None if count is None else count(shape, field)
 
 
 def check_triangles(total: int, field: str, limit: int) -> None:

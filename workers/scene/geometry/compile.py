@@ -15,7 +15,9 @@ from workers.scene.geometry.budget import (
     placement_field,
     shape_triangles,
 )
-from workers.scene.geometry.shapes import MeshData, shape_mesh
+from workers.scene.geometry.mesh import MeshData
+from workers.scene.geometry.registry import ENVIRONMENT_IMAGES, registered
+from workers.scene.geometry.shapes import shape_mesh
 
 
 @dataclass(frozen=True)
@@ -156,9 +158,8 @@ def compile_scene(
         tangents=np.concatenate(chunks["tan"]).astype(np.float32) if normal_mapped else None,
         vertex_colors=_vertex_colors(chunks["col"], chunks["pos"]),
     )
-    if isinstance(scene.environment, spec.EnvironmentMap):
-        from workers.scene.generators.envmaps import load_environment
-
+    load_environment = registered(ENVIRONMENT_IMAGES, scene.environment.type) if scene.environment else None
+    if load_environment is not None:
         image = load_environment(scene.environment, "environment", base)
         compiled.environment_image = (image * scene.environment.scale).astype(np.float32)
         compiled.environment_rotation = spec.euler_xyz(scene.environment.rotate)

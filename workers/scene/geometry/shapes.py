@@ -1,33 +1,17 @@
-"""Turn a shape description into a checked triangle mesh in the shape's local space."""
+"""Turn a shape description into a checked triangle mesh in the shape's local space: the builder that
+`workers.scene.geometry.registry` names for the shape's `type` makes it, and `check_mesh` checks it. The
+analytic shapes (rectangle, box, sphere) are built here."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-
-DEGENERATE_AREA = 1e-14  # relative to the squared bounding-box diagonal
-
-
-@dataclass(frozen=True)
-class MeshData:
-    """Indexed triangles; optional per-vertex shading normals, UVs, tangents and colours."""
-
-    vertices: np.ndarray  # (V, 3) float64
-    faces: np.ndarray  # (F, 3) int64
-    normals: np.ndarray | None = None  # (V, 3)
-    uvs: np.ndarray | None = None  # (V, 2)
-    tangents: np.ndarray | None = None  # (V, 4): xyz and the bitangent's sign (glTF's TANGENT)
-    # (V, 3) linear RGB that multiplies the material's base colour (glTF's COLOR_0, a PLY's colours)
-    colors: np.ndarray | None = None
-
-    @property
-    def num_triangles(self) -> int:
-        return len(self.faces)
+from workers.scene.geometry.mesh import MeshData, degenerate_triangles
+from workers.scene.geometry.registry import SHAPE_MESHES, registered
 
 
 def rectangle() -> MeshData:
@@ -73,54 +57,42 @@ def sphere(center, radius: float, subdivisions: int) -> MeshData:
     )
 
 
+def rectangle_mesh(shape: spec.RectangleShape, field: str, base_dir: Path | None) -> MeshData:
+    return rectangle()
+
+
+def box_mesh(shape: spec.BoxShape, field: str, base_dir: Path | None) -> MeshData:
+    return box()
+
+
+def sphere_mesh(shape: spec.SphereShape, field: str, base_dir: Path | None) -> MeshData:
+    return sphere(shape.center, shape.radius, shape.subdivisions)
+
+
+def rectangle_triangles(shape: spec.RectangleShape, field: str) -> int:
+    return 2
+
+
+def box_triangles(shape: spec.BoxShape, field: str) -> int:
+    return 12
+
+
+def sphere_triangles(shape: spec.SphereShape, field: str) -> int:
+    return 20 * 4**shape.subdivisions  # an icosphere: each subdivision splits a face in four
+
+
+def shape_path(path: str, base_dir: Path | None) -> Path:
+    """The file a shape reads: a relative `path` resolves against the scene's folder `base_dir`."""
+    resolved = Path(path)
+    return base_dir / resolved if not resolved.is_absolute() and base_dir is not None else resolved
+
+
 def shape_mesh(shape: spec.Shape, field: str, base_dir: Path | None = None) -> MeshData:
     """The checked local-space mesh of `shape`; `field` names it in errors."""
-    match shape:
-        case spec.RectangleShape():
-            mesh = rectangle()
-        case spec.BoxShape():
-            mesh = box()
-        case spec.SphereShape():
-            mesh = sphere(shape.center, shape.radius, shape.subdivisions)
-        case spec.MeshShape():
-            from workers.scene.importers.meshio import load_mesh_file
-
-            path = Path(shape.path)
-            if not path.is_absolute() and base_dir is not None:
-                path = base_dir / path
-            mesh = load_mesh_file(path, f"{field}.path")
-        case spec.ProceduralShape():
-            from workers.scene.generators.procedural import generate
-
-            mesh = generate(shape.generator, shape.params, field)
-        case spec.GltfShape():
-            from workers.scene.importers.gltf import primitive_mesh
-
-            path = Path(shape.path)
-            if not path.is_absolute() and base_dir is not None:
-                path = base_dir / path
-            mesh = primitive_mesh(path, shape.mesh, shape.primitive, field)
-        case spec.UsdShape():
-            from workers.scene.importers.usd import prim_mesh
-
-            path = Path(shape.path)
-            if not path.is_absolute() and base_dir is not None:
-                path = base_dir / path
-            mesh = prim_mesh(path, shape.prim, field)
-        case _:
-            raise SceneError(field, f"unsupported shape {type(shape).__name__}")
-    return check_mesh(mesh, field, repair=getattr(shape, "repair", False))
-
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-
-def degenerate_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Which triangles have (relatively) zero area: they would break the renderer's normals and sampling."""
-    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
-    return triangle_areas(vertices, faces) <= DEGENERATE_AREA * max(extent, 1e-30) ** 2
+    build = registered(SHAPE_MESHES, shape.type)
+    if build is None:
+        raise SceneError(field, f"unsupported shape {type(shape).__name__}")
+    return check_mesh(build(shape, field, base_dir), field, repair=getattr(shape, "repair", False))
 
 
 def check_mesh(mesh: MeshData, field: str, repair: bool = False) -> MeshData:

@@ -12,7 +12,7 @@ numbers (candela and lux read as W/sr and W/m^2: one photometric unit per radiom
 without a photometric scale do). The first perspective camera in node order is the view.
 
 Defaults, each recorded in `SceneSpec.notes` (job plans list them): no camera gives a camera framing the
-scene's bounds (`workers.scene.portability.portable.framing_camera`); no light and no emission gives the
+scene's bounds (`workers.scene.geometry.framing`); no light and no emission gives the
 `studio` environment. Unsupported optional features are listed as ignored; an unsupported extension in
 `extensionsRequired`, a non-triangle primitive, a sparse accessor or a reference leaving the file's
 folder is a SceneError naming it.
@@ -34,7 +34,9 @@ import pygltflib
 
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.geometry.shapes import MeshData, degenerate_triangles
+from workers.scene.geometry.framing import framing_camera
+from workers.scene.geometry.mesh import MeshData, degenerate_triangles
+from workers.scene.geometry.shapes import shape_path
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 SUPPORTED_EXTENSIONS = frozenset(
@@ -213,6 +215,11 @@ def _triangles(indices: np.ndarray, mode: int) -> np.ndarray:
         b = np.where(even, indices[k + 1], indices[k])
         return np.stack([a, b, indices[k + 2]], axis=1)
     return np.stack([np.full(len(k), indices[0]), indices[k + 1], indices[k + 2]], axis=1)
+
+
+def gltf_shape_mesh(shape: spec.GltfShape, field: str, base_dir: Path | None) -> MeshData:
+    """The mesh of a `gltf` shape (`workers.scene.geometry.registry`)."""
+    return primitive_mesh(shape_path(shape.path, base_dir), shape.mesh, shape.primitive, field)
 
 
 def primitive_mesh(path: Path, mesh: int, primitive: int, field: str) -> MeshData:
@@ -429,8 +436,6 @@ def _bounds(geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[in
 def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
     """The scene of the glTF file at `path`; its paths are relative to the folder `prefix` names
     (`posixpath.join(prefix, name)`: "" when the scene file is the glTF file itself)."""
-    from workers.scene.portability.portable import framing_camera
-
     file = read_gltf(path)
     doc = file.document
     unsupported = sorted(set(doc.extensionsRequired or []) - SUPPORTED_EXTENSIONS)

@@ -16,11 +16,18 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
-from workers.scene.geometry.shapes import MeshData
+from workers.scene.geometry.mesh import MeshData
+from workers.scene.geometry.shapes import shape_path
 from workers.scene.importers.image_io import srgb_to_linear
 
 SUPPORTED_EXTENSIONS = (".obj", ".ply", ".gltf", ".glb", ".stl")
+
+
+def mesh_shape_mesh(shape: spec.MeshShape, field: str, base_dir: Path | None) -> MeshData:
+    """The mesh of a `mesh` shape (`workers.scene.geometry.registry`); errors name its `path`."""
+    return load_mesh_file(shape_path(shape.path, base_dir), f"{field}.path")
 
 
 def load_mesh_file(path: Path, field: str) -> MeshData:

@@ -27,7 +27,9 @@ import numpy as np
 from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
-from workers.scene.geometry.shapes import MeshData, degenerate_triangles
+from workers.scene.geometry.framing import framing_camera
+from workers.scene.geometry.mesh import MeshData, degenerate_triangles
+from workers.scene.geometry.shapes import shape_path
 from workers.scene.importers.gltf import DEFAULT_ENVIRONMENT, unique_name
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
@@ -110,6 +112,11 @@ def _per_corner(values, interpolation: str, indices: np.ndarray, face_of_corner:
     if interpolation == "uniform" and len(values) == face_of_corner.max() + 1:
         return values[face_of_corner]
     return None
+
+
+def usd_shape_mesh(shape: spec.UsdShape, field: str, base_dir: Path | None) -> MeshData:
+    """The mesh of a `usd` shape (`workers.scene.geometry.registry`)."""
+    return prim_mesh(shape_path(shape.path, base_dir), shape.prim, field)
 
 
 def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
@@ -293,8 +300,6 @@ def _world(prim, time) -> np.ndarray:
 
 def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
     """The scene of the USD file at `path`; paths relative to the folder `prefix` names (as for glTF)."""
-    from workers.scene.portability.portable import framing_camera
-
     _, usd, usd_geom, usd_lux, usd_shade = _pxr()
     path = Path(path)
     stage = read_stage(path)

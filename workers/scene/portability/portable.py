@@ -31,7 +31,6 @@ import numpy as np
 
 from workers.scene.format.spec import (
     AggregateMaterial,
-    Camera,
     ConstantBackground,
     DirectionalLight,
     EnvironmentMap,
@@ -45,6 +44,7 @@ from workers.scene.format.spec import (
     UsdShape,
 )
 from workers.scene.geometry.compile import CompiledScene, compile_scene
+from workers.scene.importers.usd import read_stage
 from workers.scene.portability.stored import StoredFile, artifact_folder
 from workers.scene.portability.stored import StoredScene as StoredFiles
 
@@ -57,7 +57,6 @@ NEUTRAL_SUN = DirectionalLight(direction=(0.4, -1.0, -0.6), irradiance=(2.0, 2.0
 UNTEXTURED_BASE = (0.5, 0.5, 0.5)
 # An icosahedron's inradius over its circumradius: the stand-in's triangles enclose its bounding sphere.
 ICOSAHEDRON_INRADIUS = math.sqrt((5 + 2 * math.sqrt(5)) / 15)  # 0.7947
-FRAMING_DIRECTION = np.array([0.45, 0.35, 1.0])  # from the model's centre towards a default camera
 
 
 @dataclass(frozen=True)
@@ -146,8 +145,6 @@ def dependencies(path: Path) -> list[Path]:
         uris = [item.get("uri") for key in ("buffers", "images") for item in document.get(key, [])]
         return [path.parent / unquote(uri) for uri in uris if uri and not uri.startswith("data:")]
     if suffix in (".usd", ".usda", ".usdc"):
-        from workers.scene.importers.usd import read_stage
-
         layers = {Path(layer.realPath) for layer in read_stage(path).GetUsedLayers() if layer.realPath}
         return sorted(layers - {path.resolve()})
     return []
@@ -215,16 +212,6 @@ def neutral_scene(objects: list[SceneObject], materials: Mapping[str, Material])
         lights=[NEUTRAL_SUN],
         environment=ConstantBackground(radiance=(NEUTRAL_RADIANCE,) * 3),
     )
-
-
-def framing_camera(bounds: np.ndarray, fov: float = 40.0) -> Camera:
-    """A camera that sees the box `bounds` (2, 3) whole, from the front, above and to the right."""
-    lo, hi = np.asarray(bounds, np.float64)
-    center, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-9)
-    distance = 1.1 * radius / math.sin(math.radians(fov) / 2)
-    direction = FRAMING_DIRECTION / np.linalg.norm(FRAMING_DIRECTION)
-    position = center + distance * direction
-    return Camera(position=tuple(position.tolist()), target=tuple(center.tolist()), fov=fov)
 
 
 def save_scene(folder: Path, stored: StoredScene) -> dict[str, tuple[str, str]]:
