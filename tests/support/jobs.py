@@ -63,7 +63,7 @@ def trained_models(spec: JobSpec) -> list[Trainable]:
     ctx = JobContext(
         job_id=spec.job_id,
         scene=SceneRef.from_json(spec.scene, spec.scene_dir),
-        config=kind.config_model.model_validate(spec.config),
+        config=kind.stored_config(spec.config),
         seed=spec.seed,
         output_dir=Path(spec.output_dir),
         checkpoints=CheckpointStore(spec.checkpoint_dir),

@@ -77,7 +77,7 @@ class JobSpec(BaseModel):
     scene: dict  # SceneSpec.model_dump(mode="json")
     scene_dir: str | None = None  # local directory with the scene's files (meshes, textures)
     scene_files: StoredScene | None = None  # or the files in the store, fetched on the driver's node
-    config: dict  # resolved config
+    config: dict  # the resolved config the job stored at submission, as JSON
     seed: int
     num_gpus: float = 0
     checkpoint_dir: str  # a local path or an fsspec URL (s3://...); the driver resumes from it if non-empty
@@ -148,7 +148,7 @@ def run_job(spec: JobSpec, emit: Callable[[JobEvent], None], cancel: threading.E
         ctx = JobContext(
             job_id=spec.job_id,
             scene=SceneRef.from_json(spec.scene, spec.scene_dir, spec.scene_files),
-            config=kind.config_model.model_validate(spec.config),
+            config=kind.stored_config(spec.config),
             seed=spec.seed,
             output_dir=output_dir,
             checkpoints=CheckpointStore(spec.checkpoint_dir, keep=2),

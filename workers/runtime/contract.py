@@ -13,7 +13,7 @@ from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from pydantic import BaseModel
 
@@ -21,6 +21,7 @@ from workers.runtime.checkpoints import CheckpointStore
 from workers.scene.portability.reference import SceneRef
 
 PRESET_NAMES = ("quick", "default", "paper")
+ConfigT = TypeVar("ConfigT", bound=BaseModel)
 
 
 class PlanItem(BaseModel):
@@ -60,8 +61,11 @@ def no_reservation(count: int) -> AbstractContextManager[SamplerSlots]:
 
 
 @dataclass
-class JobContext:
+class JobContext(Generic[ConfigT]):
     """Everything a kind's `run` gets from the driver: inputs, where to write, and how to talk back.
+
+    `config` is the kind's own config model (a kind's run takes `JobContext[ItsConfig]`), resolved and
+    validated once, at submission.
 
     A render reports samples per pixel as steps; a training kind reports optimizer steps and its loss.
     `checkpoints` is the job's own store: a kind resumes from `checkpoints.latest()` when there is one.
@@ -71,7 +75,7 @@ class JobContext:
 
     job_id: str
     scene: SceneRef
-    config: BaseModel
+    config: ConfigT
     seed: int
     output_dir: Path
     checkpoints: CheckpointStore
@@ -185,6 +189,12 @@ class Kind:
 
     def resolve_config(self, preset: str, overrides: dict) -> BaseModel:
         return resolve_preset(self.config_model, self.presets, preset, overrides)
+
+    def stored_config(self, resolved: dict) -> BaseModel:
+        """The config a job stored (`resolve_config`'s, as JSON) as the kind's model again, on the driver's
+        side of the store. It was checked strictly at submission; this only reads it back, so JSON's lists
+        and strings stand for the model's tuples and enums."""
+        return self.config_model.model_validate(resolved)
 
     def plan(self, scene: SceneRef, config: BaseModel) -> Plan:
         return imported(self.plan_function)(scene, config)

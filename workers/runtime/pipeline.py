@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 import torch
@@ -31,6 +31,7 @@ from workers.runtime.training import Phase, Progress, TrainConfig, TrainResult, 
 from workers.runtime.view import PathTracedView
 from workers.scene.importers.image_io import write_png
 
+TrainedConfigT = TypeVar("TrainedConfigT", bound=TrainedKindConfig)
 PREVIEW = "preview.png"  # the reference, any images the kind adds, and the model's frame, side by side
 REFERENCE_PNG, FRAME_PNG = "reference.png", "frame.png"  # the two alone, for a comparison slider
 
@@ -81,34 +82,32 @@ class Finished:
     preview: Sequence[np.ndarray] = ()  # images shown between the reference and the model's frame
 
 
-class Method(Protocol):
-    """What a training kind writes."""
+class Method(Protocol[TrainedConfigT]):
+    """What a training kind writes, for its config's type."""
 
     kind: str  # the kind's registered name, as the report names it
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
+    def trainables(self, ctx: JobContext[TrainedConfigT]) -> list[Trainable]:
         """The models to train, in order (built before any trains: their sources fix the batches)."""
         ...
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
+    def finish(self, ctx: JobContext[TrainedConfigT], trained: list[Trained]) -> Finished:
         """Export the trained models into `ctx.output_dir` and render the report's frame."""
         ...
 
 
-def run_method(method: Method, ctx: JobContext) -> RunOutput:
+def run_method(method: Method[TrainedConfigT], ctx: JobContext[TrainedConfigT]) -> RunOutput:
     """Train, export and measure a kind's method as one job (the module docstring lists the steps), with
     the config's `torch_threads` for the job's duration only."""
-    config: TrainedKindConfig = ctx.config
-    if config.torch_threads is None:
+    if ctx.config.torch_threads is None:
         return _run_method(method, ctx)
-    with torch_threads(config.torch_threads):
+    with torch_threads(ctx.config.torch_threads):
         return _run_method(method, ctx)
 
 
-def _run_method(method: Method, ctx: JobContext) -> RunOutput:
-    config: TrainedKindConfig = ctx.config
+def _run_method(method: Method[TrainedConfigT], ctx: JobContext[TrainedConfigT]) -> RunOutput:
     trainables = method.trainables(ctx)
-    trained = _train_all(ctx, trainables, config.samplers)
+    trained = _train_all(ctx, trainables, ctx.config.samplers)
     ctx.raise_if_cancelled()
     finished = method.finish(ctx, trained)
     ctx.raise_if_cancelled()

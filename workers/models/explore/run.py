@@ -42,8 +42,8 @@ class ExploreMethod:
         self.baseline: Explorer | None = None
         self.source: PatchSource | None = None
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
-        config: ExploreConfig = ctx.config
+    def trainables(self, ctx: JobContext[ExploreConfig]) -> list[Trainable]:
+        config = ctx.config
         spec = SourceSpec(PatchSource, PatchSourceConfig(ctx.scene, config), ctx.seed)
         self.source = spec.build()
         self.explorer = self._explorer(config, ctx.seed)
@@ -79,8 +79,8 @@ class ExploreMethod:
             **options,
         )
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
-        config: ExploreConfig = ctx.config
+    def finish(self, ctx: JobContext[ExploreConfig], trained: list[Trained]) -> Finished:
+        config = ctx.config
         source, model = self.source, self.explorer.average  # the trained weights' average (`Explorer`)
         files = artifact.save(
             ctx.output_dir, config, model, ctx.scene.spec, source.box, ctx.scene.local_folder()

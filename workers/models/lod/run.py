@@ -34,8 +34,8 @@ class LodMethod:
         self.asset: Asset | None = None
         self.grid: LodGrid | None = None
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
-        config: LodConfig = ctx.config
+    def trainables(self, ctx: JobContext[LodConfig]) -> list[Trainable]:
+        config = ctx.config
         self.asset = choose_asset(ctx.scene, config)
         self.grid = _voxelise(ctx, self.asset)
         torch.manual_seed(ctx.seed)
@@ -51,8 +51,8 @@ class LodMethod:
             )
         ]
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
-        config: LodConfig = ctx.config
+    def finish(self, ctx: JobContext[LodConfig], trained: list[Trained]) -> Finished:
+        config = ctx.config
         (done,) = trained
         networks, chosen, grid = done.model, self.asset, self.grid
         scene = ctx.scene.compiled()
@@ -99,9 +99,9 @@ class LodMethod:
         return Finished(files, levels.view, levels.frame, method_metrics, metrics)
 
 
-def _voxelise(ctx: JobContext, chosen: Asset) -> LodGrid:
+def _voxelise(ctx: JobContext[LodConfig], chosen: Asset) -> LodGrid:
     """The planned LoDs of the chosen objects' triangles."""
-    config: LodConfig = ctx.config
+    config = ctx.config
     scene = ctx.scene.compiled()
     extent = cube_extent(chosen.bounds, config.finest_resolution)
     resolutions = [r for r, _ in choose_resolutions(ctx.scene.spec, config, extent)]

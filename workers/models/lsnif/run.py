@@ -31,8 +31,8 @@ from workers.runtime.view import PathTracedView
 class LsnifMethod:
     kind = "lsnif"
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
-        config: LsnifConfig = ctx.config
+    def trainables(self, ctx: JobContext[LsnifConfig]) -> list[Trainable]:
+        config = ctx.config
         trainables = []
         for choice in choose_objects(ctx.scene, config):
             if choice.choice != LSNIF:
@@ -48,8 +48,8 @@ class LsnifMethod:
             )
         return trainables
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
-        config: LsnifConfig = ctx.config
+    def finish(self, ctx: JobContext[LsnifConfig], trained: list[Trained]) -> Finished:
+        config = ctx.config
         scene = ctx.scene.compiled()
         models, placements, method_metrics = {}, {}, {}
         for done in trained:

@@ -47,16 +47,16 @@ def covered_pixels(shell: Shell, camera: Camera, size: int) -> np.ndarray:
 class MesoganMethod:
     kind = "mesogan"
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
-        config: MesoganConfig = ctx.config
+    def trainables(self, ctx: JobContext[MesoganConfig]) -> list[Trainable]:
+        config = ctx.config
         covering(ctx.scene.compiled(), config.surfaces, config.shell_height, config.texel)  # fail early
         spec = SourceSpec(SlabSource, SlabSourceConfig(mesogan=config), ctx.seed)
         torch.manual_seed(ctx.seed)
         model = MesoGAN(config)
         return [Trainable(model, phases(model), spec, config.train, stored_dtype=artifact.STORAGE_DTYPE)]
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
-        config: MesoganConfig = ctx.config
+    def finish(self, ctx: JobContext[MesoganConfig], trained: list[Trained]) -> Finished:
+        config = ctx.config
         model: MesoGAN = trained[0].model
         files = artifact.save(ctx.output_dir, config, model, ctx.scene.spec, ctx.scene.local_folder())
         scene = ctx.scene.compiled()

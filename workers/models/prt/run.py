@@ -29,8 +29,8 @@ from workers.runtime.training import Phase
 class PrtMethod:
     kind = "prt"
 
-    def trainables(self, ctx: JobContext) -> list[Trainable]:
-        config: PrtConfig = ctx.config
+    def trainables(self, ctx: JobContext[PrtConfig]) -> list[Trainable]:
+        config = ctx.config
         for choice in probe_objects(ctx.scene, config):
             ctx.log(f"{choice.name}: {choice.reason}")
         spec = SourceSpec(PrtSource, PrtSourceConfig(ctx.scene, config), ctx.seed)
@@ -44,8 +44,8 @@ class PrtMethod:
         phases = [Phase("main", partial(prt_loss, mu=config.mu, transport_weight=config.transport_weight))]
         return [Trainable(model, phases, spec, config.train, stored_dtype=artifact.STORAGE_DTYPE)]
 
-    def finish(self, ctx: JobContext, trained: list[Trained]) -> Finished:
-        config: PrtConfig = ctx.config
+    def finish(self, ctx: JobContext[PrtConfig], trained: list[Trained]) -> Finished:
+        config = ctx.config
         (done,) = trained
         model: PrtNetwork = done.model
         source: PrtSource = done.trainable.source.build()
@@ -83,7 +83,7 @@ class PrtMethod:
 
     @staticmethod
     def _chosen_frame(
-        ctx: JobContext,
+        ctx: JobContext[PrtConfig],
         model: PrtNetwork,
         box: np.ndarray,
         objects: np.ndarray,
@@ -92,7 +92,7 @@ class PrtMethod:
     ) -> tuple[Frame, float, PrtConfig]:
         """The frame `frame_spp` chooses among the config's counts (one when the config fixes it) by their
         counted cost, its median time (the report's), and the config with its spp (the artifact's)."""
-        config: PrtConfig = ctx.config
+        config = ctx.config
         candidates = frame_candidates(model, box, objects, report, config, ctx.seed)
         for c in candidates:
             ctx.log(str(c))

@@ -19,8 +19,8 @@ from workers.runtime.samplers import BatchStream, open_batches
 from workers.runtime.sources import SourceSpec
 
 
-def run(ctx: JobContext) -> RunOutput:
-    config: RenderConfig = ctx.config
+def run(ctx: JobContext[RenderConfig]) -> RunOutput:
+    config = ctx.config
     settings = config.settings(ctx.seed)
     ctx.scene.compiled()  # scene errors surface here, in one clear line, not in actors
     plan = plan_render(PinholeCamera(ctx.scene.spec.camera, settings.width, settings.height), settings)
@@ -58,7 +58,7 @@ def run(ctx: JobContext) -> RunOutput:
 
 
 def _render_passes(
-    ctx: JobContext,
+    ctx: JobContext[RenderConfig],
     config: RenderConfig,
     plan: RenderPlan,
     accum: ImageAccumulator,
@@ -93,7 +93,9 @@ def _render_passes(
     return state
 
 
-def _open_stream(ctx: JobContext, settings: RenderSettings, slots: SamplerSlots, start: int) -> BatchStream:
+def _open_stream(
+    ctx: JobContext[RenderConfig], settings: RenderSettings, slots: SamplerSlots, start: int
+) -> BatchStream:
     """Items from `start` on, rendered by the reserved sampler actors, or in the driver without any."""
     source = TileSourceConfig(scene=ctx.scene, settings=settings)
     spec = SourceSpec(TileSource, source, ctx.seed)
