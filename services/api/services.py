@@ -87,7 +87,7 @@ class Services:
         start scheduling (Ray must be initialised for that; an API-only replica does not use Ray)."""
         if self.settings.scheduling and not ray.is_initialized():
             raise RuntimeError("ray.init() first: the scheduler runs jobs on Ray")
-        self.db.migrate()
+        self.db.migrate(self.scenes.specs)
         tokens = configured_tokens(self.settings.tokens, self.settings.tokens_file)
         if not tokens:
             token, self.admin_token_file = generated_admin_token(self.settings.data_dir)

@@ -22,6 +22,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from alembic import command
 from alembic.config import Config
@@ -29,6 +30,9 @@ from sqlalchemy import create_engine, event, text
 from sqlalchemy.engine import URL, Engine, make_url
 from sqlalchemy.exc import DisconnectionError
 from sqlalchemy.orm import Session, sessionmaker
+
+if TYPE_CHECKING:
+    from services.jobs.scene_specs import SceneSpecs
 
 MIGRATIONS = Path(__file__).with_name("migrations")
 MIGRATION_LOCK = 0x6E62616B65  # "nbake": the PostgreSQL advisory lock key that serialises migrations
@@ -99,8 +103,11 @@ class Database:
                 session.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK})
             yield session
 
-    def migrate(self) -> None:
-        """Bring the schema to the newest Alembic revision (run at every start; a no-op when current)."""
+    def migrate(self, scene_specs: SceneSpecs | None = None) -> None:
+        """Bring the schema to the newest Alembic revision (run at every start; a no-op when current).
+
+        `scene_specs` is the store that migration 0004 moves the jobs' scenes into: needed only to migrate
+        a database that holds jobs from before it (the server always passes it)."""
         with self.engine.begin() as connection:
             if not self.is_sqlite:  # replicas starting together migrate one after another
                 connection.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK})
@@ -109,6 +116,7 @@ class Database:
             config = Config()
             config.set_main_option("script_location", str(MIGRATIONS))
             config.attributes["connection"] = connection
+            config.attributes["scene_specs"] = scene_specs
             command.upgrade(config, "head")
 
     def ping(self) -> None:

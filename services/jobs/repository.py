@@ -12,7 +12,7 @@ from typing import Any
 
 from sqlalchemy import bindparam, func, or_, select, update
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session, defer
+from sqlalchemy.orm import Session
 
 from services.jobs.db import Database
 from services.jobs.errors import JobNotFound
@@ -22,11 +22,10 @@ from services.platform.errors import Conflict, InvalidInput
 
 INSERT_ATTEMPTS = 3  # concurrent identical submissions on PostgreSQL: the loser retries and finds the winner
 REUSABLE = (JobState.QUEUED, JobState.RUNNING, JobState.SUCCEEDED)
-# Built once (a repeated submission runs nothing else): the scene, the largest column, is left unread (no
-# answer shows it), and the states are plain comparisons (an IN list is re-expanded at every execution).
+# Built once (a repeated submission runs nothing else): the states are plain comparisons (an IN list is
+# re-expanded at every execution).
 _REUSABLE_JOB = (
     select(Job)
-    .options(defer(Job.scene, raiseload=True))
     .join(IdempotencyKey, IdempotencyKey.job_id == Job.id)
     .where(IdempotencyKey.key == bindparam("key"), or_(*(Job.state == state for state in REUSABLE)))
 )

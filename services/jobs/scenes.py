@@ -20,6 +20,7 @@ from services.artifacts.store import BlobStore
 from services.artifacts.validation import file_references
 from services.jobs.identity import scene_hash, sha256_of
 from services.jobs.material_artifacts import MaterialArtifacts, named_artifacts
+from services.jobs.scene_specs import SceneSpecs, spec_digest
 from services.jobs.tenants import Tenancy
 from services.platform.auth import Principal
 from services.platform.errors import InvalidInput
@@ -43,7 +44,8 @@ class ResolvedScene:
     spec: SceneSpec
     ref: dict[str, str]  # {"source": "builtin" | "asset" | "inline", "name": ..., "asset_id": ...}
     content_hash: str
-    spec_json: dict[str, Any]  # spec.model_dump(mode="json"), as stored in the job row
+    spec_json: dict[str, Any]  # spec.model_dump(mode="json"), as stored in the artifact store
+    spec_digest: str  # what the job row holds: the stored spec_json's digest (`services.jobs.scene_specs`)
 
 
 def scene_field(error: SceneError) -> str:
@@ -74,6 +76,7 @@ class SceneResolver:
         self.blobs, self.assets_root, self.cache_dir = blobs, assets_root, cache_dir
         self.tenancy, self.geometry = tenancy, geometry
         self.material_artifacts = MaterialArtifacts(ArtifactStore(blobs, assets_root), tenancy)
+        self.specs = SceneSpecs(blobs)
         self._resolved: OrderedDict[str, ResolvedScene] = OrderedDict()
         self._resolved_lock = threading.Lock()
 
@@ -116,12 +119,19 @@ class SceneResolver:
         except SceneError as error:
             raise InvalidInput(error.problem, scene_field(error)) from None
 
+    def store(self, resolved: ResolvedScene) -> str:
+        """Put the scene's spec in the store unless it is there already (a repeat is a look-up, not a
+        write of the whole scene); the digest a job row names it by."""
+        if not self.specs.contains(resolved.spec_digest):
+            self.specs.put(resolved.spec_json)
+        return resolved.spec_digest
+
     def scene_dir(self, ref: dict[str, str]) -> Path | None:
         """The folder a driver resolves the scene's relative paths against (None without files)."""
         return self._materialized(ref["asset_id"])[0] if ref["source"] == "asset" else None
 
     def stored_files(self, ref: dict[str, str], scene: dict[str, Any]) -> StoredScene | None:
-        """The files of the scene `ref` names (`scene`: its spec as the job stores it) as a driver on any
+        """The files of the scene `ref` names (`scene`: its spec's JSON) as a driver on any
         node fetches them: store URLs and digests, the stored artifacts its materials name included (None
         without files). The cache folder is the asset's, or named by the files' content with artifacts."""
         files = {}
@@ -190,4 +200,4 @@ def _inline_key(scene: dict[str, Any]) -> str:
 
 def _resolved(spec: SceneSpec, ref: dict[str, str], files: dict[str, str]) -> ResolvedScene:
     spec_json = spec.model_dump(mode="json")
-    return ResolvedScene(spec, ref, scene_hash(spec_json, files), spec_json)
+    return ResolvedScene(spec, ref, scene_hash(spec_json, files), spec_json, spec_digest(spec_json))

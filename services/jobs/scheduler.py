@@ -32,7 +32,6 @@ from services.jobs.states import JobState
 from services.jobs.tables import Job
 from services.platform.errors import ServiceError
 from workers.driver.jobs import JobHandle, JobOutcome, JobSpec, attach_job, start_job
-from workers.models.registry import get_kind
 
 WARNING_ANNOTATION = (
     "warning"  # on an artifact whose model the job flagged (e.g. worse than 1-spp path tracing)
@@ -174,12 +173,14 @@ class Scheduler:
         self.jobs.append_events(job.id, [("log", started)])
 
     def _spec(self, job: Job) -> JobSpec:
-        """Everything the driver reads or writes is in the store, so it may run on any node."""
+        """Everything the driver reads or writes is in the store, so it may run on any node. The scene is
+        read back by the digest the job row holds (BlobNotFound, a LookupError, when the store lost it)."""
+        scene = self.scenes.specs.get(job.scene_digest)
         return JobSpec(
             job_id=job.id,
             kind=job.kind,
-            scene=job.scene,
-            scene_files=self.scenes.stored_files(job.scene_ref, job.scene),
+            scene=scene,
+            scene_files=self.scenes.stored_files(job.scene_ref, scene),
             config=job.config,
             seed=job.seed,
             num_gpus=self._gpus(job),
@@ -189,8 +190,9 @@ class Scheduler:
 
     @staticmethod
     def _gpus(job: Job) -> float:
-        """What the config asks for, when the cluster has it; otherwise the job runs on CPUs."""
-        wanted = get_kind(job.kind).config_model.model_validate(job.config).num_gpus
+        """What the config asks for, when the cluster has it; otherwise the job runs on CPUs. Read from the
+        stored config, which submission validated and filled with every default (`KindConfig.num_gpus`)."""
+        wanted = job.config["num_gpus"]
         return wanted if 0 < wanted <= ray.cluster_resources().get("GPU", 0) else 0
 
     # ------------------------------------------------------------------ following

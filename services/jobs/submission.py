@@ -1,5 +1,7 @@
-"""Turning a job request into a stored QUEUED job: kind, preset, config and scene validated (each error
-naming its field), the work's idempotency key computed, and an existing job reused when it matches.
+"""Turning a job request into a stored QUEUED job, in two steps: `check` resolves the request into a
+checked job (kind, preset, config and scene validated, each error naming its field, and the work's
+idempotency key computed); `persist` reuses the existing job a key names, or plans, admits and inserts a
+new one.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import uuid
 from collections import OrderedDict
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -62,6 +65,23 @@ class JobRequest(BaseModel):
     force: bool = Field(False, description="Run even if identical work already exists.")
 
 
+@dataclass(frozen=True)
+class CheckedJob:
+    """A request resolved and checked, before anything is stored: what a new job of it would hold."""
+
+    tenant: str
+    kind: str
+    preset: str
+    config: BaseModel  # the kind's config model: the preset with the request's overrides, validated
+    resolved: dict[str, Any]  # config.model_dump(mode="json"): what the job stores and its identity hashes
+    scene: ResolvedScene
+    seed: int
+    priority: int
+    force: bool
+    code: str  # the code version, part of the identity
+    key: str  # the idempotency key (`services.jobs.identity`): the same work, the same key
+
+
 class Submitter:
     """Plans run in `geometry`'s child processes when given (a server: plans may build meshes), and are
     cached per kind, scene content and resolved config. A new job is admitted by the tenant's `quotas`."""
@@ -88,7 +108,11 @@ class Submitter:
         """(job, created): created is False when an idempotency key named an existing job of the same
         tenant. The job is `principal`'s tenant's (the default tenant's without one), and may name only
         assets that tenant sees."""
-        principal = principal or Principal(DEFAULT_TENANT, "admin")
+        return self.persist(self.check(request, principal or Principal(DEFAULT_TENANT, "admin")), header_key)
+
+    def check(self, request: JobRequest, principal: Principal) -> CheckedJob:
+        """The request as a checked job of `principal`'s tenant: kind, preset, config and scene validated
+        (InvalidInput naming the field at fault) and the work's identity computed. Nothing is stored."""
         try:
             kind = get_kind(request.kind)
         except UnknownKind as error:
@@ -110,40 +134,61 @@ class Submitter:
         # none is dropped to make this submission equal to an earlier job's
         resolved = config.model_dump(mode="json")
         code = code_version()
-        key = idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code)
-        content_key = None if request.force else f"{principal.tenant}/content:{key}"  # per tenant
+        return CheckedJob(
+            tenant=principal.tenant,
+            kind=kind.name,
+            preset=request.preset,
+            config=config,
+            resolved=resolved,
+            scene=scene,
+            seed=request.seed,
+            priority=request.priority,
+            force=request.force,
+            code=code,
+            key=idempotency_key(kind.name, scene.content_hash, resolved, request.seed, code),
+        )
+
+    def persist(self, checked: CheckedJob, header_key: str | None = None) -> tuple[Job, bool]:
+        """The job an idempotency key names (created False), else a new one: planned (InvalidInput when the
+        plan is refused), its scene stored, admitted by the tenant's quotas and inserted. A repeat of
+        existing work is answered before it is planned."""
+        content_key = None if checked.force else f"{checked.tenant}/content:{checked.key}"  # per tenant
         header = _header_key(header_key)
-        header = header and f"{principal.tenant}/{header}"
+        header = header and f"{checked.tenant}/{header}"
         reusing = header is None and content_key is not None
         if reusing and (existing := self.jobs.reusable(content_key)):
             return existing, False  # the same work exists: validated and planned when it was submitted
         with self._first(content_key if reusing else None) as first:
             if not first and (existing := self.jobs.reusable(content_key)):
                 return existing, False  # an identical submission of this process has just made it
-            plan = self._checked_plan(kind.name, scene, config, resolved)
-            job = Job(
-                id=f"job-{uuid.uuid4().hex}",
-                tenant=principal.tenant,
-                kind=kind.name,
-                state=JobState.QUEUED,
-                scene_ref=scene.ref,
-                scene=scene.spec_json,
-                scene_hash=scene.content_hash,
-                preset=request.preset,
-                config=resolved,
-                seed=request.seed,
-                priority=request.priority,
-                code_version=code,
-                idempotency_key=key,
-                plan=plan,
-                attempts=0,
-                max_attempts=self.max_attempts,
-                cancel_requested=False,
-                last_event_seq=0,
-                created_at=utcnow(),
-            )
+            job = self._new_job(checked)
             admit = self.quotas.admit if self.quotas else None  # once no existing job is reused
             return self.jobs.create(job, content_key, header, absent=reusing, admit=admit)
+
+    def _new_job(self, checked: CheckedJob) -> Job:
+        """The row of a new QUEUED job; its scene is put in the store once the plan is accepted."""
+        plan = self._checked_plan(checked.kind, checked.scene, checked.config, checked.resolved)
+        return Job(
+            id=f"job-{uuid.uuid4().hex}",
+            tenant=checked.tenant,
+            kind=checked.kind,
+            state=JobState.QUEUED,
+            scene_ref=checked.scene.ref,
+            scene_digest=self.scenes.store(checked.scene),
+            scene_hash=checked.scene.content_hash,
+            preset=checked.preset,
+            config=checked.resolved,
+            seed=checked.seed,
+            priority=checked.priority,
+            code_version=checked.code,
+            idempotency_key=checked.key,
+            plan=plan,
+            attempts=0,
+            max_attempts=self.max_attempts,
+            cancel_requested=False,
+            last_event_seq=0,
+            created_at=utcnow(),
+        )
 
     @contextmanager
     def _first(self, content_key: str | None) -> Iterator[bool]:

@@ -52,7 +52,8 @@ class Job(Base):
     kind: Mapped[str] = mapped_column(String(64), index=True)
     state: Mapped[str] = mapped_column(String(16), index=True)
     scene_ref: Mapped[dict[str, Any]]  # how the user named the scene: builtin / asset / inline
-    scene: Mapped[dict[str, Any]]  # the resolved SceneSpec, as JSON
+    # the resolved SceneSpec's JSON is stored once in the artifact store, under this digest (scene_specs)
+    scene_digest: Mapped[str] = mapped_column(String(80))
     scene_hash: Mapped[str] = mapped_column(String(80))
     preset: Mapped[str] = mapped_column(String(64))
     config: Mapped[dict[str, Any]]  # the resolved config
