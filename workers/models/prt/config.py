@@ -63,7 +63,7 @@ class PrtConfig(TrainedKindConfig):
         8,
         ge=1,
         description="Lightings per step, each with its own wavelets and share of pixels (paper 1); 8 beat 1 "
-        f"by 1-3 dB, more no longer helped {evidence('lightings-per-step')}.",
+        f"by 1.7-2.6 dB, more no longer helped {evidence('lightings-per-step')}.",
     )
     lighting_pool: int = Field(
         1024,
@@ -111,7 +111,7 @@ class PrtConfig(TrainedKindConfig):
         1536,
         ge=1,
         description="Pixels per training view whose transport is stored (at most all it sees); about +1 dB "
-        f"a 4x more rows, 4.5 kB each {evidence('rows-per-view')}.",
+        f"per 4x rows, 4.5 kB each {evidence('rows-per-view')}.",
     )
     row_spp: int = Field(
         256,
