@@ -97,6 +97,14 @@ def test_bad_variables_are_errors_naming_the_field(variable, field, words):
     assert words in error.value.problem
 
 
+def test_a_constant_background_has_no_map_to_rotate():
+    rotation = {"type": "environment_rotation", "name": "a", "range_angle": 90}
+    with pytest.raises(SceneError) as error:
+        scene_from_dict(cornell([rotation], environment={"type": "constant", "radiance": [0.5, 0.5, 0.5]}))
+    assert error.value.field == "variables[0].type", error.value
+    assert "no environment map" in error.value.problem
+
+
 def test_a_range_that_makes_the_scene_invalid_at_one_end_names_the_variable():
     # A camera that looks along its up vector at one end of its range is invalid only there.
     variable = {
