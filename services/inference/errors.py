@@ -1,5 +1,5 @@
 """The inference service's errors a caller can act on. They are service errors (status, title,
-detail, field), so the REST problem handlers and the gRPC error mapping of `services/api` serve them
+detail, field), so the REST problem handlers and the gRPC error mapping of `services.platform` serve them
 unchanged."""
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ def submissions(root: Path, database_url: str) -> BenchSection:
     servers: list[subprocess.Popen] = []
     try:
         # One after the other: replicas starting together race on replacing the stored tokens (a
-        # primary-key violation in `store_tokens` on PostgreSQL fails one of them).
+        # primary-key violation in `DatabaseTokens.store_configured` on PostgreSQL fails one of them).
         for i, port in enumerate(ports):
             command = ["-m", "tests.bench.api_process", str(port), str(root / f"api{i}"), str(root / "store")]
             servers.append(subprocess.Popen([sys.executable, *command, database_url, schema], env=env))
