@@ -181,6 +181,9 @@ def test_async_client(served):
         (sdk_models.FileEntry, "FileEntry"),
         (sdk_models.Token, "TokenView"),
         (sdk_models.CreatedToken, "CreatedToken"),
+        (sdk_models.TenantQuotas, "TenantQuotas"),
+        (sdk_models.QuotaLimits, "QuotaLimits"),
+        (sdk_models.QuotaUse, "QuotaUse"),
     ],
 )
 def test_sdk_models_match_the_servers_schemas(served, model, schema):

@@ -342,6 +342,14 @@ class Client:
         """Replace `tenant`'s own quotas (a None field: the deployment's default); its quotas now."""
         return self.retry.call(lambda: self._token_admin().set_quotas(tenant, limits))
 
+    def quotas(self, tenant: str) -> TenantQuotas:
+        """`tenant`'s quotas in force, its own, the deployment's defaults and what its jobs use now."""
+        return self.retry.call(lambda: self._token_admin().get_quotas(tenant))
+
+    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
+        """Replace `tenant`'s own quotas (a None field: the deployment's default); its quotas now."""
+        return self.retry.call(lambda: self._token_admin().set_quotas(tenant, limits))
+
     def _token_admin(self) -> HttpTransport:
         if not hasattr(self.transport, "create_token"):
             raise NeuralbakeError("tokens and quotas are managed over REST: connect with an http(s):// URL")

@@ -164,6 +164,32 @@ class TenantQuotas(BaseModel):
     updated_at: datetime | None = None
 
 
+class QuotaLimits(BaseModel):
+    """A tenant's limits; None: no limit (in `TenantQuotas.own`: the deployment's default holds)."""
+
+    max_running: int | None = None
+    max_queued: int | None = None
+    max_compute_s: float | None = None
+    max_priority: int | None = None
+
+
+class QuotaUse(BaseModel):
+    running: int
+    queued: int
+    compute_s: float = Field(description="The plans' estimated seconds of the queued and running jobs.")
+
+
+class TenantQuotas(BaseModel):
+    """A tenant's quotas: in force (`limits`), its own, the deployment's defaults, and its use now."""
+
+    tenant: str
+    limits: QuotaLimits
+    own: QuotaLimits
+    defaults: QuotaLimits
+    use: QuotaUse
+    updated_at: datetime | None = None
+
+
 class ModelInfo(BaseModel):
     """A model the inference service holds in memory (`operations`: `query`, `render`)."""
 

@@ -152,3 +152,10 @@ class HttpTransport:
     def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
         body = limits.model_dump()
         return TenantQuotas.model_validate(self.send("PUT", f"/v1/tenants/{tenant}/quotas", json=body).json())
+
+    def get_quotas(self, tenant: str) -> TenantQuotas:
+        return TenantQuotas.model_validate(self.send("GET", f"/v1/tenants/{tenant}/quotas").json())
+
+    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
+        body = limits.model_dump()
+        return TenantQuotas.model_validate(self.send("PUT", f"/v1/tenants/{tenant}/quotas", json=body).json())

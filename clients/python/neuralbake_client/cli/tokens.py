@@ -1,6 +1,6 @@
-"""`nbake tokens create | list | revoke` (an admin token): each token belongs to a tenant and sees only
-that tenant's jobs, assets and artifacts; admin tokens see every tenant. The server stores a token's
-sha256 only, so `create` shows the secret once.
+"""`nbake tokens create | list | revoke | quota` (an admin token): each token belongs to a tenant and sees
+only that tenant's jobs, assets and artifacts; admin tokens see every tenant. The server stores a token's
+sha256 only, so `create` shows the secret once. `quota` shows or sets a tenant's quotas.
 """
 
 from __future__ import annotations
@@ -13,11 +13,14 @@ from neuralbake_client.cli.output import Output
 from neuralbake_client.cli.remote import JsonOption, TokenOption, UrlOption, connect, remote_errors
 
 if TYPE_CHECKING:
-    from neuralbake_client.models import Token
+    from neuralbake_client.models import QuotaLimits, TenantQuotas, Token
+
+DEFAULT = "default"  # a quota option's value that drops the tenant's own limit for the deployment's
+DURATION_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400}
 
 tokens_app = typer.Typer(
     name="tokens",
-    help="Create, list and revoke the server's tokens (needs an admin token).",
+    help="Create, list and revoke the server's tokens, and set tenants' quotas (needs an admin token).",
     no_args_is_help=True,
 )
 
@@ -83,3 +86,101 @@ def revoke_command(
         out.line("revoked", id=token_id)
     else:
         print(f"revoked {token_id}")
+
+
+@tokens_app.command("quota")
+def quota_command(
+    tenant: Annotated[str, typer.Argument(help="The tenant whose quotas to show or set.")],
+    max_running: Annotated[
+        str | None, typer.Option(help="Jobs running at once (0 holds its queue), or `default`.")
+    ] = None,
+    max_queued: Annotated[str | None, typer.Option(help="Jobs waiting to start, or `default`.")] = None,
+    max_compute: Annotated[
+        str | None,
+        typer.Option(
+            help="Estimated compute of its queued and running jobs: 90s, 30m, 4h, 2d, or `default`."
+        ),
+    ] = None,
+    max_priority: Annotated[
+        str | None, typer.Option(help="The highest priority its jobs may ask, or `default`.")
+    ] = None,
+    json_lines: JsonOption = False,
+    url: UrlOption = None,
+    token: TokenOption = None,
+) -> None:
+    """Show a tenant's quotas and what its jobs use now; with options, change those quotas first (the
+    others stay as they are). A submission over the queued or compute quota gets 429."""
+    out = Output(json_lines)
+    changes = {
+        name: value
+        for name, value in (
+            ("max_running", _count(max_running, "--max-running", 0)),
+            ("max_queued", _count(max_queued, "--max-queued", 0)),
+            ("max_compute_s", _duration(max_compute)),
+            ("max_priority", _count(max_priority, "--max-priority", -1000)),
+        )
+        if value is not None
+    }
+    with remote_errors(), connect(url, token) as client:
+        quotas = client.quotas(tenant)
+        if changes:
+            own = quotas.own.model_copy(update={k: None if v == DEFAULT else v for k, v in changes.items()})
+            quotas = client.set_quotas(tenant, own)
+    if out.json:
+        out.line("quotas", **quotas.model_dump(mode="json"))
+        return
+    print(_quota_lines(quotas))
+
+
+def _count(value: str | None, option: str, lowest: int) -> int | str | None:
+    if value is None or value == DEFAULT:
+        return value
+    try:
+        number = int(value)
+    except ValueError:
+        number = lowest - 1
+    if number < lowest:
+        raise typer.BadParameter(f"{value!r}: a whole number from {lowest}, or `default`", param_hint=option)
+    return number
+
+
+def _duration(value: str | None) -> float | str | None:
+    """`90`, `90s`, `30m`, `4h`, `2d` as seconds."""
+    if value is None or value == DEFAULT:
+        return value
+    text = value.strip().lower()
+    scale = DURATION_UNITS.get(text[-1:])
+    try:
+        seconds = float(text[:-1] if scale else text) * (scale or 1)
+    except ValueError:
+        seconds = -1.0
+    if not 0 <= seconds < float("inf"):
+        raise typer.BadParameter(
+            f"{value!r}: a duration such as 90s, 30m, 4h or 2d", param_hint="--max-compute"
+        )
+    return seconds
+
+
+def _quota_lines(quotas: TenantQuotas) -> str:
+    limits, use = quotas.limits, quotas.use
+    rows = [
+        ("running", f"{use.running} of {_limit(limits.max_running)}", "max_running"),
+        ("queued", f"{use.queued} of {_limit(limits.max_queued)}", "max_queued"),
+        ("compute", f"{_hours(use.compute_s)} of {_limit(limits.max_compute_s, _hours)}", "max_compute_s"),
+        ("priority", f"at most {_limit(limits.max_priority)}", "max_priority"),
+    ]
+    lines = [f"tenant {quotas.tenant}"]
+    lines += [f"  {name:<9} {text:<24} {_source(quotas.own, field)}" for name, text, field in rows]
+    return "\n".join(lines)
+
+
+def _limit(value, shown=str) -> str:
+    return "unlimited" if value is None else shown(value)
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.3g}h" if seconds >= 3600 else f"{seconds:.3g}s"
+
+
+def _source(own: QuotaLimits, field: str) -> str:
+    return "(own)" if getattr(own, field) is not None else "(default)"
