@@ -221,14 +221,14 @@ class Structure(Model):
 
     length: Annotated[FiniteFloat, Field(gt=0, le=1, description="strand length / slab height")] = 0.8
     density: Annotated[FiniteFloat, Field(gt=0, le=400, description="strands per squared slab height")] = 40.0
-    curliness: Unit = 0.3
+    curliness: Annotated[Unit, Field(description="how far strands bend sideways (0: straight)")] = 0.3
 
 
 class Appearance(Model):
     """The strands' colour (what only the decoder's radiance head sees)."""
 
-    hue: Unit = 0.02
-    saturation: Unit = 0.8
+    hue: Annotated[Unit, Field(description="the strands' hue on the colour wheel (0.02: red-brown)")] = 0.02
+    saturation: Annotated[Unit, Field(description="the strands' colour saturation (0: grey)")] = 0.8
 
     def color(self, value: float = 0.7) -> tuple[float, float, float]:
         """The strands' reflectance: HSV with the given value."""
