@@ -135,3 +135,54 @@ def test_a_build_fails_on_a_broken_gate_passes_when_fixed_and_reruns_without_sub
 @pytest.mark.slow
 def test_a_build_of_three_kinds(served, tmp_path):
     check_build(served, tmp_path, trained_kinds=True)
+
+
+REPO = Path(__file__).resolve().parents[2]
+CI_EXAMPLES = {"github-actions.yml": "vendor.github-workflows", "gitlab-ci.yml": "vendor.gitlab-ci"}
+CHECK_JSONSCHEMA = str(Path(sys.executable).with_name("check-jsonschema"))
+
+
+def ci_commands(example: str) -> list[str]:
+    """The `nbake` commands of a CI example: GitHub's steps' `run`, GitLab's jobs' `script` lines."""
+    document = yaml.safe_load((REPO / "docs" / "ci" / example).read_text())
+    if "jobs" in document:
+        lines = [step["run"] for job in document["jobs"].values() for step in job["steps"] if "run" in step]
+    else:
+        lines = [line for job in document.values() if isinstance(job, dict) for line in job.get("script", [])]
+    return [line for line in lines if line.startswith("nbake ")]
+
+
+@pytest.mark.parametrize("example", CI_EXAMPLES)
+def test_the_ci_examples_validate_against_their_systems_schemas(example, tmp_path):
+    path = REPO / "docs" / "ci" / example
+    check = [CHECK_JSONSCHEMA, "--builtin-schema", CI_EXAMPLES[example]]
+    done = subprocess.run([*check, str(path)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    broken = yaml.safe_load(path.read_text())
+    job = broken["jobs"]["bake"] if "jobs" in broken else broken["bake"]
+    job["timeout-minutes" if "jobs" in broken else "timeout"] = {"minutes": 60}  # a typo the schema catches
+    (tmp_path / example).write_text(yaml.safe_dump(broken))
+    assert subprocess.run([*check, str(tmp_path / example)], capture_output=True, timeout=120).returncode != 0
+
+
+@pytest.mark.parametrize("example", CI_EXAMPLES)
+def test_the_ci_examples_commands_bake_the_shipped_pipeline(example, served, tmp_path):
+    (tmp_path / "scenes").symlink_to(REPO / "assets" / "scenes")  # the pipeline names ../scenes/example.yaml
+    work = tmp_path / "repository"
+    work.mkdir()
+    (work / "nbake.yaml").write_text((REPO / "assets" / "pipelines" / "nbake.yaml").read_text())
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NBAKE_")} | {
+        "NBAKE_URL": served.url,
+        "NBAKE_TOKEN": TOKENS["submit"],
+        "NBAKE_CONFIG": str(tmp_path / "absent.toml"),
+        "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+    }
+    commands = ci_commands(example)
+    assert commands, f"{example} runs no nbake command"
+    for command in commands:
+        done = subprocess.run(
+            ["bash", "-c", command], cwd=work, env=env, capture_output=True, text=True, timeout=900
+        )
+        assert done.returncode == 0, f"{command}\n{done.stdout}{done.stderr}"
+    assert ElementTree.parse(work / "nbake-junit.xml").getroot().get("failures") == "0"
+    assert len(json.loads((work / "nbake.lock.json").read_text())["entries"]) == 2

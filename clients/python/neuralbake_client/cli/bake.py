@@ -127,6 +127,9 @@ def bake_command(
                 baker.on_update = update
                 result = baker.run()
     status = exit_status(result)
+    for report in (summary, junit):
+        if report is not None:
+            report.parent.mkdir(parents=True, exist_ok=True)
     if summary:
         body = result.model_dump(mode="json", exclude={"lock"}) | {
             "exit_status": status,
