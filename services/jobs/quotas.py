@@ -18,6 +18,7 @@ from datetime import datetime
 
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from services.jobs.db import Database
@@ -28,6 +29,7 @@ from services.platform.errors import InvalidInput, ServiceError
 
 MAX_COUNT = 1_000_000  # a bound that fits every database's integer column
 MAX_COMPUTE_S = 1e12
+SET_ATTEMPTS = 2
 RETRY_AFTER_S = (1, 3600)  # a Retry-After within these bounds
 IDLE_RETRY_AFTER_S = 60  # when none of the tenant's jobs runs, so nothing says when room will be made
 
@@ -63,12 +65,12 @@ class QuotaUse(BaseModel):
 
 class QuotaExceeded(ServiceError):
     """429: waiting helps (a job of the tenant ends and makes room). The problem names the quota, its limit
-    and the tenant's use beside the detail."""
+    and the tenant's use beside the detail; no field of the request is at fault."""
 
     status, title = 429, "Quota exceeded"
 
     def __init__(self, quota: str, limit: float, current: float, detail: str, retry_after_s: int):
-        super().__init__(detail, quota)
+        super().__init__(detail)
         self.headers = {"Retry-After": str(retry_after_s)}
         self.extensions = {"quota": quota, "limit": limit, "current": current}
 
@@ -81,14 +83,20 @@ class Quotas:
 
     def set(self, tenant: str, override: QuotaLimits) -> QuotaLimits:
         """Replace `tenant`'s override (None fields: the default's); its limits now."""
-        with self.db.writing() as session:
-            row = session.get(TenantQuota, tenant, with_for_update=True)
-            if row is None:
-                row = TenantQuota(tenant=tenant)
-                session.add(row)
-            for name, value in override.model_dump().items():
-                setattr(row, name, value)
-            row.updated_at = utcnow()
+        for attempt in range(SET_ATTEMPTS):
+            try:
+                with self.db.writing() as session:
+                    row = session.get(TenantQuota, tenant, with_for_update=True)
+                    if row is None:
+                        row = TenantQuota(tenant=tenant)
+                        session.add(row)
+                    for name, value in override.model_dump().items():
+                        setattr(row, name, value)
+                    row.updated_at = utcnow()
+                break
+            except IntegrityError:  # another replica inserted the tenant's first row meanwhile: update it
+                if attempt == SET_ATTEMPTS - 1:
+                    raise
         return self.defaults.over(override)
 
     def override(self, tenant: str) -> tuple[QuotaLimits, datetime | None]:

@@ -82,7 +82,7 @@ def test_the_queued_quota_priority_ceiling_and_running_quota_hold_a_tenant(serve
         assert int(refused.headers["Retry-After"]) >= 1
         problem = refused.json()
         assert (problem["quota"], problem["limit"], problem["current"]) == ("max_queued", 1, 1)
-        assert problem["field"] == "max_queued" and TENANT in problem["detail"]
+        assert "field" not in problem and TENANT in problem["detail"] and "max_queued" in problem["detail"]
 
         again = http.post("/v1/jobs", json=RENDER)  # identical work: its job, not counted against the quota
         assert again.status_code == 200 and again.json()["id"] == job_id
