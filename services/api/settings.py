@@ -14,10 +14,10 @@ from services.artifacts.staging import UploadLimits
 from services.jobs.quotas import QuotaLimits
 from services.platform.settings import SharedSettings
 
-# Every tenant's quotas unless it has its own: a hundred queued jobs, no more estimated compute than the
-# longest job allowed (max_job_seconds), priorities up to 100 of the API's 1000; running jobs unlimited
-# beyond the scheduler's own max_running.
-DEFAULT_TENANT_QUOTAS = QuotaLimits(max_queued=100, max_compute_s=7 * 86_400.0, max_priority=100)
+# Every tenant's quotas unless it has its own: a thousand queued jobs (a bound on a runaway script; the
+# benches queue a few hundred), no more estimated compute than the longest job allowed (max_job_seconds),
+# priorities up to 100 of the API's 1000; running jobs unlimited beyond the scheduler's own max_running.
+DEFAULT_TENANT_QUOTAS = QuotaLimits(max_queued=1000, max_compute_s=7 * 86_400.0, max_priority=100)
 NO_LIMIT = "none"  # an NBAKE_TENANT_MAX_* value that lifts the limit
 
 
