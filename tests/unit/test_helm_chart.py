@@ -78,6 +78,19 @@ def test_api_and_inference_deployments_probe_health_and_take_secrets_from_secret
     assert env_of(api)["RAY_ADDRESS"]["value"] == "nb-neuralbake-ray-head-svc:6379"
 
 
+def test_tenant_quota_defaults_reach_the_api_as_its_environment():
+    quotas = {"maxQueued": 50, "maxComputeS": 3600, "maxRunning": "none"}
+    api = by_kind(render({"api": {"tenantQuotas": quotas}}), "Deployment")["nb-neuralbake-api"]
+    env = env_of(api["spec"]["template"]["spec"]["containers"][0])
+    assert {k: v["value"] for k, v in env.items() if k.startswith("NBAKE_TENANT_")} == {
+        "NBAKE_TENANT_MAX_QUEUED": "50",
+        "NBAKE_TENANT_MAX_COMPUTE_S": "3600",
+        "NBAKE_TENANT_MAX_RUNNING": "none",
+    }  # maxPriority left out: the server's default
+    default = by_kind(render(), "Deployment")["nb-neuralbake-api"]["spec"]["template"]["spec"]
+    assert not any(k.startswith("NBAKE_TENANT_") for k in env_of(default["containers"][0]))
+
+
 def test_the_ray_cluster_has_a_cpu_head_and_an_autoscaled_gpu_worker_group():
     (cluster,) = by_kind(render(), "RayCluster").values()
     assert cluster["apiVersion"] == "ray.io/v1"
@@ -108,6 +121,7 @@ def test_the_ray_cluster_has_a_cpu_head_and_an_autoscaled_gpu_worker_group():
         ({"podSecurityContext": {"runAsNonRoot": False}}, "runAsNonRoot"),
         ({"database": {"schema": "Bad-Schema"}}, "schema"),
         ({"api": {"resources": {"requests": {"cpu": "lots", "memory": "1Gi"}}}}, "cpu"),
+        ({"api": {"tenantQuotas": {"maxQueued": -1}}}, "maxQueued"),
         ({"unknown": 1}, "unknown"),
     ],
 )
