@@ -52,7 +52,7 @@ def test_extension_members_retry_info_and_quota_failure_over_grpc():
                 details[kind.__name__] = message
     metadata = details["ErrorInfo"].metadata
     assert (metadata["quota"], metadata["limit"], metadata["current"]) == ("max_queued", "2", "2")
-    assert metadata["status"] == "429"
+    assert (metadata["status"], metadata["retry_after"]) == ("429", "7")
     assert details["RetryInfo"].retry_delay.seconds == 7
     (violation,) = details["QuotaFailure"].violations
     assert (violation.subject, violation.description) == ("max_queued", "two jobs queued")

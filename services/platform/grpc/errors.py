@@ -47,12 +47,14 @@ def problem_of(error: Exception, table: ProblemTable) -> ProblemInfo | None:
 
 
 def to_status(problem: ProblemInfo) -> grpc.Status:
+    retry_after = (problem.headers or {}).get("Retry-After")
     info = error_details_pb2.ErrorInfo(
         reason=problem.title.upper().replace(" ", "_"),
         domain=DOMAIN,
         metadata={name: str(value) for name, value in (problem.extensions or {}).items()}
         | {"status": str(problem.status), "title": problem.title}
-        | ({"field": problem.field} if problem.field else {}),
+        | ({"field": problem.field} if problem.field else {})
+        | ({"retry_after": retry_after} if retry_after else {}),  # what the SDK reads, as over HTTP
     )
     details = [info]
     if problem.field:
@@ -60,7 +62,7 @@ def to_status(problem: ProblemInfo) -> grpc.Status:
             field=problem.field, description=problem.detail
         )
         details.append(error_details_pb2.BadRequest(field_violations=[violation]))
-    if retry_after := (problem.headers or {}).get("Retry-After"):
+    if retry_after:
         delay = duration_pb2.Duration(seconds=int(retry_after))
         details.append(error_details_pb2.RetryInfo(retry_delay=delay))
     if quota := (problem.extensions or {}).get("quota"):
