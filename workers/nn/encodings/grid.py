@@ -22,7 +22,7 @@ from torch.autograd.function import once_differentiable
 from torch.nn import functional as F
 
 from workers.nn.encodings import grid_kernels
-from workers.nn.encodings.grid_kernels import KernelIndexing
+from workers.nn.encodings.grid_kernels import GridArrays, KernelIndexing
 
 
 class CornerIndex(Protocol):
@@ -165,50 +165,24 @@ def _check_tiling(blocks: list[tuple[int, int]], n_rows: int) -> None:
         raise ValueError(f"level blocks cover {end} rows of a table of {n_rows}")
 
 
-@dataclass(frozen=True)
-class _KernelArguments:
-    """The per-level arguments every CPU kernel takes after its point and table arrays, in the kernels'
-    order. The dimension and feature counts travel as the lengths of the tuples `primes` and `features`,
-    which Numba compiles in as constants (so per-point loops unroll)."""
-
-    starts: np.ndarray
-    scales: np.ndarray
-    sides: np.ndarray
-    primes: tuple[int, ...]
-    features: tuple[int, ...]
-    indexing: KernelIndexing
-
-    @staticmethod
-    def of(
-        geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex, table: Tensor
-    ) -> _KernelArguments:
-        _check_tiling(blocks, table.shape[0])
-        levels = range(geometry.n_levels)
-        indexing = index.kernel_indexing()
-        return _KernelArguments(
-            starts=np.asarray([start for start, _ in blocks], dtype=np.int64),
-            scales=np.asarray(
-                [geometry.scale(level) for level in levels], dtype=table.detach().numpy().dtype
-            ),
-            sides=np.asarray([geometry.vertices_per_side(level) for level in levels], dtype=np.int64),
-            primes=tuple(int(prime) for prime in indexing.primes[: geometry.n_dims]),
-            features=tuple(range(table.shape[1])),
-            indexing=indexing,
-        )
-
-    def __iter__(self):
-        i = self.indexing
-        yield from (
-            self.starts,
-            self.scales,
-            self.sides,
-            self.primes,
-            self.features,
-            i.rules,
-            i.sizes,
-            i.lookup_starts,
-            i.lookup,
-        )
+def _grid_arrays(
+    geometry: GridGeometry, blocks: list[tuple[int, int]], index: CornerIndex, table: Tensor
+) -> GridArrays:
+    """The grid as the CPU kernels read it (their one argument besides points, table and outputs)."""
+    _check_tiling(blocks, table.shape[0])
+    levels = range(geometry.n_levels)
+    indexing = index.kernel_indexing()
+    return GridArrays(
+        starts=np.asarray([start for start, _ in blocks], dtype=np.int64),
+        scales=np.asarray([geometry.scale(level) for level in levels], dtype=table.detach().numpy().dtype),
+        sides=np.asarray([geometry.vertices_per_side(level) for level in levels], dtype=np.int64),
+        primes=tuple(int(prime) for prime in indexing.primes[: geometry.n_dims]),
+        features=tuple(range(table.shape[1])),
+        rules=indexing.rules,
+        sizes=indexing.sizes,
+        lookup_starts=indexing.lookup_starts,
+        lookup=indexing.lookup,
+    )
 
 
 @contextmanager
@@ -249,9 +223,9 @@ class _GridInterpolation(torch.autograd.Function):
         ctx.geometry, ctx.blocks, ctx.index = geometry, blocks, index
         if _uses_kernels(x, table):
             out = table.new_empty(n_points, geometry.n_levels * n_features)  # the kernel writes every entry
-            arguments = _KernelArguments.of(geometry, blocks, index, table)
+            grid = _grid_arrays(geometry, blocks, index, table)
             with _torch_threads_kept():
-                grid_kernels.grid_forward(x.detach().numpy(), table.detach().numpy(), *arguments, out.numpy())
+                grid_kernels.grid_forward(x.detach().numpy(), table.detach().numpy(), grid, out.numpy())
             return out
         out = table.new_empty(n_points, geometry.n_levels, n_features)
         for level, (start, size) in enumerate(blocks):
@@ -269,13 +243,13 @@ class _GridInterpolation(torch.autograd.Function):
             # The kernel writes every entry of the gradients it is given; an empty one is not wanted.
             grad_x = x.new_empty(x.shape if ctx.needs_input_grad[0] else (0, x.shape[1]))
             grad_table = table.new_empty(table.shape if ctx.needs_input_grad[1] else (0, table.shape[1]))
-            arguments = _KernelArguments.of(ctx.geometry, ctx.blocks, ctx.index, table)
+            grid = _grid_arrays(ctx.geometry, ctx.blocks, ctx.index, table)
             with _torch_threads_kept():
                 grid_kernels.grid_backward(
                     x.detach().numpy(),
                     table.detach().numpy(),
                     grad_out.to(table.dtype).contiguous().numpy(),
-                    *arguments,
+                    grid,
                     grad_table.numpy(),
                     grad_x.numpy(),
                 )

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -88,6 +89,23 @@ class KernelIndexing:
             lookup=np.concatenate(flat) if flat else np.zeros(1, dtype=np.int64),
             primes=np.asarray(primes, dtype=np.int64),
         )
+
+
+class GridArrays(NamedTuple):
+    """Everything a kernel reads about the grid besides the points and the table, as one argument.
+
+    Numba passes a named tuple as a struct of its members, so the compiled code is that of separate
+    arguments; `primes` and `features` are tuples for their lengths (module docstring)."""
+
+    starts: np.ndarray  # int64 [L]: the first row of each level's block of the table
+    scales: np.ndarray  # [L], the table's dtype: lattice position = x * scale + 0.5
+    sides: np.ndarray  # int64 [L]: lattice vertices per side
+    primes: tuple[int, ...]  # d entries: the hash's per-dimension primes
+    features: tuple[int, ...]  # F entries: only the length is read
+    rules: np.ndarray  # the rest as in `KernelIndexing`
+    sizes: np.ndarray
+    lookup_starts: np.ndarray
+    lookup: np.ndarray
 
 
 _LINEAR = int(RowRule.LINEAR)
@@ -227,141 +245,68 @@ def _level_in_slot(slot, n_levels):
 
 
 @njit(cache=True)
-def _forward_points(
-    x,
-    table,
-    first,
-    last,
-    level,
-    rule,
-    starts,
-    scales,
-    sides,
-    primes,
-    features,
-    sizes,
-    lookup_starts,
-    lookup,
-    out,
-):
+def _forward_points(x, table, first, last, level, rule, grid, out):
     """`grid_forward` for points first .. last - 1 at one level."""
     one = table.dtype.type(1.0)
-    start, scale, side = starts[level], scales[level], sides[level]
-    size, lookup_start = sizes[level], lookup_starts[level]
-    n_features = len(features)
+    start, scale, side = grid.starts[level], grid.scales[level], grid.sides[level]
+    size, lookup_start = grid.sizes[level], grid.lookup_starts[level]
+    n_features = len(grid.features)
     for n in range(first, last):
         # A row view: here (no stores between corners) it measured faster than a tuple copy.
-        cell = _cell(x[n], scale, side, rule, primes, one)
+        cell = _cell(x[n], scale, side, rule, grid.primes, one)
         for f in range(n_features):
             total = table.dtype.type(0.0)
-            for corner in range(1 << len(primes)):
+            for corner in range(1 << len(grid.primes)):
                 key, weight = _corner(cell, corner, rule, one)
-                row = _row(key, rule, size, lookup_start, lookup)
+                row = _row(key, rule, size, lookup_start, grid.lookup)
                 if _stored(rule, row):
                     total += weight * table[np.uint64(start + row), f]
             out[n, np.uint64(level * n_features + f)] = total
 
 
 @njit(parallel=True, cache=True)
-def grid_forward(x, table, starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup, out):
+def grid_forward(x, table, grid, out):
     """out[n, l * F + f] = sum over corners c of w_c(x_n) * table[start_l + row_c, f].
 
     Tasks are (level, chunk of points), level-major, so a thread works through one level's block of the
     table at a time (a 2^19-row level is 4 MB: it stays in cache, all 16 levels would not); each task
     writes only its own columns of its own rows of `out`.
     """
-    n_points, n_levels = x.shape[0], starts.shape[0]
+    n_points, n_levels = x.shape[0], grid.starts.shape[0]
     n_chunks = (n_points + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
+    # A parallel loop cannot capture a named tuple of arrays (Numba's gufunc wrapper reads its tuple
+    # members as arrays and fails to compile): the loop captures the members, and each task packs them
+    # again, which compiles away.
+    starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup = grid
     for task in prange(n_levels * n_chunks):
+        task_grid = GridArrays(starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup)
         level, chunk = _level_in_slot(task // n_chunks, n_levels), task % n_chunks
         first, last = chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)
         # The same call with the rule as a constant where it is arithmetic, so the lookups and the
         # stored-row test drop out of the compiled loop.
         rule = rules[level]
         if rule == _HASHED:
-            _forward_points(
-                x,
-                table,
-                first,
-                last,
-                level,
-                _HASHED,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                out,
-            )
+            _forward_points(x, table, first, last, level, _HASHED, task_grid, out)
         elif rule == _LINEAR:
-            _forward_points(
-                x,
-                table,
-                first,
-                last,
-                level,
-                _LINEAR,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                out,
-            )
+            _forward_points(x, table, first, last, level, _LINEAR, task_grid, out)
         else:
-            _forward_points(
-                x,
-                table,
-                first,
-                last,
-                level,
-                rule,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                out,
-            )
+            _forward_points(x, table, first, last, level, rule, task_grid, out)
 
 
 @njit(cache=True)
-def _table_gradient_points(
-    x,
-    grad_out,
-    level,
-    rule,
-    starts,
-    scales,
-    sides,
-    primes,
-    features,
-    sizes,
-    lookup_starts,
-    lookup,
-    grad_table,
-):
+def _table_gradient_points(x, grad_out, level, rule, grid, grad_table):
     """The table gradient of one level: every point in order adds to the level's block of `grad_table`."""
     one = grad_table.dtype.type(1.0)
-    start, scale, side = starts[level], scales[level], sides[level]
-    size, lookup_start = sizes[level], lookup_starts[level]
-    n_features = len(features)
+    start, scale, side = grid.starts[level], grid.scales[level], grid.sides[level]
+    size, lookup_start = grid.sizes[level], grid.lookup_starts[level]
+    n_features = len(grid.features)
     for n in range(x.shape[0]):
         # A tuple copy: the scatter's stores may alias `x` as far as the compiler knows, so a row view
         # would be reread and the corner work redone after each one (measured 1.5x slower).
-        cell = _cell(_as_tuple(x[n], primes), scale, side, rule, primes, one)
-        for corner in range(1 << len(primes)):
+        cell = _cell(_as_tuple(x[n], grid.primes), scale, side, rule, grid.primes, one)
+        for corner in range(1 << len(grid.primes)):
             key, weight = _corner(cell, corner, rule, one)
-            row = _row(key, rule, size, lookup_start, lookup)
+            row = _row(key, rule, size, lookup_start, grid.lookup)
             if _stored(rule, row):
                 for f in range(n_features):
                     grad_table[np.uint64(start + row), f] += (
@@ -370,34 +315,19 @@ def _table_gradient_points(
 
 
 @njit(cache=True)
-def _input_gradient_points(
-    x,
-    table,
-    grad_out,
-    level,
-    rule,
-    starts,
-    scales,
-    sides,
-    primes,
-    features,
-    sizes,
-    lookup_starts,
-    lookup,
-    terms,
-):
+def _input_gradient_points(x, table, grad_out, level, rule, grid, terms):
     """The input gradient's terms of one level: terms[level, n, j] = scale_l * sum over corners c of
     (d w_c / d f_j) <table[row_c], grad_out[n, l]>."""
     one = table.dtype.type(1.0)
-    start, scale, side = starts[level], scales[level], sides[level]
-    size, lookup_start = sizes[level], lookup_starts[level]
-    n_features, n_dims = len(features), len(primes)
+    start, scale, side = grid.starts[level], grid.scales[level], grid.sides[level]
+    size, lookup_start = grid.sizes[level], grid.lookup_starts[level]
+    n_features, n_dims = len(grid.features), len(grid.primes)
     for n in range(x.shape[0]):
-        cell = _cell(_as_tuple(x[n], primes), scale, side, rule, primes, one)
+        cell = _cell(_as_tuple(x[n], grid.primes), scale, side, rule, grid.primes, one)
         terms[level, n, :] = 0
         for corner in range(1 << n_dims):
             key, _ = _corner(cell, corner, rule, one)
-            row = _row(key, rule, size, lookup_start, lookup)
+            row = _row(key, rule, size, lookup_start, grid.lookup)
             if _stored(rule, row):
                 dot = table.dtype.type(0.0)
                 for f in range(n_features):
@@ -409,76 +339,16 @@ def _input_gradient_points(
 
 
 @njit(cache=True)
-def _backward_level(
-    x,
-    table,
-    grad_out,
-    level,
-    rule,
-    starts,
-    scales,
-    sides,
-    primes,
-    features,
-    sizes,
-    lookup_starts,
-    lookup,
-    grad_table,
-    terms,
-):
+def _backward_level(x, table, grad_out, level, rule, grid, grad_table, terms):
     """The table gradient and the input gradient's terms of one level, each when its array is not empty."""
     if grad_table.shape[0] > 0:
-        _table_gradient_points(
-            x,
-            grad_out,
-            level,
-            rule,
-            starts,
-            scales,
-            sides,
-            primes,
-            features,
-            sizes,
-            lookup_starts,
-            lookup,
-            grad_table,
-        )
+        _table_gradient_points(x, grad_out, level, rule, grid, grad_table)
     if terms.shape[1] > 0:
-        _input_gradient_points(
-            x,
-            table,
-            grad_out,
-            level,
-            rule,
-            starts,
-            scales,
-            sides,
-            primes,
-            features,
-            sizes,
-            lookup_starts,
-            lookup,
-            terms,
-        )
+        _input_gradient_points(x, table, grad_out, level, rule, grid, terms)
 
 
 @njit(parallel=True, cache=True)
-def grid_backward(
-    x,
-    table,
-    grad_out,
-    starts,
-    scales,
-    sides,
-    primes,
-    features,
-    rules,
-    sizes,
-    lookup_starts,
-    lookup,
-    grad_table,
-    grad_x,
-):
+def grid_backward(x, table, grad_out, grid, grad_table, grad_x):
     """grad_table[start_l + row_c] = sum over points n of w_c(x_n) * grad_out[n, l], and
     grad_x[n, j] = sum_l scale_l * sum_c (d w_c / d f_j) <table[row_c], grad_out[n, l]>. An empty
     `grad_table` or `grad_x` (no rows) means that gradient is not wanted.
@@ -489,68 +359,23 @@ def grid_backward(
     summed in level order afterwards. Both results are therefore the same bit for bit whatever the
     thread count.
     """
-    n_points, n_dims, n_levels = x.shape[0], len(primes), starts.shape[0]
+    n_points, n_dims, n_levels = x.shape[0], len(grid.primes), grid.starts.shape[0]
     terms = np.empty((n_levels, n_points if grad_x.shape[0] > 0 else 0, n_dims), table.dtype)
+    # As in `grid_forward`: the loop captures the grid's members and packs them again.
+    starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup = grid
     for slot in prange(n_levels):
+        task_grid = GridArrays(starts, scales, sides, primes, features, rules, sizes, lookup_starts, lookup)
         level = _level_in_slot(slot, n_levels)
         if grad_table.shape[0] > 0:
             grad_table[starts[level] : starts[level] + sizes[level]] = 0
         # As in `grid_forward`: the rule is a constant where it is arithmetic.
         rule = rules[level]
         if rule == _HASHED:
-            _backward_level(
-                x,
-                table,
-                grad_out,
-                level,
-                _HASHED,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                grad_table,
-                terms,
-            )
+            _backward_level(x, table, grad_out, level, _HASHED, task_grid, grad_table, terms)
         elif rule == _LINEAR:
-            _backward_level(
-                x,
-                table,
-                grad_out,
-                level,
-                _LINEAR,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                grad_table,
-                terms,
-            )
+            _backward_level(x, table, grad_out, level, _LINEAR, task_grid, grad_table, terms)
         else:
-            _backward_level(
-                x,
-                table,
-                grad_out,
-                level,
-                rule,
-                starts,
-                scales,
-                sides,
-                primes,
-                features,
-                sizes,
-                lookup_starts,
-                lookup,
-                grad_table,
-                terms,
-            )
+            _backward_level(x, table, grad_out, level, rule, task_grid, grad_table, terms)
     n_chunks = (terms.shape[1] + POINTS_PER_CHUNK - 1) // POINTS_PER_CHUNK
     for chunk in prange(n_chunks):
         for n in range(chunk * POINTS_PER_CHUNK, min(n_points, (chunk + 1) * POINTS_PER_CHUNK)):
