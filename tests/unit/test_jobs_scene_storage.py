@@ -19,6 +19,7 @@ from services.jobs.identity import canonical_json
 from services.jobs.scene_specs import SceneSpecs
 from services.jobs.submission import JobRequest
 from services.jobs.tables import Event, Job, utcnow
+from services.platform.errors import InvalidInput
 from workers.scene.generators.builtin import get_builtin
 
 RESUBMISSIONS = 5
@@ -63,6 +64,19 @@ def test_forced_resubmissions_of_a_large_scene_store_it_once(services):
     assert {job.scene_digest for job in again} == {first.scene_digest}
     assert set(services.blobs.digests()) == blobs  # the store holds the one copy the first job put there
     assert services.scenes.specs.get(first.scene_digest) == stored
+
+
+def test_a_refused_job_stores_no_scene(tmp_path):
+    """The scene goes into the store only once the job's plan is accepted: a refusal leaves nothing."""
+    settings = ServiceSettings(data_dir=tmp_path, tokens="t:admin", scheduling=False, max_job_seconds=1e-3)
+    built = Services.build(settings)
+    built.start()
+    try:
+        with pytest.raises(InvalidInput, match="max_job_seconds"):
+            built.submit(JobRequest(kind="render", scene=instanced_box(10), preset="quick"))
+        assert list(built.blobs.digests()) == []
+    finally:
+        built.stop()
 
 
 def migrated(db: Database, revision: str) -> None:
