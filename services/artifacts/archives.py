@@ -81,7 +81,15 @@ def extract_archive(path: Path, name: str, staging: Staging) -> None:
             _extract_zip(path, staging, guard)
         else:
             _extract_tar(path, _TAR_MODES[suffix], staging, guard)
-    except (zipfile.BadZipFile, tarfile.TarError, gzip.BadGzipFile, zlib.error, EOFError) as error:
+    # NotImplementedError: zipfile has no decompressor for the member's compression method
+    except (
+        zipfile.BadZipFile,
+        tarfile.TarError,
+        gzip.BadGzipFile,
+        zlib.error,
+        EOFError,
+        NotImplementedError,
+    ) as error:
         raise UploadError(name, f"cannot read the archive: {error}") from None
     except UnicodeDecodeError as error:  # a zip member flagged UTF-8 with a name that is not UTF-8
         member = printable(bytes(error.object).decode("utf-8", "surrogateescape"))
@@ -91,7 +99,8 @@ def extract_archive(path: Path, name: str, staging: Staging) -> None:
 def _extract_zip(path: Path, staging: Staging, guard: _InflationGuard) -> None:
     limits = staging.limits
     with zipfile.ZipFile(path) as archive:
-        members = [m for m in archive.infolist() if not m.is_dir() and not _skipped(m.filename)]
+        # not `ZipInfo.is_dir()`, which raises IndexError on a member with an empty name
+        members = [m for m in archive.infolist() if not m.filename.endswith("/") and not _skipped(m.filename)]
         if len(members) > limits.max_files:
             raise UploadError(
                 guard.archive_name,
@@ -111,6 +120,8 @@ def _extract_zip(path: Path, staging: Staging, guard: _InflationGuard) -> None:
             if member.flag_bits & _ZIP_ENCRYPTED:
                 raise UploadError(member.filename, "encrypted archive members are not supported")
             guard.check_declared(member.filename, member.file_size, member.compress_size)
+            if member.header_offset < 0:  # zipfile would seek before the archive's start (OSError)
+                raise zipfile.BadZipFile(f"{member.filename}: its header lies before the archive's start")
             with archive.open(member) as stream:
                 chunks = guard.count(member.filename, read_chunks(stream))
                 staging.add(member.filename, chunks, declared_size=member.file_size)

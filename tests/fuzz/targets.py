@@ -1,51 +1,83 @@
-"""atheris fuzz targets for the parsers that read what an attacker sends: scene files, upload archives,
-the inference wire format and the SSE `Last-Event-ID` header. Each target accepts only the parser's own
-error (a 4xx); anything else is a crash, which atheris reports with the input that caused it.
+"""Fuzz targets for the parsers that read what an attacker sends: every importer an upload reaches (scene
+files in YAML/JSON, glTF/GLB and USD; the meshes and textures a scene names; zip and tar archives), the
+inference wire format and the SSE `Last-Event-ID` header. Each target accepts only the parser's own error
+(a 4xx); anything else is a crash. `tests/fuzz/__main__.py` runs one under atheris.
 
-    python -m tests.fuzz.targets scene -max_total_time=60     # any libFuzzer flag after the target
+An upload goes through the server's own entry, `ingest_upload` (staging and its limits, archives, the
+scene and every file it names parsed, checked and built), in this process. An upload target's input is
+one file: its first byte picks the file's name, the rest is its content. `SEEDS` start each corpus with
+every hostile input of issue 50's table and a valid file of each kind.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import io
+import json
 import os
 import re
-import sys
 import tempfile
-from pathlib import Path
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 
-import atheris
+from PIL import Image
 
-with atheris.instrument_imports(include=["services", "workers"]):
-    from services.artifacts.archives import extract_archive
-    from services.artifacts.staging import Staging, UploadError, UploadLimits
-    from services.inference.errors import MalformedBody
-    from services.inference.wire import decode_binary
-    from workers.scene.format.errors import SceneError
-    from workers.scene.portability.io import load_scene
+from services.artifacts.store import BlobStore
+from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
+from services.inference.errors import MalformedBody
+from services.inference.wire import decode_binary
+from tests.support import hostile_inputs as hostile
+from tests.support.archives import tarred, zipped
+from tests.support.usd_files import usdc
+from workers.scene.format.errors import SceneError
+from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
 
-# NBAKE_FUZZ_DIR: a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
-WORK = Path(tempfile.mkdtemp(prefix="nbake-fuzz-", dir=os.environ.get("NBAKE_FUZZ_DIR")))
+WORK_ENV = (
+    "NBAKE_FUZZ_DIR"  # a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
+)
 LIMITS = UploadLimits(max_total_bytes=1 << 20, max_files=20, max_file_bytes=1 << 20)
+USER_ERRORS = (UploadError, SceneError)  # an upload's errors the API answers with a 4xx
 
 
-def scene(data: bytes) -> None:
-    provider = atheris.FuzzedDataProvider(data)
-    suffix = ".json" if provider.ConsumeBool() else ".yaml"
-    path = WORK / f"scene{suffix}"
-    path.write_bytes(provider.ConsumeBytes(len(data)))
-    with contextlib.suppress(SceneError):
-        load_scene(path)
+def upload(files: hostile.Files) -> None:
+    """`files` uploaded as the server takes them, in this process; only the upload's own errors pass."""
+    with tempfile.TemporaryDirectory(dir=os.environ.get(WORK_ENV)) as work:
+        parts = [(name, io.BytesIO(data)) for name, data in files]
+        with contextlib.suppress(*USER_ERRORS):
+            ingest_upload(parts, BlobStore(f"{work}/blobs"), LIMITS, work_dir=Path(work))
 
 
-def archive(data: bytes) -> None:
-    provider = atheris.FuzzedDataProvider(data)
-    name = provider.PickValueInList(["upload.zip", "upload.tar", "upload.tar.gz"])
-    path = WORK / name
-    path.write_bytes(provider.ConsumeBytes(len(data)))
-    with tempfile.TemporaryDirectory(dir=WORK) as folder, contextlib.suppress(UploadError):
-        extract_archive(path, name, Staging(Path(folder), LIMITS))
+@dataclass(frozen=True)
+class UploadTarget:
+    """Uploads one fuzzed file: an input's first byte picks its name from `names`, the rest is its content.
+    `scene`, given that name, writes the scene file uploaded beside it (one that names it)."""
+
+    names: tuple[str, ...]
+    scene: Callable[[str], str] | None = None
+
+    def __call__(self, data: bytes) -> None:
+        name = self.names[data[0] % len(self.names)] if data else self.names[0]
+        beside = [] if self.scene is None else [("scene.yaml", self.scene(name).encode())]
+        upload([*beside, (name, data[1:])])
+
+    def seed(self, files: hostile.Files) -> bytes:
+        """The input that uploads the file of `files` with one of this target's suffixes (under this target's
+        name for that suffix: the target brings its own scene)."""
+        for name, content in files:
+            for index, own in enumerate(self.names):
+                if "".join(PurePosixPath(name).suffixes[-2:]) == "".join(PurePosixPath(own).suffixes[-2:]):
+                    return bytes([index]) + content
+        raise ValueError(f"none of {[name for name, _ in files]} is a file of {self.names}")
+
+
+scene = UploadTarget(("scene.yaml", "scene.json"))
+gltf = UploadTarget(("scene.gltf", "scene.glb"))
+usd = UploadTarget(("scene.usda", "scene.usdc"))
+mesh = UploadTarget(("mesh.obj", "mesh.ply", "mesh.stl"), hostile.mesh_scene)
+texture = UploadTarget(("texture.png", "texture.jpg", "texture.exr"), hostile.textured_scene)
+archive = UploadTarget(("upload.zip", "upload.tar", "upload.tar.gz"))
 
 
 def wire(data: bytes) -> None:
@@ -55,14 +87,15 @@ def wire(data: bytes) -> None:
 
 @functools.cache
 def _job_server():
-    """A job server (API only, SQLite in the work folder) in process, and a job that ended (cancelled while
+    """A job server (API only, SQLite in a work folder) in process, and a job that ended (cancelled while
     queued), whose event stream therefore ends: (client, job id)."""
-    with atheris.instrument_imports(include=["services"]):
-        from fastapi.testclient import TestClient
+    from fastapi.testclient import TestClient
 
-        from services.api.app import create_app
-        from services.api.settings import ServiceSettings
-    settings = ServiceSettings(data_dir=WORK / "server", tokens="fuzz-token:admin", scheduling=False)
+    from services.api.app import create_app
+    from services.api.settings import ServiceSettings
+
+    work = Path(tempfile.mkdtemp(prefix="server-", dir=os.environ.get(WORK_ENV)))
+    settings = ServiceSettings(data_dir=work, tokens="fuzz-token:admin", scheduling=False)
     client = TestClient(create_app(settings), headers={"Authorization": "Bearer fuzz-token"})
     client.__enter__()  # runs the app's startup (migrations, tokens); the process exits without teardown
     job = client.post("/v1/jobs", json={"kind": "render", "scene": "cornell_box", "preset": "quick"}).json()
@@ -93,26 +126,113 @@ def last_event_id(data: bytes) -> None:
             raise RuntimeError(f"Last-Event-ID {value!r}: events {sent} are not those after it, in order")
 
 
-TARGETS = {"scene": scene, "archive": archive, "wire": wire, "last_event_id": last_event_id}
-SEEDS = {
-    "scene": [
-        b"\x00materials: {m: {type: diffuse}}\nobjects: [{name: a, shape: {type: box}, material: m}]\n"
-    ],
-    "archive": [],
-    "wire": [b'{"params": {}, "arrays": {"x": {"dtype": "float32", "shape": [2, 3]}}}\n' + bytes(24)],
-    "last_event_id": [b"0", b"1", b"2147483647", b" 3 "],
+TARGETS: dict[str, Callable[[bytes], None]] = {
+    "scene": scene,
+    "gltf": gltf,
+    "usd": usd,
+    "mesh": mesh,
+    "texture": texture,
+    "archive": archive,
+    "wire": wire,
+    "last_event_id": last_event_id,
 }
 
+_BOX_SCENE = (
+    "materials: {m: {type: diffuse}}\nobjects: [{name: a, shape: {type: box}, material: m}]\n" + hostile.LIGHT
+)
+_TRIANGLE_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+_TRIANGLE_PLY = b"""ply
+format ascii 1.0
+element vertex 3
+property float x
+property float y
+property float z
+element face 1
+property list uchar int vertex_indices
+end_header
+0 0 0
+1 0 0
+0 1 0
+3 0 1 2
+"""
+_TRIANGLE_STL = b"""solid t
+facet normal 0 0 1
+outer loop
+vertex 0 0 0
+vertex 1 0 0
+vertex 0 1 0
+endloop
+endfacet
+endsolid t
+"""
 
-def main() -> None:
-    name = sys.argv[1]
-    corpus = WORK / f"corpus-{name}"
-    corpus.mkdir()
-    for index, seed in enumerate(SEEDS[name]):
-        (corpus / str(index)).write_bytes(seed)
-    atheris.Setup([sys.argv[0], *sys.argv[2:], str(corpus)], TARGETS[name])
-    atheris.Fuzz()
+
+def _bytes_of(parts: list[tuple[str, io.BytesIO]]) -> hostile.Files:
+    return [(name, stream.getvalue()) for name, stream in parts]
 
 
-if __name__ == "__main__":
-    main()
+def _png(width: int, height: int) -> bytes:
+    encoded = io.BytesIO()
+    Image.new("RGB", (width, height), (200, 100, 50)).save(encoded, format="PNG")
+    return encoded.getvalue()
+
+
+def _seeds() -> dict[str, dict[str, bytes]]:
+    """Each target's first corpus, by name: issue 50's hostile inputs, scaled down where only their size was
+    hostile (a list of ones, an instancer just over its limit), a valid file of each kind, and the inputs
+    fuzzing found crashing a parser (each fixed since)."""
+    instancer = hostile.usd_point_instancer(MAX_SCENE_INSTANCES + 1)
+    faceless = hostile.usd_mesh_without_faces()
+    triangle = hostile.gltf_triangle()
+    return {
+        "scene": {
+            "box": scene.seed([("scene.yaml", _BOX_SCENE.encode())]),
+            "list of ones": scene.seed(hostile.yaml_list(1000)),
+            "alias bomb": scene.seed([("scene.yaml", hostile.YAML_ALIAS_BOMB.encode())]),
+        },
+        "gltf": {
+            "triangle": gltf.seed([("scene.gltf", json.dumps(triangle).encode())]),
+            "triangle glb": gltf.seed([("scene.glb", hostile.glb(triangle))]),
+            "accessor bomb": gltf.seed(hostile.gltf_accessor_bomb()),
+            "accessor bomb glb": gltf.seed(
+                [("scene.glb", hostile.glb(json.loads(hostile.gltf_accessor_bomb()[0][1])))]
+            ),
+            **{name: gltf.seed(files) for name, files in hostile.gltf_variants().items()},
+            "buffer view without byteLength": gltf.seed(hostile.gltf_view_without_length()),
+        },
+        "usd": {
+            "point instancer over the limit": usd.seed(instancer),
+            "mesh without faces": usd.seed(faceless),
+            "mesh without faces usdc": usd.seed([("scene.usdc", usdc(faceless[0][1]))]),
+            "point instancer usdc": usd.seed([("scene.usdc", usdc(hostile.usd_point_instancer(3)[0][1]))]),
+            "bytes not UTF-8": usd.seed(hostile.usd_not_utf8()),
+            "instancer with fewer positions": usd.seed(hostile.usd_instancer_with_fewer_positions()),
+            "points of an unknown type": usd.seed(hostile.usd_points_of_unknown_type()),
+        },
+        "mesh": {
+            "obj": mesh.seed([("a.obj", _TRIANGLE_OBJ)]),
+            "ply": mesh.seed([("a.ply", _TRIANGLE_PLY)]),
+            "stl": mesh.seed([("a.stl", _TRIANGLE_STL)]),
+            "obj vertex with two coordinates": mesh.seed(hostile.obj_vertex_with_two_coordinates()),
+        },
+        "texture": {
+            "png": texture.seed([("a.png", _png(2, 2))]),
+            "png declaring 10^10 pixels": texture.seed([("big.png", hostile.png_header(100_000, 100_000))]),
+        },
+        "archive": {
+            "zip name flagged UTF-8": archive.seed(hostile.zip_with_bad_utf8_name()),
+            "zip of a texture bomb": archive.seed(_bytes_of(zipped(dict(hostile.png_bomb_texture())))),
+            "tar.gz of a faceless mesh": archive.seed(_bytes_of(tarred(dict(faceless)))),
+            "zip compression method 99": archive.seed(hostile.zip_with_unknown_compression()),
+            "zip member without a name": archive.seed(hostile.zip_member_without_name()),
+            "zip header before its start": archive.seed(hostile.zip_central_directory_past_its_place()),
+        },
+        "wire": {
+            "2x3 floats": b'{"params": {}, "arrays": {"x": {"dtype": "float32", "shape": [2, 3]}}}\n'
+            + bytes(24)
+        },
+        "last_event_id": {"0": b"0", "1": b"1", "int32 max": b"2147483647", "padded": b" 3 "},
+    }
+
+
+SEEDS = _seeds()

@@ -13,7 +13,7 @@ import pytest
 from services.artifacts import validation
 from tests.integration import test_api_server as api
 from tests.integration.test_api_server import QUICK_RENDER, problem_of
-from tests.unit.test_scene_hostile import ALIAS_BOMB
+from tests.support.hostile_inputs import YAML_ALIAS_BOMB
 
 server, client = api.server, api.client  # fixtures
 
@@ -40,7 +40,7 @@ def upload(client: httpx.Client, name: str, data: bytes) -> httpx.Response:
 
 
 def test_alias_bomb_upload_is_422_naming_the_file(client):
-    body = problem_of(upload(client, "scene.yaml", ALIAS_BOMB.encode()), 422)
+    body = problem_of(upload(client, "scene.yaml", YAML_ALIAS_BOMB.encode()), 422)
     assert body["field"] == "scene.yaml" and "200000 values" in body["detail"]
 
 

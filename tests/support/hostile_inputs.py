@@ -14,6 +14,28 @@ Files = list[tuple[str, bytes]]
 LIGHT = "lights: [{type: point, position: [0, 5, 0], intensity: [1, 1, 1]}]\n"
 
 
+# ~700 bytes whose aliases expand to 10^8 leaves under `params`
+YAML_ALIAS_BOMB = """\
+materials: {grey: {type: diffuse}}
+objects:
+  - name: bomb
+    material: grey
+    shape:
+      type: procedural
+      generator: ground_plane
+      params:
+        a: &a [x, x, x, x, x, x, x, x, x, x]
+        b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
+        c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
+        d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
+        e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
+        f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]
+        g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]
+        h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]
+lights: [{type: point, position: [0, 5, 0], intensity: [1, 1, 1]}]
+"""
+
+
 def yaml_list(ones: int = 1_500_000) -> Files:
     """A plain YAML list of `ones` ones, no aliases (1.5M: 5.7 MiB, which took 1 GB and 97 s in the API)."""
     return [("scene.yaml", b"- 1\n" * ones)]
@@ -47,13 +69,25 @@ def png_header(width: int, height: int) -> bytes:
     )
 
 
-def png_bomb_texture(side: int = 100_000) -> Files:
-    """A scene whose material's texture is a PNG declaring `side` x `side` pixels."""
-    scene = (
-        "materials: {m: {type: diffuse, reflectance: {type: image, path: big.png}}}\n"
+def textured_scene(texture: str) -> str:
+    """A lit floor whose material's reflectance is the image file `texture`."""
+    return (
+        f"materials: {{m: {{type: diffuse, reflectance: {{type: image, path: {texture}}}}}}}\n"
         "objects: [{name: floor, shape: {type: rectangle}, material: m}]\n" + LIGHT
     )
-    return [("scene.yaml", scene.encode()), ("big.png", png_header(side, side))]
+
+
+def mesh_scene(mesh: str) -> str:
+    """A lit scene of the mesh file `mesh`."""
+    return (
+        "materials: {m: {type: diffuse}}\n"
+        f"objects: [{{name: part, shape: {{type: mesh, path: {mesh}}}, material: m}}]\n" + LIGHT
+    )
+
+
+def png_bomb_texture(side: int = 100_000) -> Files:
+    """A scene whose material's texture is a PNG declaring `side` x `side` pixels."""
+    return [("scene.yaml", textured_scene("big.png").encode()), ("big.png", png_header(side, side))]
 
 
 def usd_point_instancer(instances: int = 100_000) -> Files:
@@ -131,6 +165,12 @@ def gltf_variants() -> dict[str, Files]:
             "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 9}]}]
         },
         "glTF bufferView.buffer": {"bufferViews": [{"buffer": 9, "byteLength": 36}]},
+        "glTF light": {
+            "nodes": [{"mesh": 0}, {"extensions": {"KHR_lights_punctual": {"light": 9}}}],
+            "scenes": [{"nodes": [0, 1]}],
+            "extensionsUsed": ["KHR_lights_punctual"],
+            "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point"}]}},
+        },
         "glTF 3-number matrix": {"nodes": [{"mesh": 0, "matrix": [1, 0, 0]}]},
         "glTF count -5": {"accessors": [accessor | {"count": -5}]},
         "glTF non-base64 data URI": {
@@ -141,6 +181,14 @@ def gltf_variants() -> dict[str, Files]:
         name: [("scene.gltf", json.dumps(gltf_triangle(**change)).encode())]
         for name, change in variants.items()
     }
+
+
+def glb(document: dict) -> bytes:
+    """`document` as a binary glTF: the 12-byte header and one JSON chunk (its buffers are data URIs)."""
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)  # chunks are 4-byte aligned, JSON padded with spaces
+    chunk = struct.pack("<I4s", len(text), b"JSON") + text
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunk)) + chunk
 
 
 def zip_with_bad_utf8_name() -> Files:
@@ -172,3 +220,65 @@ def Xform "World"
 }
 """
     return [("scene.usda", stage.encode())]
+
+
+# Inputs the fuzz targets (tests/fuzz) found crashing the server's parsers, reduced by hand.
+
+
+def usd_not_utf8() -> Files:
+    """A USD text layer with a byte that is not UTF-8 where usd-core's parser quotes it in its error."""
+    return [("scene.usda", b'#usda 1.0\ndef Mesh "M"\n{\n    int[] f\xbe = []\n}\n')]
+
+
+def obj_vertex_with_two_coordinates() -> Files:
+    """An OBJ whose third vertex has two coordinates (trimesh then returns [n, 1] vertices)."""
+    return [("mesh.obj", b"v 0 0 0\nv 1 0 0\nv 0 1\nf 1 2 3\n")]
+
+
+def _zip(**members: bytes) -> bytearray:
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(zipfile.ZipInfo(name), data)
+    return bytearray(buffer.getvalue())
+
+
+def zip_with_unknown_compression() -> Files:
+    """A zip whose member declares compression method 99, which zipfile cannot decompress."""
+    data = _zip(**{"scene.yaml": b"objects: []\n"})
+    for signature, method_at in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):
+        struct.pack_into("<H", data, data.find(signature) + method_at, 99)
+    return [("scene.zip", bytes(data))]
+
+
+def zip_member_without_name() -> Files:
+    """A zip with a member whose name is empty."""
+    return [("scene.zip", bytes(_zip(**{"": b"x", "scene.yaml": b"objects: []\n"})))]
+
+
+def zip_central_directory_past_its_place() -> Files:
+    """A zip whose end record puts the central directory 100 bytes after where it is: zipfile then places
+    the first member's header before the start of the file."""
+    data = _zip(**{"scene.yaml": b"objects: []\n"})
+    end = data.rfind(b"PK\x05\x06")
+    struct.pack_into("<I", data, end + 16, struct.unpack_from("<I", data, end + 16)[0] + 100)
+    return [("scene.zip", bytes(data))]
+
+
+def gltf_view_without_length() -> Files:
+    """A glTF whose buffer view lacks its (required) byteLength."""
+    return [("scene.gltf", json.dumps(gltf_triangle(bufferViews=[{"buffer": 0}])).encode())]
+
+
+def usd_instancer_with_fewer_positions() -> Files:
+    """A PointInstancer with three protoIndices and two positions."""
+    name, stage = usd_point_instancer(3)[0]
+    return [(name, stage.replace(b"(0, 0, 0), (1, 0, 0), (2, 0, 0)", b"(0, 0, 0), (1, 0, 0)"))]
+
+
+def usd_points_of_unknown_type() -> Files:
+    """A USD mesh whose points are declared `point6f[]`, a type usd-core does not know."""
+    name, stage = usd_mesh_without_faces()[0]
+    stage = stage.replace(b"int[] faceVertexCounts = []", b"int[] faceVertexCounts = [3]")
+    stage = stage.replace(b"int[] faceVertexIndices = []", b"int[] faceVertexIndices = [0, 1, 2]")
+    return [(name, stage.replace(b"point3f[] points", b"point6f[] points"))]

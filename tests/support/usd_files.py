@@ -3,6 +3,9 @@ UsdUVTexture inputs, UsdLux lights and cameras."""
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
+
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
@@ -81,3 +84,13 @@ def point_light(stage, path: str, position, intensity: float) -> None:
     matrix = np.eye(4)
     matrix[:3, 3] = position
     place(light.GetPrim(), matrix)
+
+
+def usdc(usda: bytes) -> bytes:
+    """The stage written as text `usda`, in USD's binary crate format (what a `.usdc` file holds)."""
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.ImportFromString(usda.decode())
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "stage.usdc"
+        layer.Export(str(path))
+        return path.read_bytes()

@@ -12,6 +12,7 @@ from PIL import Image
 from services.artifacts.assets import AssetNotFound, load_asset, materialize, save_asset
 from services.artifacts.store import BlobCorrupted, BlobStore
 from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
+from tests.support.archives import tarred, zipped
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.compile import compile_scene
 from workers.scene.portability.io import load_scene
@@ -51,31 +52,6 @@ def scene_files(**changes: bytes | None) -> dict[str, bytes]:
 
 def loose(files: dict[str, bytes]) -> list[tuple[str, io.BytesIO]]:
     return [(name, io.BytesIO(data)) for name, data in files.items()]
-
-
-def zipped(files: dict[str, bytes], name: str = "scene.zip") -> list[tuple[str, io.BytesIO]]:
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
-        for member, data in files.items():
-            archive.writestr(member, data)
-    return [(name, io.BytesIO(buffer.getvalue()))]
-
-
-def tarred(
-    files: dict[str, bytes], name: str = "scene.tar.gz", links: dict[str, tuple[bytes, str]] | None = None
-) -> list[tuple[str, io.BytesIO]]:
-    """A tar(.gz) of `files`; `links` adds members of another type: name -> (tarfile type, target)."""
-    buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w:gz" if name.endswith("gz") else "w") as archive:
-        for member, data in files.items():
-            info = tarfile.TarInfo(member)
-            info.size = len(data)
-            archive.addfile(info, io.BytesIO(data))
-        for member, (kind, target) in (links or {}).items():
-            info = tarfile.TarInfo(member)
-            info.type, info.linkname = kind, target
-            archive.addfile(info)
-    return [(name, io.BytesIO(buffer.getvalue()))]
 
 
 @pytest.fixture

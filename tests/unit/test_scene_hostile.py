@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.hostile_inputs import YAML_ALIAS_BOMB
 from workers.scene.format.errors import SceneError
 from workers.scene.portability.io import (
     MAX_SCENE_DEPTH,
@@ -14,27 +15,6 @@ from workers.scene.portability.io import (
     load_scene,
     scene_from_dict,
 )
-
-# ~700 bytes whose aliases expand to 10^8 leaves under `params`
-ALIAS_BOMB = """\
-materials: {grey: {type: diffuse}}
-objects:
-  - name: bomb
-    material: grey
-    shape:
-      type: procedural
-      generator: ground_plane
-      params:
-        a: &a [x, x, x, x, x, x, x, x, x, x]
-        b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
-        c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
-        d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
-        e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
-        f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]
-        g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f, *f]
-        h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g, *g]
-lights: [{type: point, position: [0, 5, 0], intensity: [1, 1, 1]}]
-"""
 
 
 def refusal(tmp_path, name: str, text: str) -> SceneError:
@@ -48,14 +28,14 @@ def refusal(tmp_path, name: str, text: str) -> SceneError:
 
 def test_alias_bomb_is_refused_while_parsing(tmp_path):
     started = time.process_time()
-    error = refusal(tmp_path, "scene.yaml", ALIAS_BOMB)
+    error = refusal(tmp_path, "scene.yaml", YAML_ALIAS_BOMB)
     assert f"more than {MAX_SCENE_VALUES} values" in error.problem
     # building the 10^8 leaves takes many seconds; refusing takes milliseconds (a relative bound)
     assert time.process_time() - started < 1.0
 
 
 def test_a_few_shared_aliases_still_load(tmp_path):
-    text = ALIAS_BOMB.split("      params:")[0] + "      params: {size: 4.0}\n"
+    text = YAML_ALIAS_BOMB.split("      params:")[0] + "      params: {size: 4.0}\n"
     text += "lights: [&l {type: point, position: [0, 5, 0], intensity: [1, 1, 1]}, *l]\n"
     scene, _ = load_scene(_write(tmp_path, "scene.yaml", text))
     assert len(scene.lights) == 2

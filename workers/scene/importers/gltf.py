@@ -137,6 +137,8 @@ def _view_bytes(file: GltfFile, index: int, where: str) -> tuple[bytes, int, int
     view = item(file.document.bufferViews, index, where, "buffer view")
     data = item(file.buffers, view.buffer, f"{where}: bufferViews[{index}].buffer", "buffer")
     start = view.byteOffset or 0
+    if view.byteLength is None:
+        raise SceneError(f"{where}: bufferViews[{index}]", "byteLength is required")
     if start < 0 or view.byteLength < 0 or start + view.byteLength > len(data):
         raise SceneError(where, f"buffer view {index} runs past the end of buffer {view.buffer}")
     return data, start, view.byteLength, view.byteStride

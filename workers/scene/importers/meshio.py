@@ -47,6 +47,9 @@ def load_mesh_file(path: Path, field: str) -> MeshData:
     parts = _placed_parts(loaded)
     if not parts:
         raise SceneError(field, f"{path.name} contains no triangles")
+    if any(np.ndim(mesh.vertices) != 2 or np.shape(mesh.vertices)[1] != 3 for mesh, _ in parts):
+        # trimesh's OBJ reader returns an [n, 1] array when a `v` line holds fewer than three numbers
+        raise SceneError(field, f"cannot read {path.name}: a vertex does not have three coordinates")
     return _concatenate(parts, linear_colors=extension in (".gltf", ".glb"))
 
 

@@ -54,6 +54,15 @@ def _check_inside(folder: Path, real_path: str, where: str, what: str) -> None:
         raise SceneError(where, f"{what} {real_path!r} is outside the folder of the scene file")
 
 
+def _message(error: Exception) -> str:
+    """usd-core's message, or a plain one when the message quotes bytes of the file that are not UTF-8
+    (reading it then raises UnicodeDecodeError, and usd-core offers no other way to it)."""
+    try:
+        return str(error)
+    except UnicodeDecodeError:
+        return "the file is not a USD layer (it holds bytes that are not UTF-8 text)"
+
+
 @lru_cache(maxsize=4)
 def _open(path_text: str, modified_ns: int, size: int):
     _, usd, *_ = _pxr()
@@ -61,7 +70,7 @@ def _open(path_text: str, modified_ns: int, size: int):
     try:
         stage = usd.Stage.Open(path_text)
     except Exception as error:  # usd-core raises Tf.ErrorException for unreadable layers
-        raise SceneError(path.name, f"cannot open USD stage: {error}") from error
+        raise SceneError(path.name, f"cannot open USD stage: {_message(error)}") from error
     if stage is None:
         raise SceneError(path.name, "cannot open USD stage")
     folder = path.parent.resolve()
@@ -119,6 +128,15 @@ def usd_shape_mesh(shape: spec.UsdShape, field: str, base_dir: Path | None) -> M
     return prim_mesh(shape_path(shape.path, base_dir), shape.prim, field)
 
 
+def _numbers(attribute, dtype, where: str) -> np.ndarray:
+    """The attribute's array; a SceneError when the file gave it a value that holds no numbers (a value of
+    a type usd-core does not know reads as an UnregisteredValue)."""
+    try:
+        return np.asarray(attribute.Get() or [], dtype=dtype)
+    except (TypeError, ValueError):
+        raise SceneError(where, f"{attribute.GetName()} is not an array of numbers") from None
+
+
 def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
     """The triangles of the UsdGeom.Mesh at `prim_path` in its own space."""
     _, _, usd_geom, _, _ = _pxr()
@@ -131,9 +149,9 @@ def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
     if not prim or not prim.IsA(usd_geom.Mesh):
         raise SceneError(where, f"{Path(path).name} has no mesh at {prim_path}")
     mesh = usd_geom.Mesh(prim)
-    points = np.asarray(mesh.GetPointsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
-    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
-    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    points = _numbers(mesh.GetPointsAttr(), np.float64, where).reshape(-1, 3)
+    counts = _numbers(mesh.GetFaceVertexCountsAttr(), np.int64, where)
+    indices = _numbers(mesh.GetFaceVertexIndicesAttr(), np.int64, where)
     if not len(counts):
         raise SceneError(where, "the mesh has no faces (faceVertexCounts is empty)")
     if counts.sum() != len(indices) or (len(indices) and (indices.min() < 0 or indices.max() >= len(points))):
@@ -418,6 +436,12 @@ def _instanced(instancer_prim, world: np.ndarray, placements, bound, time, impor
             f"{instancer_prim.GetPath()}: {placed:,} instances, over the limit of {MAX_SCENE_INSTANCES:,}",
         )
     matrices = instancer.ComputeInstanceTransformsAtTime(time, time)
+    if len(matrices) != len(proto_indices):  # usd-core warns and returns none when the arrays disagree
+        raise SceneError(
+            importer.path.name,
+            f"{instancer_prim.GetPath()}: {len(proto_indices):,} protoIndices but {len(matrices):,} instance "
+            "transforms: positions (and orientations, scales when given) need one entry per instance",
+        )
     cache = usd_geom.XformCache(time)
     for p, proto_path in enumerate(prototypes):
         proto = instancer_prim.GetStage().GetPrimAtPath(proto_path)
