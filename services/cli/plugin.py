@@ -19,11 +19,6 @@ PLUGIN = Plugin(
             "services.cli.serve_inference:serve_inference_command",
             "Serve trained artifacts for queries and renders, over REST and gRPC.",
         ),
-        CommandRef(
-            "scenes",
-            "services.cli.scenes:scenes_command",
-            "List the built-in scenes that `nbake render NAME` accepts.",
-        ),
     ),
     scene_render=CommandRef(
         "render",

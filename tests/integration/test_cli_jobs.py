@@ -149,3 +149,28 @@ def test_url_and_token_from_a_config_file(served, tmp_path):
     assert done.returncode == 0, done.stderr
     flags = nbake("jobs", "--url", "http://127.0.0.1:1", env=clean | {"NBAKE_CONFIG": str(config)})
     assert flags.returncode == 4  # a flag wins over the file
+
+
+def test_kinds_and_scenes_are_the_servers_with_the_client_alone(served, tmp_path):
+    """`nbake kinds` and `nbake scenes` ask the server, so a client-only install lists what it accepts."""
+    from workers.models.registry import kind_names
+    from workers.scene.generators.builtin import BUILTIN_SCENES
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NBAKE_")} | {
+        "NBAKE_URL": served.url,
+        "NBAKE_TOKEN": TOKENS["read"],
+        "NBAKE_CONFIG": str(tmp_path / "none.toml"),
+    }
+    scenes = lines(nbake("scenes", "--json", env=env).stdout)
+    assert [scene["name"] for scene in scenes] == sorted(BUILTIN_SCENES)
+    assert all(scene["description"] for scene in scenes)
+    kinds = lines(nbake("kinds", "--json", env=env).stdout)
+    assert sorted(kind["name"] for kind in kinds) == sorted(kind_names())
+    assert all("config_schema" not in kind for kind in kinds)
+    lod = lines(nbake("kinds", "lod", "--json", env=env).stdout)[0]
+    assert [p["name"] for p in lod["presets"]] == ["quick", "default", "paper"]
+    assert "train" in lod["config_schema"]["properties"]
+    unknown = nbake("kinds", "lodd", env=env)
+    assert unknown.returncode == 2 and "lodd" in unknown.stderr
+    grpc = nbake("scenes", env=env | {"NBAKE_URL": served.grpc_url})
+    assert grpc.returncode == 2 and "REST only" in grpc.stderr

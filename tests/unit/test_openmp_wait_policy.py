@@ -42,7 +42,6 @@ def policy_when_torch_loads(module: str, **env: str) -> str:
         "services.cli.serve",
         "services.cli.serve_inference",
         "services.cli.render",
-        "services.cli.scenes",
         "workers.driver.jobs",
     ],
 )

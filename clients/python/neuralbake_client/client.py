@@ -34,10 +34,12 @@ from neuralbake_client.models import (
     JobEvent,
     JobList,
     JobState,
+    KindInfo,
     Manifest,
     ModelInfo,
     Progress,
     QuotaLimits,
+    SceneInfo,
     TenantQuotas,
     Token,
 )
@@ -323,37 +325,43 @@ class Client:
     def create_token(self, tenant: str = "default", scope: str = "read", name: str = "") -> CreatedToken:
         """A new token of `tenant` (its jobs, assets and artifacts are all it sees) with `scope` (read,
         submit or admin). Its secret, `.token`, is in this answer only: the server keeps its hash."""
-        return self._token_admin().create_token(tenant, scope, name)
+        return self._rest("tokens and quotas are").create_token(tenant, scope, name)
 
     def tokens(self) -> list[Token]:
         """Every token of the deployment, without secrets."""
-        return self.retry.call(lambda: self._token_admin().list_tokens())
+        return self.retry.call(lambda: self._rest("tokens and quotas are").list_tokens())
 
     def revoke_token(self, token: Token | str) -> None:
         """Revoke a created token by id: its next request gets 401."""
         ident = token.id if isinstance(token, Token) else token
-        self.retry.call(lambda: self._token_admin().revoke_token(ident))
+        self.retry.call(lambda: self._rest("tokens and quotas are").revoke_token(ident))
 
     def quotas(self, tenant: str) -> TenantQuotas:
         """`tenant`'s quotas in force, its own, the deployment's defaults and what its jobs use now."""
-        return self.retry.call(lambda: self._token_admin().get_quotas(tenant))
+        return self.retry.call(lambda: self._rest("tokens and quotas are").get_quotas(tenant))
 
     def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
         """Replace `tenant`'s own quotas (a None field: the deployment's default); its quotas now."""
-        return self.retry.call(lambda: self._token_admin().set_quotas(tenant, limits))
+        return self.retry.call(lambda: self._rest("tokens and quotas are").set_quotas(tenant, limits))
 
-    def quotas(self, tenant: str) -> TenantQuotas:
-        """`tenant`'s quotas in force, its own, the deployment's defaults and what its jobs use now."""
-        return self.retry.call(lambda: self._token_admin().get_quotas(tenant))
-
-    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
-        """Replace `tenant`'s own quotas (a None field: the deployment's default); its quotas now."""
-        return self.retry.call(lambda: self._token_admin().set_quotas(tenant, limits))
-
-    def _token_admin(self) -> HttpTransport:
+    def _rest(self, what: str) -> HttpTransport:
+        """The REST transport, for what only the REST API offers (`what`: for the error message)."""
         if not hasattr(self.transport, "create_token"):
-            raise NeuralbakeError("tokens and quotas are managed over REST: connect with an http(s):// URL")
+            raise NeuralbakeError(f"{what} served over REST only: connect with an http(s):// URL")
         return self.transport
+
+    # ------------------------------------------------------------------ the catalog (REST only)
+
+    def kinds(self) -> list[KindInfo]:
+        """The server's model kinds, each with its presets' resolved configs and its config's JSON schema."""
+        return self.retry.call(lambda: self._rest("kinds are").list_kinds())
+
+    def kind(self, name: str) -> KindInfo:
+        return self.retry.call(lambda: self._rest("kinds are").get_kind(name))
+
+    def scenes(self) -> list[SceneInfo]:
+        """The server's built-in scenes, each with the first line of its description."""
+        return self.retry.call(lambda: self._rest("scenes are").list_scenes())
 
     # ------------------------------------------------------------------ inference
 

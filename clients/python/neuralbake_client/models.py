@@ -164,32 +164,6 @@ class TenantQuotas(BaseModel):
     updated_at: datetime | None = None
 
 
-class QuotaLimits(BaseModel):
-    """A tenant's limits; None: no limit (in `TenantQuotas.own`: the deployment's default holds)."""
-
-    max_running: int | None = None
-    max_queued: int | None = None
-    max_compute_s: float | None = None
-    max_priority: int | None = None
-
-
-class QuotaUse(BaseModel):
-    running: int
-    queued: int
-    compute_s: float = Field(description="The plans' estimated seconds of the queued and running jobs.")
-
-
-class TenantQuotas(BaseModel):
-    """A tenant's quotas: in force (`limits`), its own, the deployment's defaults, and its use now."""
-
-    tenant: str
-    limits: QuotaLimits
-    own: QuotaLimits
-    defaults: QuotaLimits
-    use: QuotaUse
-    updated_at: datetime | None = None
-
-
 class ModelInfo(BaseModel):
     """A model the inference service holds in memory (`operations`: `query`, `render`)."""
 
@@ -198,3 +172,31 @@ class ModelInfo(BaseModel):
     operations: list[str]
     bytes: int
     device: str
+
+
+class PresetInfo(BaseModel):
+    name: str
+    config: dict[str, Any] = Field(description="The config this preset resolves to, without overrides.")
+
+
+class KindInfo(BaseModel):
+    """A model kind the server runs: `trains` (a trained model with a speed-against-error report, or a
+    path-traced image), its presets, its smallest example job and its config's JSON schema."""
+
+    name: str
+    trains: bool
+    presets: list[PresetInfo]
+    example_scene: str
+    example_overrides: dict[str, Any]
+    config_schema: dict[str, Any]
+
+    def preset(self, name: str) -> PresetInfo:
+        for preset in self.presets:
+            if preset.name == name:
+                return preset
+        raise KeyError(f"{name!r}: the presets are {', '.join(p.name for p in self.presets)}")
+
+
+class SceneInfo(BaseModel):
+    name: str
+    description: str

@@ -15,8 +15,10 @@ from neuralbake_client.models import (
     Job,
     JobEvent,
     JobList,
+    KindInfo,
     Manifest,
     QuotaLimits,
+    SceneInfo,
     TenantQuotas,
     Token,
 )
@@ -140,18 +142,20 @@ class HttpTransport:
         body = {"tenant": tenant, "scope": scope, "name": name}
         return CreatedToken.model_validate(self.send("POST", "/v1/tokens", json=body).json())
 
+    def list_kinds(self) -> list[KindInfo]:
+        return [KindInfo.model_validate(item) for item in self.send("GET", "/v1/kinds").json()["items"]]
+
+    def get_kind(self, name: str) -> KindInfo:
+        return KindInfo.model_validate(self.send("GET", f"/v1/kinds/{name}").json())
+
+    def list_scenes(self) -> list[SceneInfo]:
+        return [SceneInfo.model_validate(item) for item in self.send("GET", "/v1/scenes").json()["items"]]
+
     def list_tokens(self) -> list[Token]:
         return [Token.model_validate(item) for item in self.send("GET", "/v1/tokens").json()["items"]]
 
     def revoke_token(self, token_id: str) -> None:
         self.send("DELETE", f"/v1/tokens/{token_id}")
-
-    def get_quotas(self, tenant: str) -> TenantQuotas:
-        return TenantQuotas.model_validate(self.send("GET", f"/v1/tenants/{tenant}/quotas").json())
-
-    def set_quotas(self, tenant: str, limits: QuotaLimits) -> TenantQuotas:
-        body = limits.model_dump()
-        return TenantQuotas.model_validate(self.send("PUT", f"/v1/tenants/{tenant}/quotas", json=body).json())
 
     def get_quotas(self, tenant: str) -> TenantQuotas:
         return TenantQuotas.model_validate(self.send("GET", f"/v1/tenants/{tenant}/quotas").json())

@@ -70,7 +70,15 @@ def submit_command(
     scene: Annotated[
         str, typer.Argument(help="A scene file or folder (uploaded), a built-in name or an asset id.")
     ],
-    kind: Annotated[str, typer.Option("--kind", "-k", help="The model kind, e.g. render.")],
+    kind: Annotated[
+        str,
+        typer.Option(
+            "--kind",
+            "-k",
+            help="The model kind: render, lod, prt, lsnif, explore, mesogan "
+            "(`nbake kinds` lists the server's, with their parameters).",
+        ),
+    ],
     preset: Annotated[
         str | None, typer.Option(help="quick, default or paper (the server's default).")
     ] = None,

@@ -11,6 +11,7 @@ import typer
 from typer.core import TyperGroup
 
 from neuralbake_client.cli.bake import bake_command, diff_command
+from neuralbake_client.cli.catalog import kinds_command, scenes_command
 from neuralbake_client.cli.jobs import register as register_job_commands
 from neuralbake_client.cli.plugins import LazyCommand, plugin_commands
 from neuralbake_client.cli.query import query_command
@@ -34,7 +35,7 @@ app = typer.Typer(
     name="nbake",
     cls=Nbake,
     help="neuralbake: turn 3D scenes into neural rendering representations, trained on samples from its "
-    "own Embree path tracer. The server package adds serve, serve-inference, scenes and local rendering.",
+    "own Embree path tracer. The server package adds serve, serve-inference and local rendering.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_show_locals=False,  # locals hold whole images and meshes
@@ -42,6 +43,8 @@ app = typer.Typer(
 register_job_commands(app)  # submit, jobs, show, watch, cancel, download
 app.command("bake")(bake_command)
 app.command("diff")(diff_command)
+app.command("kinds")(kinds_command)
+app.command("scenes")(scenes_command)
 app.command("query")(query_command)
 app.command("render", cls=SceneOrArtifact)(render_command)
 app.add_typer(tokens_app)  # tokens create | list | revoke
