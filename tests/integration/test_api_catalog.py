@@ -3,6 +3,7 @@ files at `/ui`, on a real server: scopes, problem+json errors, OpenAPI, security
 
 from __future__ import annotations
 
+import jsonschema
 import pytest
 
 from tests.integration import test_api_server as api
@@ -30,6 +31,20 @@ def test_kinds_list_every_registered_kind_with_its_presets_resolved(server):
     assert render["presets"][0]["config"] == quick and quick["width"] == 64
     assert render["example_scene"] in BUILTIN_SCENES
     assert {k["name"] for k in kinds if k["trains"]} == {n for n in kind_names() if get_kind(n).method}
+
+
+def test_a_kind_serves_its_configs_json_schema_which_its_presets_and_no_typo_meet(server):
+    with server.client("read") as reader:
+        kinds = {k["name"]: k for k in reader.get("/v1/kinds").json()["items"]}
+    for name, kind in kinds.items():
+        schema = kind["config_schema"]
+        assert schema == get_kind(name).config_model.model_json_schema()
+        for preset in kind["presets"]:
+            jsonschema.validate(preset["config"], schema)
+        typo = {"train": {"stpes": 3}} if "train" in schema["properties"] else {"stpes": 3}
+        with pytest.raises(jsonschema.ValidationError, match="stpes"):
+            jsonschema.validate(typo, schema)
+    assert kinds["render"]["config_schema"]["properties"]["spp"]["minimum"] == 1
 
 
 def test_scenes_list_the_built_in_scenes_with_a_description(server):

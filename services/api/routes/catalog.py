@@ -1,5 +1,6 @@
 """`/v1/kinds` and `/v1/scenes`: what a job can be made of (the registered kinds with their presets'
-resolved configs, the built-in scenes), so a client offers real choices instead of hard-coding them."""
+resolved configs and their config's JSON schema, the built-in scenes), so a client offers real choices
+and checks overrides instead of hard-coding them."""
 
 from __future__ import annotations
 
@@ -35,6 +36,10 @@ class KindView(BaseModel):
     presets: list[PresetView] = Field(description=f"In the order {', '.join(PRESET_NAMES)}.")
     example_scene: str = Field(description="The built-in scene the kind's smallest job uses.")
     example_overrides: dict[str, Any]
+    config_schema: dict[str, Any] = Field(
+        description="The config's JSON schema: every parameter's type, bounds, default and description "
+        "(docs/kinds/<kind>.md is made from it)."
+    )
 
     @classmethod
     def of(cls, kind: Kind) -> KindView:
@@ -48,6 +53,7 @@ class KindView(BaseModel):
             presets=presets,
             example_scene=kind.example.scene,
             example_overrides=kind.example.overrides,
+            config_schema=kind.config_model.model_json_schema(),
         )
 
 
