@@ -12,7 +12,7 @@ from tests.support.doc_blocks import blocks
 from tests.support.doc_runner import DocRun
 
 ROOT = Path(__file__).resolve().parents[2]
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "clients/python/README.md"]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), ROOT / "clients/python/README.md"]
 IDS = [str(doc.relative_to(ROOT)) for doc in DOCS]
 TRAINING = [doc for doc in DOCS if any(block.slow for block in blocks(doc))]  # docs with `run slow` blocks
 
