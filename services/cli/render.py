@@ -14,7 +14,7 @@ from rich.console import Console
 from services.cli.errors import fail, user_errors
 from services.cli.outputs import RenderOutputs, as_display
 from services.cli.progress import print_json, rays_per_second, render_progress
-from workers.models.registry import register_materials
+from workers.render.aggregate_materials import used_aggregate_materials
 from workers.render.render import RenderResult, RenderSettings, render
 from workers.scene.format.spec import Camera
 from workers.scene.geometry.compile import compile_scene
@@ -93,7 +93,10 @@ def render_command(
         interactive = stderr.is_terminal and not json_lines
         with stderr.status(f"loading {name}") if interactive else nullcontext():
             compiled = compile_scene(spec, base_dir)
-            register_materials()  # a scene may name a kind's material (a `mesogan` shell)
+            if used_aggregate_materials(compiled):  # a kind's material (a `mesogan` shell): load the kinds
+                from workers.models.registry import register_materials  # imports torch: only when needed
+
+                register_materials()
         with render_progress(name, spp, json_lines, stderr) as progress:
             result = render(compiled, settings, progress=progress)
     outputs.write(result, exposure)

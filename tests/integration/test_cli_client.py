@@ -59,6 +59,15 @@ def test_remote_commands_import_neither_torch_nor_the_server(tmp_path):
     assert heavy(rendered) == {"httpx", "pydantic", "numpy"}
 
 
+def test_a_local_render_loads_neither_torch_nor_ray(tmp_path):
+    """The model kinds (torch, Ray) are loaded only for a scene with a kind's material: importing them was
+    most of `nbake render`'s start-up (tests/bench/bench_render.py times it)."""
+    small = ["--spp", "1", "--width", "8", "--height", "8", "--threads", "1", "--no-png"]
+    rendered = modules_after(tmp_path, "render", "cornell_box", *small, "-o", "x.exr")
+    assert "workers.render.render" in rendered
+    assert heavy(rendered) & {"torch", "ray"} == set()
+
+
 def test_the_server_package_adds_its_commands_with_their_own_summaries():
     (server,) = plugins.installed()
     help_text = CliRunner().invoke(app, ["--help"]).stdout

@@ -135,6 +135,7 @@ def test_a_kind_material_is_drawn_by_its_kind(tmp_path):
     scene.write_text(
         "materials: {fur: {type: mesogan, path: no_such_artifact}}\n"
         "objects: [{name: ball, shape: {type: sphere}, material: fur}]\n"
+        "environment: {type: constant, radiance: [1, 1, 1]}\n"
     )
     result = nbake("render", scene, *SMALL, "-o", tmp_path / "x.exr")
     assert result.exit_code == 2
