@@ -76,6 +76,8 @@ class QuotaExceeded(ServiceError):
 
 
 class Quotas:
+    """Every tenant's quotas, read from the job database over the deployment's `defaults`."""
+
     def __init__(self, db: Database, defaults: QuotaLimits):
         self.db, self.defaults = db, defaults
 
@@ -115,7 +117,7 @@ class Quotas:
     # ------------------------------------------------------------------ admission (at submission)
 
     def admit(self, session: Session, job: Job) -> None:
-        """Raise unless `tenant` may queue `job` now: QuotaExceeded (429) while its queued jobs or their
+        """Raise unless `job`'s tenant may queue it now: QuotaExceeded (429) while its queued jobs or their
         compute are at the limit; InvalidInput (422) for what waiting cannot fix (a priority over the
         ceiling, a job whose estimate alone is over the compute limit). Run in the transaction that
         inserts the job, after any reuse of existing work."""
