@@ -8,12 +8,14 @@ sizes before a member is read and again from the bytes actually produced while r
 from __future__ import annotations
 
 import gzip
+import lzma
 import stat
 import tarfile
 import zipfile
 import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePosixPath
+from typing import BinaryIO
 
 from services.artifacts.paths import printable
 from services.artifacts.staging import PAYLOAD_TOO_LARGE, Staging, UploadError, UploadLimits
@@ -123,8 +125,17 @@ def _extract_zip(path: Path, staging: Staging, guard: _InflationGuard) -> None:
             if member.header_offset < 0:  # zipfile would seek before the archive's start (OSError)
                 raise zipfile.BadZipFile(f"{member.filename}: its header lies before the archive's start")
             with archive.open(member) as stream:
-                chunks = guard.count(member.filename, read_chunks(stream))
+                chunks = guard.count(member.filename, _decompressed(member.filename, stream))
                 staging.add(member.filename, chunks, declared_size=member.file_size)
+
+
+def _decompressed(name: str, stream: BinaryIO) -> Iterator[bytes]:
+    """A zip member's bytes; its decompressor's errors on corrupt data (bz2 raises a bare OSError, lzma
+    an LZMAError) are the archive's (zlib's are caught by `extract_archive`)."""
+    try:
+        yield from read_chunks(stream)
+    except (OSError, lzma.LZMAError) as error:
+        raise zipfile.BadZipFile(f"{name}: {error}") from None
 
 
 def _extract_tar(path: Path, mode: str, staging: Staging, guard: _InflationGuard) -> None:

@@ -224,6 +224,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "zip of a texture bomb": archive.seed(_bytes_of(zipped(dict(hostile.png_bomb_texture())))),
             "tar.gz of a faceless mesh": archive.seed(_bytes_of(tarred(dict(faceless)))),
             "zip compression method 99": archive.seed(hostile.zip_with_unknown_compression()),
+            "zip corrupt bzip2": archive.seed(hostile.zip_with_corrupt_bzip2()),
             "zip member without a name": archive.seed(hostile.zip_member_without_name()),
             "zip header before its start": archive.seed(hostile.zip_central_directory_past_its_place()),
         },

@@ -251,6 +251,14 @@ def zip_with_unknown_compression() -> Files:
     return [("scene.zip", bytes(data))]
 
 
+def zip_with_corrupt_bzip2() -> Files:
+    """A zip whose member declares bzip2 compression (method 12) over bytes that are not bzip2."""
+    data = _zip(**{"scene.yaml": b"objects: []\n"})
+    for signature, method_at in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):
+        struct.pack_into("<H", data, data.find(signature) + method_at, 12)
+    return [("scene.zip", bytes(data))]
+
+
 def zip_member_without_name() -> Files:
     """A zip with a member whose name is empty."""
     return [("scene.zip", bytes(_zip(**{"": b"x", "scene.yaml": b"objects: []\n"})))]

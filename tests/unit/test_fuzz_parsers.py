@@ -15,8 +15,8 @@ import pytest
 
 from tests.fuzz.targets import SEEDS, TARGETS, WORK_ENV
 
-# The upload targets start at about 2.2 GB resident (torch, Numba, usd-core and pygltflib are imported by the
-# scene loaders); the limit catches an input that more than doubles it, as an alias bomb would.
+# A target starts at about 0.2 GB resident; the limit catches an input that grows it by gigabytes, as an
+# alias bomb would (tests/fuzz/__main__.py caps the address space too).
 RSS_LIMIT_MB = 5120
 
 ROOT = Path(__file__).resolve().parents[2]
