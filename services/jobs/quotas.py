@@ -3,11 +3,11 @@ its queued and running jobs may add up to (the sum of their plans' `estimated_se
 priority it may ask for. A deployment-wide default (`ServiceSettings.tenant_quotas`) holds for every
 tenant; a `tenant_quotas` row overrides it field by field (NULL: the default).
 
-Where each is enforced: the queued, compute and priority limits when a job is created (inside the
-transaction that inserts it, so a submission that reuses existing work never counts, and on SQLite, whose
-writers take turns, two submissions cannot both take the last place); the running limit by the scheduler,
-which starts none of a tenant's queued jobs while it is at its limit. On PostgreSQL concurrent submissions
-of one tenant may overshoot the queued and compute limits by the submissions in flight.
+Where each is enforced: the queued, compute and priority limits when a job is created, inside the
+transaction that inserts it, so a submission that reuses existing work never counts; one tenant's
+admissions take turns (SQLite's writers do anyway; on PostgreSQL an advisory lock per tenant), so two
+concurrent submissions cannot both take the last place. The running limit is the scheduler's, which
+starts none of a tenant's queued jobs while it is at its limit.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 
 from pydantic import BaseModel, ConfigDict, Field
-from sqlalchemy import func, select
+from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -31,6 +31,7 @@ MAX_COUNT = 1_000_000  # a bound that fits every database's integer column
 MAX_COMPUTE_S = 1e12
 SET_ATTEMPTS = 2
 RETRY_AFTER_S = (1, 3600)  # a Retry-After within these bounds
+ADMISSION_LOCK = "nbake-quota:"  # + the tenant: the advisory lock its admissions take turns on
 IDLE_RETRY_AFTER_S = 60  # when none of the tenant's jobs runs, so nothing says when room will be made
 
 
@@ -137,6 +138,7 @@ class Quotas:
             )
         if limits.max_queued is None and limits.max_compute_s is None:
             return
+        _take_turns(session, job.tenant)
         use = _use(session, job.tenant)
         if limits.max_queued is not None and use.queued + 1 > limits.max_queued:
             raise QuotaExceeded(
@@ -226,6 +228,15 @@ def _override(row: TenantQuota | None) -> QuotaLimits:
     if row is None:
         return QuotaLimits()
     return QuotaLimits(**{name: getattr(row, name) for name in QuotaLimits.model_fields})
+
+
+def _take_turns(session: Session, tenant: str) -> None:
+    """On PostgreSQL, one tenant's admissions take turns (an advisory lock on its name until the inserting
+    transaction ends), so two cannot both see the last place free; SQLite's writers take turns already."""
+    if session.get_bind().dialect.name == "postgresql":
+        session.execute(
+            text("SELECT pg_advisory_xact_lock(hashtext(:key))"), {"key": ADMISSION_LOCK + tenant}
+        )
 
 
 def _use(session: Session, tenant: str) -> QuotaUse:

@@ -5,6 +5,8 @@ next jobs leave out a tenant at its running limit."""
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import pytest
 
 from services.jobs.quotas import QuotaExceeded, QuotaLimits, Quotas
@@ -107,3 +109,18 @@ def test_the_scheduler_starts_none_of_a_tenants_jobs_while_it_is_at_its_running_
     assert start(4) == [held]
     running = jobs.list([JobState.RUNNING], None, None, 50, "acme")[0]
     assert len(running) == 2 and quotas.use("acme").running == 2
+
+
+def test_concurrent_submissions_of_a_tenant_never_pass_its_queued_quota(db):  # noqa: F811
+    jobs, quotas = JobRepository(db), Quotas(db, QuotaLimits(max_queued=3))
+
+    def attempt(n: int) -> bool:
+        try:
+            submit(jobs, quotas, planned(1, f"k{n}"))
+        except QuotaExceeded:
+            return False
+        return True
+
+    with ThreadPoolExecutor(8) as pool:
+        admitted = list(pool.map(attempt, range(24)))
+    assert sum(admitted) == 3 and quotas.use("acme").queued == 3
