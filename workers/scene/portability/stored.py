@@ -19,7 +19,6 @@ import tempfile
 import uuid
 from pathlib import Path, PurePosixPath
 
-import fsspec
 from pydantic import BaseModel, ConfigDict, Field
 
 from workers.scene.format.errors import SceneError
@@ -84,6 +83,8 @@ def fetch(stored: StoredFile, dest: Path) -> None:
     dest.parent.mkdir(parents=True, exist_ok=True)
     temporary = dest.with_name(f".{dest.name}.{uuid.uuid4().hex}")
     hasher = hashlib.sha256()
+    import fsspec  # here, not at import: every path tracer imports this module, few fetch
+
     try:
         with fsspec.open(stored.url, "rb") as source, open(temporary, "wb") as out:
             while chunk := source.read(CHUNK_BYTES):
