@@ -76,6 +76,17 @@ class QuotaExceeded(ServiceError):
         self.extensions = {"quota": quota, "limit": limit, "current": current}
 
 
+class OverPriorityCeiling(InvalidInput):
+    """422 naming `priority`, the ceiling the problem's `limit`: waiting would not help."""
+
+    def __init__(self, job: Job, ceiling: int):
+        super().__init__(
+            f"{job.priority} is over tenant {job.tenant!r}'s priority ceiling of {ceiling} (max_priority)",
+            "priority",
+        )
+        self.extensions = {"quota": "max_priority", "limit": ceiling}
+
+
 class Quotas:
     """Every tenant's quotas, read from the job database over the deployment's `defaults`."""
 
@@ -124,11 +135,7 @@ class Quotas:
         inserts the job, after any reuse of existing work."""
         limits = self.limits(session, job.tenant)
         if limits.max_priority is not None and job.priority > limits.max_priority:
-            raise InvalidInput(
-                f"{job.priority} is over tenant {job.tenant!r}'s priority ceiling of {limits.max_priority} "
-                "(max_priority)",
-                "priority",
-            )
+            raise OverPriorityCeiling(job, limits.max_priority)
         estimate = float((job.plan or {}).get("estimated_seconds", 0.0))
         if limits.max_compute_s is not None and estimate > limits.max_compute_s:
             raise InvalidInput(

@@ -89,7 +89,7 @@ def test_the_queued_quota_priority_ceiling_and_running_quota_hold_a_tenant(serve
 
         high = http.post("/v1/jobs", json=RENDER | {"seed": 2, "priority": 6})
         assert high.status_code == 422 and high.json()["field"] == "priority", high.text
-        assert "5" in high.json()["detail"]
+        assert "ceiling of 5" in high.json()["detail"] and high.json()["limit"] == 5
 
         with grpc.insecure_channel(served.grpc_target) as channel:
             request = jobs_pb2.SubmitJobRequest(

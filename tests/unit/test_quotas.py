@@ -67,6 +67,7 @@ def test_a_priority_over_the_ceiling_is_refused_naming_the_field_and_ceiling(db)
     with pytest.raises(InvalidInput, match="ceiling of 10") as refused:
         submit(jobs, quotas, planned(1, "k1", priority=11))
     assert refused.value.field == "priority"
+    assert refused.value.extensions == {"quota": "max_priority", "limit": 10}
     assert quotas.use("acme").queued == 1
 
 
