@@ -17,7 +17,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -38,6 +40,9 @@ from workers.scene.geometry.compile import compile_scene
 THREADS = 2
 SCENES = ("cornell_box", "cornell_glossy", "env_lit_objects")
 RUNS = 3  # medians over this many renders (seeds)
+SIZES = (128, 256)
+SPPS = (16, 64)
+REFERENCE_SPP = int(os.environ.get("RENDER_BENCH_REFERENCE_SPP", 1024))
 
 
 def raw_embree_rays_per_second(
@@ -148,6 +153,47 @@ print(times[0] - times[1])
 """
 
 
+STARTUP = """
+import json, time
+clocks = lambda: (time.perf_counter(), time.process_time())
+stages, last = {{}}, clocks()
+def stage(name):
+    global last
+    now = clocks()
+    stages[name] = [now[0] - last[0], now[1] - last[1]]
+    last = now
+from neuralbake_client.cli.main import app
+import services.cli.render
+stage("imports")
+from workers.render.render import RenderSettings, render
+from workers.scene.geometry.compile import compile_scene
+from workers.scene.portability.io import load_scene
+scene = compile_scene(load_scene("{scene}")[0])
+stage("scene")
+settings = RenderSettings(spp={spp}, width={size}, height={size}, threads={threads})
+render(scene, settings)
+stage("first_render")
+render(scene, settings)
+stage("warm_render")
+print(json.dumps(stages))
+"""
+
+
+def startup_stages(scene: str, size: int, spp: int) -> dict:
+    """Where a fresh `nbake render` process's time goes, wall and CPU seconds by stage: the interpreter's
+    start, the CLI's imports, the scene's load and compile, the first render and a warm one."""
+    script = STARTUP.format(scene=scene, size=size, spp=spp, threads=THREADS)
+    wall, _, stdout = timed_process([sys.executable, "-c", script])
+    stages = json.loads(stdout)
+    row = dict(scene=scene, size=size, spp=spp)
+    row["interpreter_s"] = wall - sum(w for w, _ in stages.values())
+    for name, (w, c) in stages.items():
+        row[f"{name}_s"], row[f"{name}_cpu_s"] = w, c
+    row["first_minus_warm_s"] = stages["first_render"][0] - stages["warm_render"][0]
+    row["first_minus_warm_cpu_s"] = stages["first_render"][1] - stages["warm_render"][1]
+    return row
+
+
 def first_run_seconds(scene: str) -> float:
     """Compilation time of the kernels `scene` uses, in a fresh process with an empty Numba cache."""
     with tempfile.TemporaryDirectory(prefix="nbake-bench-numba-") as cache:
@@ -195,58 +241,161 @@ def run() -> list[BenchSection]:
         jit.add(scene=name, compile_s=first_run_seconds(name))
     jit.notes.append("paid once per machine: the compiled kernels are cached on disk (numba cache=True)")
 
-    peer = BenchSection("Against Mitsuba 3 scalar_rgb, 128x128, max_depth 8")
+    startup = BenchSection(f"Start-up of a fresh `nbake render` process, by stage, {THREADS} threads")
+    for name in SCENES:
+        for _ in range(RUNS):
+            startup.add(**startup_stages(name, 256, 16))
+    startup.notes.append(
+        "first_minus_warm: what the first render in a process pays beyond a warm one (Numba's registries,"
+        " SciPy's BLAS with them, and loading the cached kernels); target < 0.3 s"
+    )
+
+    steady, cold = against_mitsuba(compiled)
+    return [throughput, cpu, jit, startup, steady, cold]
+
+
+def against_mitsuba(compiled: dict) -> tuple[BenchSection, BenchSection]:
+    """Both renderers on the same scenes, sizes, spp and threads, at equal error, both ways: steady (each
+    scene loaded once, the render alone timed) and cold (a fresh process paying its own start-up, scene
+    load, kernel load and render, timed from outside). Figures of one (scene, size, spp) alternate between
+    the two renderers, so a change in the machine's load falls on both."""
+    import mitsuba as mi
+
+    from tests.support.mitsuba_load import load_scene
+    from tests.support.mitsuba_scene import mitsuba_scene_file
+
+    title = f"Against Mitsuba 3 scalar_rgb, max_depth 8, both on {THREADS} threads, {cpu_model()}"
+    steady = BenchSection(f"{title}: steady state (scenes loaded once, render only)")
+    cold = BenchSection(f"{title}: cold (a fresh process: start-up, scene load, kernels, render)")
     with tempfile.TemporaryDirectory(prefix="nbake-bench-") as workdir:
         for name, scene in compiled.items():
-            against_mitsuba(peer, name, scene, Path(workdir))
-    peer.notes.append("ratios > 1 mean we are slower; equal-error ratio = (MSE x time) ours / Mitsuba")
-    peer.notes.append("Mitsuba time includes scene loading (PLY export excluded), as a user would pay it")
-    peer.notes.append(
-        "cpu_ratio_at_equal_error: the same with process CPU seconds (both renderers run in this process on "
-        f"{THREADS} threads): other processes' load does not enter it, a thread left idle at the end does"
-        " not either"
+            for size in SIZES:
+                folder = Path(workdir) / f"{name}_{size}"
+                scene_file = mitsuba_scene_file(scene, folder, REFERENCE_SPP, 8, width=size, height=size)
+                loaded = load_scene(scene_file, THREADS)
+                t0 = time.perf_counter()
+                reference = mitsuba_image(mi.render(loaded, spp=REFERENCE_SPP, seed=1000))
+                steady.notes.append(
+                    f"{name} {size}x{size} reference: Mitsuba {REFERENCE_SPP} spp in "
+                    f"{time.perf_counter() - t0:.1f} s"
+                )
+                tracer = PathTracer(scene)
+                render(tracer, RenderSettings(spp=1, width=size, height=size, threads=THREADS))  # warm up
+                mi.render(loaded, spp=1, seed=0)
+                for spp in SPPS:
+                    row = steady_row(name, size, spp, tracer, loaded, reference)
+                    steady.add(**row)
+                    cold.add(**cold_row(name, size, spp, folder, scene_file, row))
+    steady.notes += [
+        "speedup > 1: we are faster; at equal error = (time x relMSE) Mitsuba / ours (MSE x time is constant"
+        " in spp for an unbiased estimator), relMSE against the reference, medians of "
+        f"{RUNS} seeds",
+        "cpu_: the same with process CPU seconds (both renderers run in this process): other processes' load"
+        " enters it less than wall time",
+        f"the reference's own noise (~relMSE at 16 spp x 16/{REFERENCE_SPP}) adds to both errors alike",
+        "target: speedup_at_equal_error >= 1.5 on every scene at 256x256",
+    ]
+    cold.notes += [
+        "ours: `nbake render SCENE --no-png` in a fresh process; mitsuba: a fresh python running "
+        "tests/support/mitsuba_load.py (import, load_dict of a JSON scene + PLY files, render, write the EXR)"
+        "; both write one EXR; wall and CPU (the child's user + sys) from outside; error as in steady state",
+        "ours_first_render_s: the render time `nbake render` reports (its first render in the process);"
+        " ours_warm_s: the steady-state render of the same image; start-up target: first - warm < 0.3 s",
+    ]
+    return steady, cold
+
+
+def steady_row(name: str, size: int, spp: int, tracer: PathTracer, loaded, reference: np.ndarray) -> dict:
+    """One steady-state comparison: `RUNS` seeds, alternating between the renderers; medians."""
+    import mitsuba as mi
+
+    ours, theirs = [], []
+    for seed in range(RUNS):
+        settings = RenderSettings(spp=spp, width=size, height=size, seed=seed, threads=THREADS)
+        ours.append(timed(reference, lambda: render(tracer, settings).image))  # noqa: B023 (called here)
+        theirs.append(timed(reference, lambda: mi.render(loaded, spp=spp, seed=seed)))  # noqa: B023
+    (to, co, eo), (tm, cm, em) = (np.median(np.array(x), axis=0) for x in (ours, theirs))
+    return dict(
+        scene=name,
+        size=size,
+        spp=spp,
+        ours_s=to,
+        mitsuba_s=tm,
+        ours_relmse=eo,
+        mitsuba_relmse=em,
+        speedup=tm / to,
+        speedup_at_equal_error=(tm * em) / (to * eo),
+        cpu_speedup_at_equal_error=(cm * em) / (co * eo),
     )
-    peer.notes.append("target: equal-error ratio <= 1 / 1.5 on every scene")
-    return [throughput, cpu, jit, peer]
 
 
-def against_mitsuba(peer: BenchSection, name: str, compiled, workdir: Path) -> None:
-    from tests.support.mitsuba_scene import render_mitsuba
-
-    size = 128
-    tracer = PathTracer(compiled)
-    t0 = time.perf_counter()
-    reference = np.mean(
-        [render_mitsuba(compiled, workdir, 512, 8, seed=100 + s, width=size, height=size) for s in range(4)],
-        axis=0,
-    )
-    peer.notes.append(f"{name} reference: Mitsuba 2048 spp in {time.perf_counter() - t0:.1f} s")
-    for spp in (16, 64):
-        t_ours, cpu_ours, err_ours = [], [], []
-        for seed in range(RUNS):
-            c = time.process_time()
-            r = render(tracer, RenderSettings(spp=spp, width=size, height=size, seed=seed, threads=THREADS))
-            cpu_ours.append(time.process_time() - c)
-            t_ours.append(r.seconds)
-            err_ours.append(relative_mse(r.image.astype(np.float64), reference))
-        t_mi, cpu_mi, err_mi = [], [], []
-        for seed in range(RUNS):
-            t, c = time.perf_counter(), time.process_time()
-            image = render_mitsuba(compiled, workdir, spp, 8, seed=seed, width=size, height=size)
-            t_mi.append(time.perf_counter() - t)
-            cpu_mi.append(time.process_time() - c)
-            err_mi.append(relative_mse(image, reference))
-        to, tm = float(np.median(t_ours)), float(np.median(t_mi))
-        co, cm = float(np.median(cpu_ours)), float(np.median(cpu_mi))
-        eo, em = float(np.median(err_ours)), float(np.median(err_mi))
-        peer.add(
-            scene=name,
-            spp=spp,
-            ours_s=to,
-            mitsuba_s=tm,
-            time_ratio=to / tm,
-            ours_relmse=eo,
-            mitsuba_relmse=em,
-            time_ratio_at_equal_error=(to * eo) / (tm * em),
-            cpu_ratio_at_equal_error=(co * eo) / (cm * em),
+def cold_row(name: str, size: int, spp: int, folder: Path, scene_file: Path, steady: dict) -> dict:
+    """One cold comparison: `RUNS` fresh processes each side, alternating; medians."""
+    nbake = Path(sys.executable).with_name("nbake")
+    loader = Path(__file__).resolve().parents[1] / "support" / "mitsuba_load.py"
+    ours, theirs = [], []
+    for seed in range(RUNS):
+        args = [
+            f"--spp={spp}",
+            f"--width={size}",
+            f"--height={size}",
+            f"--threads={THREADS}",
+            f"--seed={seed}",
+        ]
+        out = folder / f"ours_{spp}.exr"
+        wall, cpu, stdout = timed_process(
+            [str(nbake), "render", name, *args, "-o", str(out), "--no-png", "--json"]
         )
+        first = json.loads(stdout.strip().splitlines()[-1])["seconds"]
+        ours.append((wall, cpu, first))
+        out = folder / f"mitsuba_{spp}.exr"
+        wall, cpu, _ = timed_process(
+            [sys.executable, str(loader), str(scene_file), str(out), str(spp), str(seed), str(THREADS)]
+        )
+        theirs.append((wall, cpu))
+    (to, co, first), (tm, cm) = (np.median(np.array(x), axis=0) for x in (ours, theirs))
+    error_ratio, warm = steady["ours_relmse"] / steady["mitsuba_relmse"], steady["ours_s"]
+    return dict(
+        scene=name,
+        size=size,
+        spp=spp,
+        ours_s=to,
+        mitsuba_s=tm,
+        speedup_at_equal_error=tm / (to * error_ratio),
+        cpu_speedup_at_equal_error=cm / (co * error_ratio),
+        ours_first_render_s=first,
+        ours_warm_s=warm,
+        first_minus_warm_s=first - warm,
+        process_minus_warm_s=to - warm,
+    )
+
+
+def timed(reference: np.ndarray, render_image) -> tuple[float, float, float]:
+    """(wall seconds, process CPU seconds, relMSE against `reference`) of one render."""
+    t, c = time.perf_counter(), time.process_time()
+    image = render_image()
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    return wall, cpu, relative_mse(mitsuba_image(image), reference)
+
+
+def timed_process(command: list[str]) -> tuple[float, float, str]:
+    """(wall seconds, CPU seconds of the child, its stdout) of a fresh process, from outside."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    done = subprocess.run(command, check=True, capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime, done.stdout
+
+
+def mitsuba_image(image) -> np.ndarray:
+    """An (H, W, 3) float64 array of a Mitsuba tensor (or our float32 image)."""
+    return np.array(image, dtype=np.float64)[..., :3]
+
+
+def cpu_model() -> str:
+    """The CPU's model name (lscpu's), which the figures depend on."""
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return "unknown CPU"

@@ -9,11 +9,13 @@ plain average of its samples, as in our renderer.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from tests.support.mitsuba_load import MATRIX
 from workers.scene.format import spec
 from workers.scene.geometry.compile import CompiledScene
 
@@ -219,3 +221,28 @@ def render_mitsuba(
     mi.set_variant("scalar_rgb")
     loaded = mi.load_dict(mitsuba_scene_dict(scene, workdir, spp, max_depth, width, height))
     return np.array(mi.render(loaded, spp=spp, seed=seed), dtype=np.float64)[..., :3]
+
+
+def mitsuba_scene_file(
+    scene: CompiledScene, workdir: Path, spp: int, max_depth: int, width=None, height=None
+) -> Path:
+    """`mitsuba_scene_dict` as a JSON file beside its PLY files (the environment map as an EXR), for
+    `tests.support.mitsuba_load` to load in a process that imports nothing of ours."""
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+
+    def plain(node):
+        if isinstance(node, mi.ScalarTransform4f):
+            return {MATRIX: np.array(node.matrix).tolist()}
+        if isinstance(node, dict) and isinstance(node.get("bitmap"), mi.Bitmap):
+            path = workdir / "environment.exr"
+            node["bitmap"].write(str(path))
+            return {**plain({k: v for k, v in node.items() if k != "bitmap"}), "filename": str(path)}
+        if isinstance(node, dict):
+            return {key: plain(value) for key, value in node.items()}
+        return node
+
+    path = workdir / "scene.json"
+    path.write_text(json.dumps(plain(mitsuba_scene_dict(scene, workdir, spp, max_depth, width, height))))
+    return path
