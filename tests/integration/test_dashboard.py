@@ -1,14 +1,17 @@
 """The web dashboard in a real browser (Debian's Chromium, headless, driven by Playwright) against a real
 `nbake serve`: the token gate, submitting a quick render from the form and watching it finish, its preview,
 a trained model's report and comparison, cancelling a running job (refused with a read token, done with a
-submit token), and job data shown as text (a scene named `<script>...` runs nothing). Each page is saved
-as a screenshot under `out/screenshots/` (or `$NBAKE_SCREENSHOTS`) for review."""
+submit token), job data shown as text (a scene named `<script>...` runs nothing), the list's duration, age
+and filters kept in the address, two jobs compared (metric deltas; frames with a difference, zoom and
+exposure), a failed job's one-line cause with its traceback collapsed, and pages that fit 420 px. Each page
+is saved as a screenshot under `out/screenshots/` (or `$NBAKE_SCREENSHOTS`) for review."""
 
 from __future__ import annotations
 
 import json
 import os
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,7 +21,7 @@ from playwright.sync_api import Browser, Page, expect, sync_playwright
 
 from tests.integration import test_grpc_server as grpc_server
 from tests.integration.test_api_server import TOKENS
-from tests.integration.test_grpc_server import LONG
+from tests.integration.test_grpc_server import LONG, TINY
 from workers.scene.generators.builtin import get_builtin
 
 served = grpc_server.served  # fixture: one real `nbake serve` on free ports, stopped after the last user
@@ -75,6 +78,24 @@ def trained_job(served) -> str:
     """A small lsnif job, submitted as the module starts so that it trains while the first tests run."""
     body = {"kind": "lsnif", "scene": "thin_walls", "preset": "quick", "config": SMALL_LSNIF}
     return post_job(served, body)["id"]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def other_trained_job(served) -> str:
+    """The same job with another seed: its frame and figures differ from `trained_job`'s."""
+    body = {"kind": "lsnif", "scene": "thin_walls", "preset": "quick", "config": SMALL_LSNIF, "seed": 1}
+    return post_job(served, body)["id"]
+
+
+def finished(served, job_id: str) -> dict:
+    """The job once it is in a final state, polled over the API."""
+    headers = {"Authorization": f"Bearer {TOKENS['read']}"}
+    for _ in range(JOB_TIMEOUT_MS // 500):
+        job = httpx.get(f"{served.url}/v1/jobs/{job_id}", headers=headers, timeout=60).json()
+        if job["state"] in ("SUCCEEDED", "FAILED", "CANCELLED"):
+            return job
+        time.sleep(0.5)
+    raise AssertionError(f"{job_id} did not finish: {job}")
 
 
 def post_job(served, body: dict) -> dict:
@@ -201,7 +222,7 @@ def test_a_trained_job_shows_its_speed_error_report_and_comparison(page, trained
     page.mouse.move(box["x"] + 0.75 * box["width"], box["y"] + 10)
     page.mouse.up()
     assert abs(float(page.locator("#compare-slider").input_value()) - 75) < 1
-    expect(page.locator("#side-by-side img")).to_have_count(2)
+    expect(page.locator("#side-by-side canvas")).to_have_count(3)  # reference, frame, difference
     screenshot(page, "compare")
 
 
@@ -238,3 +259,139 @@ def test_a_job_named_script_is_shown_as_text_and_cancelled_with_a_submit_token(p
     wait_for_state(page, "CANCELLED")
     screenshot(page, "cancelled")
     assert page.evaluate("window.__injected") is None
+
+
+def test_the_job_list_has_duration_age_and_filters_kept_in_the_url(page, served, trained_job):
+    assert finished(served, trained_job)["state"] == "SUCCEEDED"
+    sign_in(page, "read")
+    page.goto("/ui/#/jobs?kind=lsnif")
+    row = page.locator(f'tr[data-job="{trained_job}"]')
+    expect(row).to_be_visible()
+    expect(page.locator("#kind-filter")).to_have_value("lsnif")
+    kinds = page.locator("#jobs-table tbody td.kind").all_inner_texts()
+    assert kinds and set(kinds) == {"lsnif"}, kinds
+    expect(row.locator(".duration")).to_have_text(re.compile(r"\d+(\.\d)? (ms|s|min)"))
+    expect(row.locator(".age")).to_have_text(re.compile(r"\d+ (s|min|h|d) ago"))
+
+    page.select_option("#state-filter", "FAILED")
+    page.wait_for_url(re.compile(r"state=FAILED"))
+    assert "kind=lsnif" in page.url
+    expect(row).to_have_count(0)
+    page.reload()  # the filtered view is a link
+    expect(page.locator("#state-filter")).to_have_value("FAILED")
+    expect(page.locator("#kind-filter")).to_have_value("lsnif")
+    page.select_option("#state-filter", "SUCCEEDED")
+    expect(row).to_be_visible()
+    screenshot(page, "jobs-filtered")
+
+
+# The summed red, green and blue of every pixel of a canvas of the frame viewer.
+CANVAS_SUM = """canvas => {
+  const data = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+  let sum = 0;
+  for (let i = 0; i < data.length; i += 4) sum += data[i] + data[i + 1] + data[i + 2];
+  return sum;
+}"""
+
+
+def test_two_jobs_compared_with_metric_deltas_difference_zoom_and_exposure(
+    page, served, trained_job, other_trained_job
+):
+    for job_id in (trained_job, other_trained_job):
+        assert finished(served, job_id)["state"] == "SUCCEEDED"
+    sign_in(page, "read")
+    page.goto("/ui/#/jobs?kind=lsnif")
+    compare = page.locator("#compare-selected")
+    page.locator(f'tr[data-job="{trained_job}"] input.pick').check()
+    expect(compare).to_be_disabled()
+    page.locator(f'tr[data-job="{other_trained_job}"] input.pick').check()
+    compare.click()
+    page.wait_for_url(re.compile(r"#/compare/job-.+/job-"))
+
+    flip = page.locator('#compare-metrics tr[data-metric="flip"]')
+    expect(flip.locator(".delta")).to_have_text(re.compile(r"^[+−]\d"))  # the seeds' models differ
+    difference = page.locator('canvas[data-panel="frame difference"]')
+    expect(difference).to_be_visible()
+    assert difference.evaluate(CANVAS_SUM) > 0
+    frame = page.locator('canvas[data-panel="A frame"]')
+    natural = frame.evaluate("canvas => canvas.width")
+    page.select_option("#zoom", "16")  # wider than the view: it scrolls
+    assert frame.evaluate("canvas => canvas.getBoundingClientRect().width") == 16 * natural
+    views = page.locator(".viewport")
+    assert views.first.evaluate("view => { view.scrollLeft = 37; return view.scrollLeft; }") == 37
+    expect(views.nth(1)).to_have_js_property("scrollLeft", 37)  # synchronized
+    dark = frame.evaluate(CANVAS_SUM)
+    page.locator("#exposure").fill("1")
+    page.locator("#exposure").dispatch_event("input")
+    assert frame.evaluate(CANVAS_SUM) > dark
+    screenshot(page, "compare-jobs")
+
+    page.goto(f"/ui/#/compare/{trained_job}/{trained_job}")
+    expect(page.locator('canvas[data-panel="frame difference"]')).to_be_visible()
+    assert page.locator('canvas[data-panel="frame difference"]').evaluate(CANVAS_SUM) == 0
+    expect(page.locator('#compare-metrics tr[data-metric="flip"] .delta')).to_have_text("0")
+
+    page.goto(f"/ui/#/jobs/{trained_job}")
+    page.click("#compare-with")  # from a job page: the list with this job picked
+    expect(page.locator(f'tr[data-job="{trained_job}"] input.pick')).to_be_checked()
+
+    page.goto(f"/ui/#/jobs/{trained_job}/compare")  # within one job: the same viewer
+    within = page.locator('canvas[data-panel="difference"]')
+    expect(within).to_be_visible()
+    assert within.evaluate(CANVAS_SUM) > 0
+    expect(page.locator("#zoom")).to_be_visible()
+    expect(page.locator("#exposure")).to_be_visible()
+
+
+def dark_scene() -> dict:
+    """Valid at submission, but it has no light, so the render fails when it runs."""
+    spec = get_builtin("cornell_box").model_dump(mode="json", exclude_none=True)
+    spec["objects"] = [o for o in spec["objects"] if not o.get("emission")]
+    return spec
+
+
+def test_a_failed_job_shows_its_cause_in_one_line_and_its_traceback_collapsed(page, served):
+    body = {"kind": "render", "scene": dark_scene(), "preset": "quick", "config": TINY | {"samplers": 0}}
+    job = post_job(served, body | {"force": True})
+    assert finished(served, job["id"])["state"] == "FAILED"
+    sign_in(page, "read")
+    page.goto(f"/ui/#/jobs/{job['id']}")
+    cause = page.locator(".failure .cause")
+    expect(cause).to_contain_text("light")
+    line = cause.evaluate("element => parseFloat(getComputedStyle(element).fontSize)")
+    assert cause.bounding_box()["height"] < 2 * line
+    traceback = page.locator(".failure details.traceback")
+    expect(traceback).not_to_have_attribute("open", "")
+    expect(traceback.locator("summary")).to_be_visible()
+    expect(traceback.locator("pre")).to_contain_text("Traceback", use_inner_text=False)
+    logged = page.locator("#events tr.event-log", has_text="Traceback")
+    expect(logged.locator("details.traceback")).to_have_count(1)
+    assert logged.bounding_box()["height"] < 3 * line  # collapsed, not flattened into the table
+    screenshot(page, "failed")
+
+
+NARROW = {"width": 420, "height": 800}
+PAGE_WIDTHS = "[document.scrollingElement.scrollWidth, document.scrollingElement.clientWidth]"
+
+
+def test_narrow_pages_do_not_overflow(browser, served, trained_job, other_trained_job):
+    for job_id in (trained_job, other_trained_job):
+        assert finished(served, job_id)["state"] == "SUCCEEDED"
+    context = browser.new_context(viewport=NARROW, base_url=served.url)
+    narrow = context.new_page()
+    narrow.goto("/ui")
+    sign_in(narrow, "read")
+    pages = {
+        "jobs": ("#/jobs", "#jobs-table tbody tr"),
+        "job": (f"#/jobs/{trained_job}", "#events tbody tr"),
+        "report": (f"#/jobs/{trained_job}/report", "#report-table"),
+        "compare": (f"#/jobs/{trained_job}/compare", "#compare"),
+        "compare-jobs": (f"#/compare/{trained_job}/{other_trained_job}", "#compare-metrics"),
+    }
+    for name, (where, shown) in pages.items():
+        narrow.goto(f"/ui/{where}")
+        expect(narrow.locator(shown).first).to_be_visible()
+        widths = narrow.evaluate(PAGE_WIDTHS)
+        assert widths[0] <= widths[1], (name, widths)
+        screenshot(narrow, f"narrow-{name}")
+    context.close()

@@ -1,9 +1,11 @@
 // The dashboard's shell: the token gate, the navigation and the hash routes
-//   #/jobs · #/submit · #/jobs/<id> · #/jobs/<id>/files · #/jobs/<id>/report · #/jobs/<id>/compare
+//   #/jobs[?kind=&state=&pick=] · #/submit · #/jobs/<id> · #/jobs/<id>/files · #/jobs/<id>/report
+//   · #/jobs/<id>/compare · #/compare/<id>/<id>
 
 import { token } from "./api.js";
 import { fill, h } from "./dom.js";
 import { closeAll } from "./events.js";
+import { compareView } from "./views/compare.js";
 import { jobView } from "./views/job.js";
 import { jobsView } from "./views/jobs.js";
 import { loginView } from "./views/login.js";
@@ -40,10 +42,12 @@ function route() {
     show(loginView(route));
     return;
   }
-  const parts = location.hash.replace(/^#\/?/, "").split("/").map(decodeURIComponent);
+  const [path, query = ""] = location.hash.replace(/^#\/?/, "").split("?");
+  const parts = path.split("/").map(decodeURIComponent);
   if (parts[0] === "submit") show(submitView(navigate));
+  else if (parts[0] === "compare" && parts[2]) show(compareView(parts[1], parts[2]));
   else if (parts[0] === "jobs" && parts[1]) show(jobView(parts[1], parts[2] || "overview"));
-  else show(jobsView());
+  else show(jobsView(new URLSearchParams(query), navigate));
 }
 
 window.addEventListener("hashchange", route);

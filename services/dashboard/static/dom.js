@@ -49,6 +49,13 @@ export function formatSeconds(s) {
   return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
 }
 
+/** How long ago, in the largest whole unit: "40 s ago", "3 min ago", "2 h ago", "5 d ago". */
+export function formatAge(s) {
+  if (!Number.isFinite(s)) return "";
+  const [size, unit] = [[86400, "d"], [3600, "h"], [60, "min"], [1, "s"]].find(([n]) => s >= n) ?? [1, "s"];
+  return `${Math.floor(Math.max(s, 0) / size)} ${unit} ago`;
+}
+
 export function formatNumber(x, digits = 4) {
   if (x === null || x === undefined) return "";
   if (typeof x === "string") return x; // "NaN" as the report writes it

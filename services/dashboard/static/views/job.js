@@ -1,16 +1,26 @@
 // One job: its state and live progress, a cancel button, and four tabs: overview (details, plan, config,
 // events and log), files (the artifact's files with PNG previews), report (speed against error) and
-// compare (the model's frame over the path-traced reference, split by a slider).
+// compare (the model's frame over the path-traced reference, split by a slider, and both with their
+// difference in the frame viewer). A failed job shows its cause in one line, its traceback collapsed.
 
 import { ApiError, fileUrl, getJson, paths, postJson } from "../api.js";
 import { fill, formatBytes, formatNumber, formatSeconds, formatTime, h } from "../dom.js";
 import { follow } from "../events.js";
 import { TERMINAL, problemBox, progressBar, sceneLabel, stateBadge } from "../components.js";
 import { speedErrorPlot } from "../plot.js";
+import { frameViewer } from "./frames.js";
 
 const TABS = [["overview", "Overview"], ["files", "Files"], ["report", "Report"], ["compare", "Compare"]];
 const MAX_EVENT_ROWS = 300;
 const REFERENCE = "reference.png", FRAME = "frame.png", REPORT = "report.json";
+
+/** A log message of several lines (a traceback): its last line, the rest collapsed under it. */
+function logMessage(message) {
+  const lines = message.trimEnd().split("\n");
+  if (lines.length === 1) return message;
+  return h("details", { class: "traceback" },
+    h("summary", {}, `${lines[lines.length - 1]} (traceback, ${lines.length} lines)`), h("pre", {}, message));
+}
 
 export function jobView(jobId, requestedTab) {
   const tab = TABS.some(([name]) => name === requestedTab) ? requestedTab : "overview";
@@ -43,14 +53,26 @@ export function jobView(jobId, requestedTab) {
       cancelStatus.replaceChildren(problemBox(error));
     }
   });
-  fill(header, h("div", { class: "title-row" }, titleSlot, stateSlot, cancel), idSlot, progressSlot, errorSlot, cancelStatus);
+  const compareWith = h("a", { href: `#/jobs?pick=${encodeURIComponent(jobId)}`, id: "compare-with" }, "Compare with…");
+  fill(header, h("div", { class: "title-row" }, titleSlot, stateSlot, compareWith, cancel), idSlot, progressSlot, errorSlot, cancelStatus);
+  let failureShown = null; // redrawn only when it changes, so an opened traceback stays open
+
+  function renderFailure() {
+    const traceback = events.find((e) => e.type === "log" && e.data.message?.startsWith("Traceback"));
+    const key = `${job.error ?? ""}\u0000${traceback?.seq ?? ""}`;
+    if (key === failureShown) return;
+    failureShown = key;
+    fill(errorSlot, job.error ? h("div", { class: "problem failure" },
+      h("div", { class: "cause", title: job.error }, job.error),
+      traceback ? h("details", { class: "traceback" }, h("summary", {}, "Traceback"), h("pre", {}, traceback.data.message)) : null) : null);
+  }
 
   function renderHeader() {
     fill(titleSlot, h("span", { class: "kind" }, job.kind), " of ", h("span", { class: "scene" }, sceneLabel(job.scene)));
     fill(idSlot, job.id, " · preset ", job.preset);
     fill(stateSlot, stateBadge(job.state));
     fill(progressSlot, progressBar(job.progress, job.state));
-    fill(errorSlot, job.error ? h("div", { class: "problem" }, job.error) : null);
+    renderFailure();
     cancel.hidden = TERMINAL.has(job.state);
     if (job.cancel_requested) {
       cancel.disabled = true;
@@ -97,19 +119,19 @@ export function jobView(jobId, requestedTab) {
 
   // ----------------------------------------------------------------- overview
   const eventsBody = h("tbody");
-  const log = h("pre", { class: "log", id: "log" });
+  const log = h("div", { class: "log", id: "log" });
 
   function eventSummary(event) {
     const d = event.data;
     if (event.type === "state") return `${d.previous ?? ""} → ${d.state}${d.message ? `: ${d.message}` : ""}${d.error ? ` (${d.error})` : ""}`;
     if (event.type === "progress") return [d.step != null ? `step ${d.step}/${d.total}` : "", d.loss != null ? `loss ${formatNumber(d.loss)}` : "", d.eta_s != null ? `ETA ${formatSeconds(d.eta_s)}` : ""].filter(Boolean).join(", ");
-    return d.message ?? JSON.stringify(d);
+    return d.message !== undefined ? logMessage(d.message) : JSON.stringify(d);
   }
 
   function renderEvents() {
     fill(eventsBody, events.slice(-MAX_EVENT_ROWS).map((event) => h("tr", { class: `event event-${event.type}` },
       h("td", {}, event.seq), h("td", {}, formatTime(event.time)), h("td", {}, event.type), h("td", {}, eventSummary(event)))));
-    log.textContent = events.filter((e) => e.type === "log").map((e) => `${formatTime(e.time)}  ${e.data.message}`).join("\n");
+    fill(log, events.filter((e) => e.type === "log").map((e) => h("div", { class: "log-line" }, `${formatTime(e.time)}  `, logMessage(e.data.message))));
   }
 
   function overview() {
@@ -126,14 +148,14 @@ export function jobView(jobId, requestedTab) {
       h("section", { class: "card", id: "plan" }, h("h3", {}, "Plan"),
         plan ? [
           h("p", {}, plan.summary, " ", h("span", { class: "muted" }, `(estimated ${formatSeconds(plan.estimated_seconds)})`)),
-          h("table", { class: "table" }, h("thead", {}, h("tr", {}, h("th", {}, "Part"), h("th", {}, "Choice"), h("th", {}, "Why"))),
-            h("tbody", {}, plan.items.map((item) => h("tr", {}, h("td", {}, item.name), h("td", {}, item.choice), h("td", {}, item.reason))))),
+          h("div", { class: "table-wrap" }, h("table", { class: "table" }, h("thead", {}, h("tr", {}, h("th", {}, "Part"), h("th", {}, "Choice"), h("th", {}, "Why"))),
+            h("tbody", {}, plan.items.map((item) => h("tr", {}, h("td", {}, item.name), h("td", {}, item.choice), h("td", {}, item.reason)))))),
         ] : h("p", {}, "No plan.")),
       h("section", { class: "card" }, h("h3", {}, "Config"), h("pre", { class: "config" }, JSON.stringify(job.config, null, 2))),
       h("section", { class: "card" }, h("h3", {}, "Log"), log),
       h("section", { class: "card" }, h("h3", {}, "Events"),
-        h("table", { class: "table events", id: "events" },
-          h("thead", {}, h("tr", {}, ["#", "Time", "Type", "What"].map((t) => h("th", {}, t)))), eventsBody)),
+        h("div", { class: "table-wrap" }, h("table", { class: "table events", id: "events" },
+          h("thead", {}, h("tr", {}, ["#", "Time", "Type", "What"].map((t) => h("th", {}, t)))), eventsBody))),
     ];
   }
 
@@ -164,12 +186,12 @@ export function jobView(jobId, requestedTab) {
     return [
       h("section", { class: "card" }, h("h3", {}, "Previews"), previews.length ? h("div", { class: "gallery" }, previews) : h("p", {}, "No PNG files.")),
       h("section", { class: "card" }, h("h3", {}, "Files of ", h("code", {}, found.artifact_id)),
-        h("table", { class: "table", id: "files" },
+        h("div", { class: "table-wrap" }, h("table", { class: "table", id: "files" },
           h("thead", {}, h("tr", {}, ["Name", "Media type", "Size", "Digest", ""].map((t) => h("th", {}, t)))),
           h("tbody", {}, found.files.map((f) => h("tr", {},
             h("td", {}, f.name), h("td", {}, f.media_type), h("td", { class: "num" }, formatBytes(f.size)),
             h("td", { class: "digest", title: f.digest }, f.digest.slice(0, 19)),
-            h("td", {}, h("button", { type: "button", class: "link", onclick: () => download(f) }, "Download"))))))),
+            h("td", {}, h("button", { type: "button", class: "link", onclick: () => download(f) }, "Download")))))))),
       h("section", { class: "card" }, h("h3", {}, "Metrics"), keyValues(found.metrics)),
       Object.keys(found.annotations ?? {}).length
         ? h("section", { class: "card", id: "annotations" }, h("h3", {}, "Annotations"), keyValues(found.annotations)) : null,
@@ -186,8 +208,8 @@ export function jobView(jobId, requestedTab) {
   function keyValues(object) {
     const entries = Object.entries(object ?? {});
     if (!entries.length) return h("p", { class: "muted" }, "None.");
-    return h("table", { class: "table kv" }, h("tbody", {}, entries.map(([k, v]) => h("tr", {}, h("th", {}, k),
-      h("td", { class: "num" }, formatValue(k, v))))));
+    return h("div", { class: "table-wrap" }, h("table", { class: "table kv" }, h("tbody", {}, entries.map(([k, v]) => h("tr", {}, h("th", {}, k),
+      h("td", { class: "num" }, formatValue(k, v)))))));
   }
 
   function equalTime(ratio) {
@@ -212,12 +234,12 @@ export function jobView(jobId, requestedTab) {
       h("section", { class: "card" }, h("h3", {}, "Speed against error"), equalTime(data.equal_time_ratio),
         h("div", { class: "plots", id: "speed-error" }, speedErrorPlot(data, "flip", "FLIP"), speedErrorPlot(data, "relative_mse", "relative MSE"))),
       h("section", { class: "card" }, h("h3", {}, "Frames against the reference"),
-        h("table", { class: "table", id: "report-table" },
+        h("div", { class: "table-wrap" }, h("table", { class: "table", id: "report-table" },
           h("thead", {}, h("tr", {}, ["Method", "Frame", "Time per frame", "FLIP", "PSNR (dB)", "Relative MSE"].map((t) => h("th", {}, t)))),
           h("tbody", {}, points.map(([method, p]) => h("tr", { class: method === data.kind ? "model-row" : "" },
             h("td", {}, method), h("td", {}, p.label), h("td", { class: "num" }, formatSeconds(p.seconds_per_frame)),
             h("td", { class: "num" }, formatNumber(p.error.flip)), h("td", { class: "num" }, formatNumber(p.error.psnr)),
-            h("td", { class: "num" }, formatNumber(p.error.relative_mse))))))),
+            h("td", { class: "num" }, formatNumber(p.error.relative_mse)))))))),
       h("section", { class: "card" }, h("h3", {}, "Cost"), keyValues({
         training_seconds: data.training_seconds, training_samples: data.training_samples,
         training_samples_per_s: data.training_samples_per_s, seconds_per_query: data.seconds_per_query,
@@ -255,13 +277,15 @@ export function jobView(jobId, requestedTab) {
     };
     stage.addEventListener("pointerdown", drag);
     stage.addEventListener("pointermove", drag);
-    const sideBySide = [[reference, "reference (converged path tracing)"], [frame, `${job.kind} model frame`]].map(
-      ([img, caption]) => h("figure", { class: "figure" }, h("img", { src: img.src, alt: caption, class: "preview side" }), h("figcaption", {}, caption)));
+    const viewer = await frameViewer([
+      { label: "reference", url: reference.src }, { label: "frame", url: frame.src },
+      { label: "difference", difference: ["reference", "frame"] },
+    ]);
     return [
       h("section", { class: "card" }, h("h3", {}, "Model frame over the reference"),
         h("div", { class: "compare-labels" }, h("span", {}, "◀ reference (converged path tracing)"), h("span", {}, `${job.kind} model frame ▶`)),
         stage, slider),
-      h("section", { class: "card" }, h("h3", {}, "Side by side"), h("div", { class: "gallery", id: "side-by-side" }, sideBySide)),
+      h("section", { class: "card", id: "side-by-side" }, h("h3", {}, "Side by side"), viewer),
     ];
   }
 
