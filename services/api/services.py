@@ -112,6 +112,20 @@ class Services:
             self.scheduler.wake()
         return job, created
 
+    def submit_many(
+        self,
+        requests: list[JobRequest],
+        idempotency_key: str | None = None,
+        principal: Principal | None = None,
+    ) -> list[tuple[Job, bool]]:
+        """`Submitter.submit_many`, counted like single submissions; new jobs wake the scheduler once."""
+        answers = self.submitter.submit_many(requests, idempotency_key, principal)
+        for _, created in answers:
+            self.metrics.submissions.labels(str(created).lower()).inc()
+        if any(created for _, created in answers):
+            self.scheduler.wake()
+        return answers
+
     def cancel(self, job_id: str, principal: Principal | None = None) -> Job:
         """Request the cancellation and wake the scheduler, which stops a running job's driver."""
         job = self.jobs.request_cancel(job_id, principal and principal.visible_tenant)

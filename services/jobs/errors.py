@@ -11,3 +11,8 @@ class JobNotFound(ServiceError):
 
 class KindNotFound(ServiceError):
     status, title = 404, "Kind not found"
+
+
+def name_batch_item(error: ServiceError, index: int) -> None:
+    """Make `error` name its field under `jobs[index]`: the batch submission's name for its index-th job."""
+    error.field = f"jobs[{index}].{error.field}" if error.field else f"jobs[{index}]"

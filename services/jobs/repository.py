@@ -15,10 +15,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from services.jobs.db import Database
-from services.jobs.errors import JobNotFound
+from services.jobs.errors import JobNotFound, name_batch_item
 from services.jobs.states import JobState, check_transition
 from services.jobs.tables import Event, IdempotencyKey, Job, utcnow
-from services.platform.errors import Conflict, InvalidInput
+from services.platform.errors import Conflict, InvalidInput, ServiceError
 
 INSERT_ATTEMPTS = 3  # concurrent identical submissions on PostgreSQL: the loser retries and finds the winner
 REUSABLE = (JobState.QUEUED, JobState.RUNNING, JobState.SUCCEEDED)
@@ -86,6 +86,31 @@ class JobRepository:
                 if attempt == INSERT_ATTEMPTS - 1:
                     raise
                 job = _fresh_copy(job)
+        raise AssertionError("unreachable")
+
+    def create_many(
+        self,
+        entries: Sequence[tuple[Job, str | None, str | None]],
+        admit: Callable[[Session, Job], None] | None = None,
+    ) -> list[tuple[Job, bool]]:
+        """`create` for each (job, content key, header key) in one transaction: every job is inserted or
+        reused, or none is. An entry's refusal (a quota, a key reused for another request) is raised with
+        its field under `jobs[i]`, the batch request's name for it. Identical entries give one job."""
+        for attempt in range(INSERT_ATTEMPTS):
+            try:
+                with self.db.writing() as session:
+                    answers = []
+                    for index, (job, content_key, header_key) in enumerate(entries):
+                        try:
+                            answers.append(self._create(session, job, content_key, header_key, True, admit))
+                        except ServiceError as error:
+                            name_batch_item(error, index)
+                            raise
+                    return answers
+            except IntegrityError:  # a concurrent submission inserted one of the keys: retry, reusing it
+                if attempt == INSERT_ATTEMPTS - 1:
+                    raise
+                entries = [(_fresh_copy(job), content, header) for job, content, header in entries]
         raise AssertionError("unreachable")
 
     def _create(

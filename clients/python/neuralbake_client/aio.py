@@ -56,6 +56,9 @@ class AsyncClient:
     async def submit(self, kind: str, scene: SceneRef, **options: Any) -> Job:
         return await asyncio.to_thread(self.sync.submit, kind, scene, **options)
 
+    async def submit_many(self, jobs: list[dict[str, Any]]) -> list[Job]:
+        return await asyncio.to_thread(self.sync.submit_many, jobs)
+
     async def get(self, job: JobRef) -> Job:
         return await asyncio.to_thread(self.sync.get, job)
 

@@ -10,6 +10,7 @@ the next build finds them as identical work.
 
 from __future__ import annotations
 
+import re
 import time
 from collections import deque
 from collections.abc import Callable
@@ -92,88 +93,112 @@ class Baker:
         self.items = items(pipeline, base)
         self.on_update = on_update or (lambda _: None)
         self._uploads: dict[str, str | ApiError] = {}  # asset digest -> asset id, or why it was refused
+        self.results: dict[str, ItemResult] = {}  # by item name
+        self.flying: dict[str, tuple[Item, str, float]] = {}  # item name -> (item, job id, when submitted)
 
     def run(self) -> BuildResult:
         started = time.monotonic()
         deadline = started + self.pipeline.timeout
-        results = {
+        self.results = {
             item.name: ItemResult(name=item.name, asset=item.source.label, kind=item.entry.kind)
             for item in self.items
         }
-        waiting, flying = deque(self.items), {}  # flying: item name -> (item, job id, started)
+        waiting = deque(self.items)
         poll = POLL_S[0]
-        while waiting or flying:
-            while waiting and len(flying) < self.pipeline.concurrency and time.monotonic() < deadline:
-                item = waiting.popleft()
-                result, job = results[item.name], self._start(item, results[item.name])
-                if job is None:
-                    self.on_update(result)
-                else:
-                    flying[item.name] = (item, job.id, time.monotonic())
-                    self.on_update(result)
-            for name, (item, job_id, since) in list(flying.items()):
+        while waiting or self.flying:
+            if waiting and time.monotonic() < deadline:
+                self._start(waiting)
+            for name, (item, job_id, since) in list(self.flying.items()):
                 job = self.client.get(job_id)
                 if job.state.terminal:
-                    del flying[name]
-                    self._finish(item, results[name], job)
-                    results[name].seconds = time.monotonic() - since
-                    self.on_update(results[name])
+                    del self.flying[name]
+                    self._finish(item, job, time.monotonic() - since)
                     poll = POLL_S[0]
             if time.monotonic() >= deadline:
-                for result in results.values():
+                for result in self.results.values():
                     if not result.done:
                         result.outcome = TIMED_OUT
                         self.on_update(result)
                 break
-            if flying:
+            if self.flying:
                 time.sleep(min(poll, max(0.0, deadline - time.monotonic())))
                 poll = min(POLL_S[1], poll * 1.5)
-        ordered = [results[item.name] for item in self.items]
+        ordered = [self.results[item.name] for item in self.items]
         return BuildResult(items=ordered, seconds=time.monotonic() - started, lock=self._lock(ordered))
 
-    # ------------------------------------------------------------------ one item
+    # ------------------------------------------------------------------ starting items
 
-    def _start(self, item: Item, result: ItemResult) -> Job | None:
-        """Take the item's artifact from the lock, or submit it: the job in flight, or None when the item
-        is already done (from the lock, or refused)."""
+    def _start(self, waiting: deque[Item]) -> None:
+        """Start waiting items until `concurrency` are in flight: each from the lock when it has them
+        unchanged, the others submitted together as one batch."""
+        batch: list[tuple[Item, str]] = []
+        while waiting and len(self.flying) + len(batch) < self.pipeline.concurrency:
+            item = waiting.popleft()
+            if self._from_lock(item):
+                continue
+            try:
+                batch.append((item, self._scene(item.source, self.previous.entries.get(item.name))))
+            except ApiError as error:
+                self._refuse(item, error)
+        while batch:
+            try:
+                jobs = self.client.submit_many([self._request(item, scene) for item, scene in batch])
+            except ApiError as error:  # all or nothing: the item at fault is refused, the rest tried again
+                index = _item_index(error.field)
+                if index is not None and index < len(batch):
+                    self._refuse(batch.pop(index)[0], error)
+                else:
+                    for item, _ in batch:
+                        self._refuse(item, error)
+                    batch = []
+                continue
+            for (item, _), job in zip(batch, jobs, strict=True):
+                result = self.results[item.name]
+                result.job_id, result.submitted, result.reused = job.id, True, job.reused
+                if job.state.terminal:
+                    self._finish(item, job, 0.0)
+                else:
+                    self.flying[item.name] = (item, job.id, time.monotonic())
+                    self.on_update(result)
+            return
+
+    def _from_lock(self, item: Item) -> bool:
+        """Whether the lock's artifact serves `item` (same asset content and kind entry, still on the
+        server); if so the item is done, checked against its gates."""
         entry = self.previous.entries.get(item.name)
         unchanged = (
             entry is not None
             and entry.asset_digest == item.source.digest
             and entry.config_digest == item.config_digest
         )
-        if unchanged and not self.refresh:
-            try:
-                manifest = self.client.manifest(entry.artifact_id)
-            except NotFound:  # the server lost it (or it is another deployment): bake it again
-                pass
-            else:
-                result.job_id, result.artifact_id, result.reused = entry.job_id, entry.artifact_id, True
-                self._check(item, result, manifest.metrics)
-                return None
+        if not unchanged or self.refresh:
+            return False
         try:
-            kind = item.entry
-            job = self.client.submit(
-                kind.kind,
-                self._scene(item.source, entry),
-                preset=kind.preset,
-                config=kind.config,
-                seed=kind.seed,
-                priority=kind.priority,
-            )
-        except ApiError as error:
-            if error.status >= 500 or error.status in (401, 403):
-                raise  # the server or the token, not this item: the whole build stops
-            result.outcome, result.error = (
-                REFUSED,
-                f"{error.status} {error.title}: {error.where}{error.detail}",
-            )
-            return None
-        result.job_id, result.submitted, result.reused = job.id, True, job.reused
-        if job.state.terminal:
-            self._finish(item, result, job)
-            return None
-        return job
+            manifest = self.client.manifest(entry.artifact_id)
+        except NotFound:  # the server lost it (or it is another deployment): bake it again
+            return False
+        result = self.results[item.name]
+        result.job_id, result.artifact_id, result.reused = entry.job_id, entry.artifact_id, True
+        self._check(item, result, manifest.metrics)
+        self.on_update(result)
+        return True
+
+    @staticmethod
+    def _request(item: Item, scene: str) -> dict:
+        kind = item.entry
+        fields = {"preset": kind.preset, "seed": kind.seed, "priority": kind.priority}
+        return {"kind": kind.kind, "scene": scene, "config": kind.config} | {
+            name: value for name, value in fields.items() if value is not None
+        }
+
+    def _refuse(self, item: Item, error: ApiError) -> None:
+        """The server refused the item's upload or submission; a server error or a refused token is not
+        the item's fault and stops the whole build."""
+        if error.status >= 500 or error.status in (401, 403):
+            raise error
+        result = self.results[item.name]
+        result.outcome, result.error = REFUSED, f"{error.status} {error.title}: {error.where}{error.detail}"
+        self.on_update(result)
 
     def _scene(self, source: Source, entry: LockEntry | None) -> str:
         """What to submit for `source`: its name, or the id of its upload (the lock's, if the server still
@@ -189,22 +214,22 @@ class Baker:
         if known is None:
             try:
                 known = self.client.upload(source.path).asset_id
-            except ApiError as error:
-                if error.status >= 500 or error.status in (401, 403):
-                    raise
+            except ApiError as error:  # refused for every kind of this asset, uploaded once
                 known = error
             self._uploads[source.digest] = known
         if isinstance(known, ApiError):
             raise known
         return known
 
-    def _finish(self, item: Item, result: ItemResult, job: Job) -> None:
-        result.job_id, result.artifact_id = job.id, job.artifact_id
+    def _finish(self, item: Item, job: Job, seconds: float) -> None:
+        result = self.results[item.name]
+        result.job_id, result.artifact_id, result.seconds = job.id, job.artifact_id, seconds
         if job.state != JobState.SUCCEEDED:
             result.outcome = FAILED if job.state == JobState.FAILED else CANCELLED
             result.error = job.error
-            return
-        self._check(item, result, self.client.manifest(job.artifact_id).metrics)
+        else:
+            self._check(item, result, self.client.manifest(job.artifact_id).metrics)
+        self.on_update(result)
 
     def _check(self, item: Item, result: ItemResult, metrics: dict[str, float]) -> None:
         previous = self.previous.entries.get(item.name)
@@ -232,3 +257,9 @@ class Baker:
                 metrics=result.metrics,
             )
         return BuildLock(entries=entries)
+
+
+def _item_index(field: str | None) -> int | None:
+    """i of a batch refusal's field `jobs[i]...`: which item the server refused."""
+    match = re.match(r"jobs\[(\d+)\]", field or "")
+    return int(match[1]) if match else None

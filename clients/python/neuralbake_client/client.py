@@ -185,14 +185,36 @@ class Client:
         `scene` is a built-in scene name or an asset id (str), an inline SceneSpec (dict), or a local
         scene file or directory (a `Path`), which is uploaded first.
         """
+        body = self._job_body(kind, scene, preset, config, seed, priority, force)
+        key = f"sdk-{uuid.uuid4()}"  # the same key on every retry of this one submission
+        return self.retry.call(lambda: self.transport.submit(body, key))
+
+    def submit_many(self, jobs: list[Mapping[str, Any]]) -> list[Job]:
+        """Queue many jobs at once, all or nothing (at most 500): each mapping holds `submit`'s arguments
+        (`kind`, `scene`, and optionally `preset`, `config`, `seed`, `priority`, `force`). The server checks
+        and plans every job before it stores any, and names the first refusal's field under `jobs[i]`.
+        The jobs come back in order, each `reused` when identical work existed."""
+        bodies = [self._job_body(**job) for job in jobs]
+        key = f"sdk-{uuid.uuid4()}"  # a retried batch gets the same jobs back
+        return self.retry.call(lambda: self.transport.submit_many(bodies, key))
+
+    def _job_body(
+        self,
+        kind: str,
+        scene: SceneRef,
+        preset: str | None = None,
+        config: dict[str, Any] | None = None,
+        seed: int | None = None,
+        priority: int | None = None,
+        force: bool = False,
+    ) -> dict[str, Any]:
+        """A submission's body; a local scene file or folder (a `Path`) is uploaded for it first."""
         if isinstance(scene, os.PathLike):
             scene = self.upload(scene).asset_id
         body = {"kind": kind, "scene": scene, "config": config or {}, "force": force}
-        body |= {
+        return body | {
             k: v for k, v in (("preset", preset), ("seed", seed), ("priority", priority)) if v is not None
         }
-        key = f"sdk-{uuid.uuid4()}"  # the same key on every retry of this one submission
-        return self.retry.call(lambda: self.transport.submit(body, key))
 
     def get(self, job: JobRef) -> Job:
         """A job by its id, or the job that made an artifact (see `references`)."""

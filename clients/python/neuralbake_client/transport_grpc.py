@@ -63,6 +63,24 @@ def call_error(error: grpc.RpcError) -> NeuralbakeError:
     return api_error(http_status, title, detail, metadata.get("field"), grpc_code=code.name, **extra)
 
 
+def submit_request(body: dict[str, Any]) -> jobs_pb2.SubmitJobRequest:
+    """The SubmitJobRequest of a `POST /v1/jobs` body."""
+    scene = body["scene"]
+    return jobs_pb2.SubmitJobRequest(
+        kind=body["kind"],
+        config=struct(body.get("config") or {}),
+        force=body.get("force", False),
+        **({"scene_spec": struct(scene)} if isinstance(scene, dict) else {"scene_ref": scene}),
+        **{k: body[k] for k in ("preset", "seed", "priority") if body.get(k) is not None},
+    )
+
+
+def submitted_job(response: jobs_pb2.SubmitJobResponse) -> Job:
+    job = job_model(response.job)
+    job._reused = not response.created
+    return job
+
+
 def plain(value: Any) -> Any:
     """JSON from a Struct: numbers come back as floats, so whole ones are made ints again."""
     if isinstance(value, float) and value.is_integer():
@@ -142,18 +160,15 @@ class GrpcTransport:
     # ------------------------------------------------------------------ jobs
 
     def submit(self, body: dict[str, Any], idempotency_key: str) -> Job:
-        scene = body["scene"]
-        request = jobs_pb2.SubmitJobRequest(
-            kind=body["kind"],
-            config=struct(body.get("config") or {}),
-            force=body.get("force", False),
-            **({"scene_spec": struct(scene)} if isinstance(scene, dict) else {"scene_ref": scene}),
-            **{k: body[k] for k in ("preset", "seed", "priority") if body.get(k) is not None},
+        response = self._unary(
+            self.jobs.SubmitJob, submit_request(body), (("idempotency-key", idempotency_key),)
         )
-        response = self._unary(self.jobs.SubmitJob, request, (("idempotency-key", idempotency_key),))
-        job = job_model(response.job)
-        job._reused = not response.created
-        return job
+        return submitted_job(response)
+
+    def submit_many(self, bodies: list[dict[str, Any]], idempotency_key: str) -> list[Job]:
+        request = jobs_pb2.SubmitJobsRequest(jobs=[submit_request(body) for body in bodies])
+        response = self._unary(self.jobs.SubmitJobs, request, (("idempotency-key", idempotency_key),))
+        return [submitted_job(item) for item in response.items]
 
     def get_job(self, job_id: str) -> Job:
         return job_model(self._unary(self.jobs.GetJob, jobs_pb2.GetJobRequest(job_id=job_id)).job)

@@ -80,6 +80,16 @@ class HttpTransport:
         job._reused = response.status_code == 200  # 201: created
         return job
 
+    def submit_many(self, bodies: list[dict[str, Any]], idempotency_key: str) -> list[Job]:
+        headers = {"Idempotency-Key": idempotency_key}
+        answer = self.send("POST", "/v1/jobs:batch", json={"jobs": bodies}, headers=headers).json()
+        jobs = []
+        for item in answer["items"]:
+            job = Job.model_validate(item["job"])
+            job._reused = not item["created"]
+            jobs.append(job)
+        return jobs
+
     def get_job(self, job_id: str) -> Job:
         return Job.model_validate(self.send("GET", f"/v1/jobs/{job_id}").json())
 

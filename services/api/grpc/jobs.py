@@ -11,7 +11,7 @@ from neuralbake.v1 import jobs_pb2, jobs_pb2_grpc
 from services.api.grpc.messages import STATE_NAMES, event_message, job_message, submit_fields
 from services.api.grpc.streams import StreamTracker, pause
 from services.jobs.following import follow
-from services.jobs.submission import JobRequest
+from services.jobs.submission import BatchRequest, JobRequest
 from services.platform.errors import InvalidInput
 from services.platform.grpc.auth import principal
 
@@ -33,6 +33,14 @@ class JobServicer(jobs_pb2_grpc.JobServiceServicer):
         body = JobRequest.model_validate(submit_fields(request))
         job, created = self.svc.submit(body, idempotency_key(context), principal(context))
         return jobs_pb2.SubmitJobResponse(job=job_message(job), created=created)
+
+    def SubmitJobs(self, request, context):
+        batch = BatchRequest.model_validate({"jobs": [submit_fields(job) for job in request.jobs]})
+        answers = self.svc.submit_many(batch.jobs, idempotency_key(context), principal(context))
+        items = [
+            jobs_pb2.SubmitJobResponse(job=job_message(job), created=created) for job, created in answers
+        ]
+        return jobs_pb2.SubmitJobsResponse(items=items)
 
     def GetJob(self, request, context):
         job = self.svc.jobs.get(request.job_id, principal(context).visible_tenant)

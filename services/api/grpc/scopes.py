@@ -13,6 +13,7 @@ SERVICE_NAMES = tuple(
 SUBMIT_METHODS = frozenset(
     {
         "/neuralbake.v1.JobService/SubmitJob",
+        "/neuralbake.v1.JobService/SubmitJobs",
         "/neuralbake.v1.JobService/CancelJob",
         "/neuralbake.v1.AssetService/UploadAsset",
     }

@@ -6,13 +6,14 @@ from typing import Annotated
 
 from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
+from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from services.api.deps import ServicesDep
 from services.api.schemas import EventView, JobList, JobView
 from services.api.sse import event_stream
 from services.jobs.states import JobState
-from services.jobs.submission import JobRequest
+from services.jobs.submission import BatchRequest, JobRequest
 from services.platform.auth import CanRead, CanSubmit
 from services.platform.problems import PROBLEM_RESPONSES
 
@@ -42,6 +43,35 @@ async def submit_job(
         response.status_code = 200
     response.headers["Location"] = f"/v1/jobs/{job.id}"
     return JobView.of(job)
+
+
+class BatchItem(BaseModel):
+    job: JobView
+    created: bool = Field(
+        description="False: an identical job (or the key's) already existed; it is that job."
+    )
+
+
+class BatchAnswer(BaseModel):
+    items: list[BatchItem] = Field(description="In the order of the request's `jobs`.")
+
+
+@router.post(
+    ":batch",
+    response_model=BatchAnswer,
+    responses={s: PROBLEM_RESPONSES[s] for s in (400, 403, 409, 413, 422, 429)},
+)
+async def submit_jobs(
+    body: BatchRequest,
+    svc: ServicesDep,
+    principal: CanSubmit,
+    idempotency_key: Annotated[str | None, Header(max_length=255)] = None,
+) -> BatchAnswer:
+    """Queue many jobs of the token's tenant at once, all or nothing: every job is checked and planned
+    before any is stored, then all go in one transaction; the first refusal names its field under
+    `jobs[i]`. Identical work that exists is reused, as `POST /v1/jobs` does."""
+    answers = await run_in_threadpool(svc.submit_many, body.jobs, idempotency_key, principal)
+    return BatchAnswer(items=[BatchItem(job=JobView.of(job), created=created) for job, created in answers])
 
 
 @router.get(

@@ -26,7 +26,7 @@ from google.protobuf import struct_pb2 as google_dot_protobuf_dot_struct__pb2
 from google.protobuf import timestamp_pb2 as google_dot_protobuf_dot_timestamp__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18neuralbake/v1/jobs.proto\x12\rneuralbake.v1\x1a\x1cgoogle/protobuf/struct.proto\x1a\x1fgoogle/protobuf/timestamp.proto\"\xbc\x05\n\x03Job\x12\n\n\x02id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12&\n\x05state\x18\x03 \x01(\x0e\x32\x17.neuralbake.v1.JobState\x12,\n\x05scene\x18\x04 \x03(\x0b\x32\x1d.neuralbake.v1.Job.SceneEntry\x12\x12\n\nscene_hash\x18\x05 \x01(\t\x12\x0e\n\x06preset\x18\x06 \x01(\t\x12\'\n\x06\x63onfig\x18\x07 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x0c\n\x04seed\x18\x08 \x01(\x04\x12\x10\n\x08priority\x18\t \x01(\x05\x12\x14\n\x0c\x63ode_version\x18\n \x01(\t\x12\x17\n\x0fidempotency_key\x18\x0b \x01(\t\x12%\n\x04plan\x18\x0c \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x10\n\x08\x61ttempts\x18\r \x01(\x05\x12\x14\n\x0cmax_attempts\x18\x0e \x01(\x05\x12\x18\n\x10\x63\x61ncel_requested\x18\x0f \x01(\x08\x12\x12\n\x05\x65rror\x18\x10 \x01(\tH\x00\x88\x01\x01\x12\x18\n\x0b\x61rtifact_id\x18\x11 \x01(\tH\x01\x88\x01\x01\x12)\n\x08progress\x18\x12 \x01(\x0b\x32\x17.google.protobuf.Struct\x12.\n\ncreated_at\x18\x13 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12.\n\nstarted_at\x18\x14 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12/\n\x0b\x66inished_at\x18\x15 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x0e\n\x06tenant\x18\x16 \x01(\t\x1a,\n\nSceneEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\t:\x02\x38\x01\x42\x08\n\x06_errorB\x0e\n\x0c_artifact_id\"\x85\x02\n\x10SubmitJobRequest\x12\x0c\n\x04kind\x18\x01 \x01(\t\x12\x13\n\tscene_ref\x18\x02 \x01(\tH\x00\x12-\n\nscene_spec\x18\x03 \x01(\x0b\x32\x17.google.protobuf.StructH\x00\x12\x13\n\x06preset\x18\x04 \x01(\tH\x01\x88\x01\x01\x12\'\n\x06\x63onfig\x18\x05 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x11\n\x04seed\x18\x06 \x01(\x04H\x02\x88\x01\x01\x12\x15\n\x08priority\x18\x07 \x01(\x05H\x03\x88\x01\x01\x12\r\n\x05\x66orce\x18\x08 \x01(\x08\x42\x07\n\x05sceneB\t\n\x07_presetB\x07\n\x05_seedB\x0b\n\t_priority\"E\n\x11SubmitJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\x12\x0f\n\x07\x63reated\x18\x02 \x01(\x08\"\x1f\n\rGetJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\"1\n\x0eGetJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\"o\n\x0fListJobsRequest\x12\'\n\x06states\x18\x01 \x03(\x0e\x32\x17.neuralbake.v1.JobState\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12\x12\n\npage_token\x18\x03 \x01(\t\x12\x11\n\tpage_size\x18\x04 \x01(\x05\"M\n\x10ListJobsResponse\x12 \n\x04jobs\x18\x01 \x03(\x0b\x32\x12.neuralbake.v1.Job\x12\x17\n\x0fnext_page_token\x18\x02 \x01(\t\"\"\n\x10\x43\x61ncelJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\"4\n\x11\x43\x61ncelJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\"4\n\x0fWatchJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\x12\x11\n\tafter_seq\x18\x02 \x01(\x03\":\n\x10WatchJobResponse\x12&\n\x05\x65vent\x18\x01 \x01(\x0b\x32\x17.neuralbake.v1.JobEvent\"\x86\x01\n\x08JobEvent\x12\x0e\n\x06job_id\x18\x01 \x01(\t\x12\x0b\n\x03seq\x18\x02 \x01(\x03\x12\x0c\n\x04type\x18\x03 \x01(\t\x12(\n\x04time\x18\x04 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12%\n\x04\x64\x61ta\x18\x05 \x01(\x0b\x32\x17.google.protobuf.Struct*\x9a\x01\n\x08JobState\x12\x19\n\x15JOB_STATE_UNSPECIFIED\x10\x00\x12\x14\n\x10JOB_STATE_QUEUED\x10\x01\x12\x15\n\x11JOB_STATE_RUNNING\x10\x02\x12\x17\n\x13JOB_STATE_SUCCEEDED\x10\x03\x12\x14\n\x10JOB_STATE_FAILED\x10\x04\x12\x17\n\x13JOB_STATE_CANCELLED\x10\x05\x32\x8f\x03\n\nJobService\x12N\n\tSubmitJob\x12\x1f.neuralbake.v1.SubmitJobRequest\x1a .neuralbake.v1.SubmitJobResponse\x12\x45\n\x06GetJob\x12\x1c.neuralbake.v1.GetJobRequest\x1a\x1d.neuralbake.v1.GetJobResponse\x12K\n\x08ListJobs\x12\x1e.neuralbake.v1.ListJobsRequest\x1a\x1f.neuralbake.v1.ListJobsResponse\x12N\n\tCancelJob\x12\x1f.neuralbake.v1.CancelJobRequest\x1a .neuralbake.v1.CancelJobResponse\x12M\n\x08WatchJob\x12\x1e.neuralbake.v1.WatchJobRequest\x1a\x1f.neuralbake.v1.WatchJobResponse0\x01\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x18neuralbake/v1/jobs.proto\x12\rneuralbake.v1\x1a\x1cgoogle/protobuf/struct.proto\x1a\x1fgoogle/protobuf/timestamp.proto\"\xbc\x05\n\x03Job\x12\n\n\x02id\x18\x01 \x01(\t\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12&\n\x05state\x18\x03 \x01(\x0e\x32\x17.neuralbake.v1.JobState\x12,\n\x05scene\x18\x04 \x03(\x0b\x32\x1d.neuralbake.v1.Job.SceneEntry\x12\x12\n\nscene_hash\x18\x05 \x01(\t\x12\x0e\n\x06preset\x18\x06 \x01(\t\x12\'\n\x06\x63onfig\x18\x07 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x0c\n\x04seed\x18\x08 \x01(\x04\x12\x10\n\x08priority\x18\t \x01(\x05\x12\x14\n\x0c\x63ode_version\x18\n \x01(\t\x12\x17\n\x0fidempotency_key\x18\x0b \x01(\t\x12%\n\x04plan\x18\x0c \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x10\n\x08\x61ttempts\x18\r \x01(\x05\x12\x14\n\x0cmax_attempts\x18\x0e \x01(\x05\x12\x18\n\x10\x63\x61ncel_requested\x18\x0f \x01(\x08\x12\x12\n\x05\x65rror\x18\x10 \x01(\tH\x00\x88\x01\x01\x12\x18\n\x0b\x61rtifact_id\x18\x11 \x01(\tH\x01\x88\x01\x01\x12)\n\x08progress\x18\x12 \x01(\x0b\x32\x17.google.protobuf.Struct\x12.\n\ncreated_at\x18\x13 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12.\n\nstarted_at\x18\x14 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12/\n\x0b\x66inished_at\x18\x15 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x0e\n\x06tenant\x18\x16 \x01(\t\x1a,\n\nSceneEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\t:\x02\x38\x01\x42\x08\n\x06_errorB\x0e\n\x0c_artifact_id\"\x85\x02\n\x10SubmitJobRequest\x12\x0c\n\x04kind\x18\x01 \x01(\t\x12\x13\n\tscene_ref\x18\x02 \x01(\tH\x00\x12-\n\nscene_spec\x18\x03 \x01(\x0b\x32\x17.google.protobuf.StructH\x00\x12\x13\n\x06preset\x18\x04 \x01(\tH\x01\x88\x01\x01\x12\'\n\x06\x63onfig\x18\x05 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\x11\n\x04seed\x18\x06 \x01(\x04H\x02\x88\x01\x01\x12\x15\n\x08priority\x18\x07 \x01(\x05H\x03\x88\x01\x01\x12\r\n\x05\x66orce\x18\x08 \x01(\x08\x42\x07\n\x05sceneB\t\n\x07_presetB\x07\n\x05_seedB\x0b\n\t_priority\"E\n\x11SubmitJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\x12\x0f\n\x07\x63reated\x18\x02 \x01(\x08\"B\n\x11SubmitJobsRequest\x12-\n\x04jobs\x18\x01 \x03(\x0b\x32\x1f.neuralbake.v1.SubmitJobRequest\"E\n\x12SubmitJobsResponse\x12/\n\x05items\x18\x01 \x03(\x0b\x32 .neuralbake.v1.SubmitJobResponse\"\x1f\n\rGetJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\"1\n\x0eGetJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\"o\n\x0fListJobsRequest\x12\'\n\x06states\x18\x01 \x03(\x0e\x32\x17.neuralbake.v1.JobState\x12\x0c\n\x04kind\x18\x02 \x01(\t\x12\x12\n\npage_token\x18\x03 \x01(\t\x12\x11\n\tpage_size\x18\x04 \x01(\x05\"M\n\x10ListJobsResponse\x12 \n\x04jobs\x18\x01 \x03(\x0b\x32\x12.neuralbake.v1.Job\x12\x17\n\x0fnext_page_token\x18\x02 \x01(\t\"\"\n\x10\x43\x61ncelJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\"4\n\x11\x43\x61ncelJobResponse\x12\x1f\n\x03job\x18\x01 \x01(\x0b\x32\x12.neuralbake.v1.Job\"4\n\x0fWatchJobRequest\x12\x0e\n\x06job_id\x18\x01 \x01(\t\x12\x11\n\tafter_seq\x18\x02 \x01(\x03\":\n\x10WatchJobResponse\x12&\n\x05\x65vent\x18\x01 \x01(\x0b\x32\x17.neuralbake.v1.JobEvent\"\x86\x01\n\x08JobEvent\x12\x0e\n\x06job_id\x18\x01 \x01(\t\x12\x0b\n\x03seq\x18\x02 \x01(\x03\x12\x0c\n\x04type\x18\x03 \x01(\t\x12(\n\x04time\x18\x04 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12%\n\x04\x64\x61ta\x18\x05 \x01(\x0b\x32\x17.google.protobuf.Struct*\x9a\x01\n\x08JobState\x12\x19\n\x15JOB_STATE_UNSPECIFIED\x10\x00\x12\x14\n\x10JOB_STATE_QUEUED\x10\x01\x12\x15\n\x11JOB_STATE_RUNNING\x10\x02\x12\x17\n\x13JOB_STATE_SUCCEEDED\x10\x03\x12\x14\n\x10JOB_STATE_FAILED\x10\x04\x12\x17\n\x13JOB_STATE_CANCELLED\x10\x05\x32\xe2\x03\n\nJobService\x12N\n\tSubmitJob\x12\x1f.neuralbake.v1.SubmitJobRequest\x1a .neuralbake.v1.SubmitJobResponse\x12Q\n\nSubmitJobs\x12 .neuralbake.v1.SubmitJobsRequest\x1a!.neuralbake.v1.SubmitJobsResponse\x12\x45\n\x06GetJob\x12\x1c.neuralbake.v1.GetJobRequest\x1a\x1d.neuralbake.v1.GetJobResponse\x12K\n\x08ListJobs\x12\x1e.neuralbake.v1.ListJobsRequest\x1a\x1f.neuralbake.v1.ListJobsResponse\x12N\n\tCancelJob\x12\x1f.neuralbake.v1.CancelJobRequest\x1a .neuralbake.v1.CancelJobResponse\x12M\n\x08WatchJob\x12\x1e.neuralbake.v1.WatchJobRequest\x1a\x1f.neuralbake.v1.WatchJobResponse0\x01\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -35,8 +35,8 @@ if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
   _globals['_JOB_SCENEENTRY']._loaded_options = None
   _globals['_JOB_SCENEENTRY']._serialized_options = b'8\001'
-  _globals['_JOBSTATE']._serialized_start=1762
-  _globals['_JOBSTATE']._serialized_end=1916
+  _globals['_JOBSTATE']._serialized_start=1901
+  _globals['_JOBSTATE']._serialized_end=2055
   _globals['_JOB']._serialized_start=107
   _globals['_JOB']._serialized_end=807
   _globals['_JOB_SCENEENTRY']._serialized_start=737
@@ -45,24 +45,28 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_SUBMITJOBREQUEST']._serialized_end=1071
   _globals['_SUBMITJOBRESPONSE']._serialized_start=1073
   _globals['_SUBMITJOBRESPONSE']._serialized_end=1142
-  _globals['_GETJOBREQUEST']._serialized_start=1144
-  _globals['_GETJOBREQUEST']._serialized_end=1175
-  _globals['_GETJOBRESPONSE']._serialized_start=1177
-  _globals['_GETJOBRESPONSE']._serialized_end=1226
-  _globals['_LISTJOBSREQUEST']._serialized_start=1228
-  _globals['_LISTJOBSREQUEST']._serialized_end=1339
-  _globals['_LISTJOBSRESPONSE']._serialized_start=1341
-  _globals['_LISTJOBSRESPONSE']._serialized_end=1418
-  _globals['_CANCELJOBREQUEST']._serialized_start=1420
-  _globals['_CANCELJOBREQUEST']._serialized_end=1454
-  _globals['_CANCELJOBRESPONSE']._serialized_start=1456
-  _globals['_CANCELJOBRESPONSE']._serialized_end=1508
-  _globals['_WATCHJOBREQUEST']._serialized_start=1510
-  _globals['_WATCHJOBREQUEST']._serialized_end=1562
-  _globals['_WATCHJOBRESPONSE']._serialized_start=1564
-  _globals['_WATCHJOBRESPONSE']._serialized_end=1622
-  _globals['_JOBEVENT']._serialized_start=1625
-  _globals['_JOBEVENT']._serialized_end=1759
-  _globals['_JOBSERVICE']._serialized_start=1919
-  _globals['_JOBSERVICE']._serialized_end=2318
+  _globals['_SUBMITJOBSREQUEST']._serialized_start=1144
+  _globals['_SUBMITJOBSREQUEST']._serialized_end=1210
+  _globals['_SUBMITJOBSRESPONSE']._serialized_start=1212
+  _globals['_SUBMITJOBSRESPONSE']._serialized_end=1281
+  _globals['_GETJOBREQUEST']._serialized_start=1283
+  _globals['_GETJOBREQUEST']._serialized_end=1314
+  _globals['_GETJOBRESPONSE']._serialized_start=1316
+  _globals['_GETJOBRESPONSE']._serialized_end=1365
+  _globals['_LISTJOBSREQUEST']._serialized_start=1367
+  _globals['_LISTJOBSREQUEST']._serialized_end=1478
+  _globals['_LISTJOBSRESPONSE']._serialized_start=1480
+  _globals['_LISTJOBSRESPONSE']._serialized_end=1557
+  _globals['_CANCELJOBREQUEST']._serialized_start=1559
+  _globals['_CANCELJOBREQUEST']._serialized_end=1593
+  _globals['_CANCELJOBRESPONSE']._serialized_start=1595
+  _globals['_CANCELJOBRESPONSE']._serialized_end=1647
+  _globals['_WATCHJOBREQUEST']._serialized_start=1649
+  _globals['_WATCHJOBREQUEST']._serialized_end=1701
+  _globals['_WATCHJOBRESPONSE']._serialized_start=1703
+  _globals['_WATCHJOBRESPONSE']._serialized_end=1761
+  _globals['_JOBEVENT']._serialized_start=1764
+  _globals['_JOBEVENT']._serialized_end=1898
+  _globals['_JOBSERVICE']._serialized_start=2058
+  _globals['_JOBSERVICE']._serialized_end=2540
 # @@protoc_insertion_point(module_scope)

@@ -27,7 +27,7 @@ if _version_not_supported:
 
 class JobServiceStub:
     """Submit, read, list, cancel and follow jobs. Every call needs `authorization: Bearer <token>`
-    metadata: scope `read` for reads, `submit` for SubmitJob and CancelJob.
+    metadata: scope `read` for reads, `submit` for SubmitJob, SubmitJobs and CancelJob.
     """
 
     def __init__(self, channel):
@@ -40,6 +40,11 @@ class JobServiceStub:
                 '/neuralbake.v1.JobService/SubmitJob',
                 request_serializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobRequest.SerializeToString,
                 response_deserializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobResponse.FromString,
+                _registered_method=True)
+        self.SubmitJobs = channel.unary_unary(
+                '/neuralbake.v1.JobService/SubmitJobs',
+                request_serializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsRequest.SerializeToString,
+                response_deserializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsResponse.FromString,
                 _registered_method=True)
         self.GetJob = channel.unary_unary(
                 '/neuralbake.v1.JobService/GetJob',
@@ -65,12 +70,20 @@ class JobServiceStub:
 
 class JobServiceServicer:
     """Submit, read, list, cancel and follow jobs. Every call needs `authorization: Bearer <token>`
-    metadata: scope `read` for reads, `submit` for SubmitJob and CancelJob.
+    metadata: scope `read` for reads, `submit` for SubmitJob, SubmitJobs and CancelJob.
     """
 
     def SubmitJob(self, request, context):
         """Queue a job, or return the existing identical one (created = false) unless `force` is set.
         An `idempotency-key` metadata entry is honoured like the REST `Idempotency-Key` header.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
+    def SubmitJobs(self, request, context):
+        """Queue many jobs at once (a build), all or nothing: every job is checked and planned before any is
+        stored, then all go in one transaction; the first refusal names its field under `jobs[i]`.
         """
         context.set_code(grpc.StatusCode.UNIMPLEMENTED)
         context.set_details('Method not implemented!')
@@ -111,6 +124,11 @@ def add_JobServiceServicer_to_server(servicer, server):
                     request_deserializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobRequest.FromString,
                     response_serializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobResponse.SerializeToString,
             ),
+            'SubmitJobs': grpc.unary_unary_rpc_method_handler(
+                    servicer.SubmitJobs,
+                    request_deserializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsRequest.FromString,
+                    response_serializer=neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsResponse.SerializeToString,
+            ),
             'GetJob': grpc.unary_unary_rpc_method_handler(
                     servicer.GetJob,
                     request_deserializer=neuralbake_dot_v1_dot_jobs__pb2.GetJobRequest.FromString,
@@ -141,7 +159,7 @@ def add_JobServiceServicer_to_server(servicer, server):
  # This class is part of an EXPERIMENTAL API.
 class JobService:
     """Submit, read, list, cancel and follow jobs. Every call needs `authorization: Bearer <token>`
-    metadata: scope `read` for reads, `submit` for SubmitJob and CancelJob.
+    metadata: scope `read` for reads, `submit` for SubmitJob, SubmitJobs and CancelJob.
     """
 
     @staticmethod
@@ -161,6 +179,33 @@ class JobService:
             '/neuralbake.v1.JobService/SubmitJob',
             neuralbake_dot_v1_dot_jobs__pb2.SubmitJobRequest.SerializeToString,
             neuralbake_dot_v1_dot_jobs__pb2.SubmitJobResponse.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def SubmitJobs(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/neuralbake.v1.JobService/SubmitJobs',
+            neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsRequest.SerializeToString,
+            neuralbake_dot_v1_dot_jobs__pb2.SubmitJobsResponse.FromString,
             options,
             channel_credentials,
             insecure,
