@@ -139,7 +139,11 @@ def _decompressed(name: str, stream: BinaryIO) -> Iterator[bytes]:
 
 
 def _extract_tar(path: Path, mode: str, staging: Staging, guard: _InflationGuard) -> None:
-    with tarfile.open(path, mode) as archive:  # stream mode: members are read in order, never seeked
+    try:  # stream mode: members are read in order, never seeked
+        archive = tarfile.open(path, mode)  # noqa: SIM115  (closed by the `with` below)
+    except TypeError:  # tarfile reads a gzip header cut short as ord(b"")
+        raise tarfile.ReadError("the gzip header is cut short") from None
+    with archive:
         for member in archive:
             if member.isdir() or _skipped(member.name):
                 continue

@@ -38,7 +38,10 @@ WORK_ENV = (
     "NBAKE_FUZZ_DIR"  # a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
 )
 LIMITS = UploadLimits(max_total_bytes=1 << 20, max_files=20, max_file_bytes=1 << 20)
-USER_ERRORS = (UploadError, SceneError)  # an upload's errors the API answers with a 4xx
+# An upload's errors the API answers with a 4xx. The server parses in child processes with an address-space
+# ceiling and answers a MemoryError there 422 (services/geometry.py); `python -m tests.fuzz` sets such a
+# ceiling, and growth below it is libFuzzer's -rss_limit_mb to catch.
+USER_ERRORS = (UploadError, SceneError, MemoryError)
 
 
 def upload(files: hostile.Files) -> None:
@@ -199,6 +202,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             ),
             **{name: gltf.seed(files) for name, files in hostile.gltf_variants().items()},
             "buffer view without byteLength": gltf.seed(hostile.gltf_view_without_length()),
+            "data URI not ASCII": gltf.seed(hostile.gltf_data_uri_not_ascii()),
         },
         "usd": {
             "point instancer over the limit": usd.seed(instancer),
@@ -225,6 +229,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "tar.gz of a faceless mesh": archive.seed(_bytes_of(tarred(dict(faceless)))),
             "zip compression method 99": archive.seed(hostile.zip_with_unknown_compression()),
             "zip corrupt bzip2": archive.seed(hostile.zip_with_corrupt_bzip2()),
+            "tar.gz header cut short": archive.seed(hostile.tar_gz_header_cut_short()),
             "zip member without a name": archive.seed(hostile.zip_member_without_name()),
             "zip header before its start": archive.seed(hostile.zip_central_directory_past_its_place()),
         },

@@ -284,6 +284,17 @@ def usd_instancer_with_fewer_positions() -> Files:
     return [(name, stage.replace(b"(0, 0, 0), (1, 0, 0), (2, 0, 0)", b"(0, 0, 0), (1, 0, 0)"))]
 
 
+def gltf_data_uri_not_ascii() -> Files:
+    """A glTF whose buffer's data URI holds a character that is not ASCII."""
+    buffer = {"byteLength": 36, "uri": "data:application/octet-stream;base64,AAAA\u00e9AAA"}
+    return [("scene.gltf", json.dumps(gltf_triangle(buffers=[buffer])).encode())]
+
+
+def tar_gz_header_cut_short() -> Files:
+    """The first four bytes of a gzip header (magic, method, no flags byte)."""
+    return [("scene.tar.gz", b"\x1f\x8b\x08")]
+
+
 def usd_points_of_unknown_type() -> Files:
     """A USD mesh whose points are declared `point6f[]`, a type usd-core does not know."""
     name, stage = usd_mesh_without_faces()[0]

@@ -21,7 +21,6 @@ folder is a SceneError naming it.
 from __future__ import annotations
 
 import base64
-import binascii
 import math
 import posixpath
 from dataclasses import dataclass
@@ -94,7 +93,7 @@ def _uri_bytes(gltf_path: Path, uri: str, where: str) -> bytes:
             raise SceneError(where, "data URIs must be base64-encoded")
         try:
             return base64.b64decode(payload, validate=True)
-        except binascii.Error as error:
+        except ValueError as error:  # binascii.Error, or a character that is not ASCII
             raise SceneError(where, f"the data URI is not valid base64: {error}") from None
     target = _inside_folder(gltf_path, uri, where)
     if not target.is_file():
