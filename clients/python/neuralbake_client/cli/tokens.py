@@ -11,12 +11,12 @@ import typer
 
 from neuralbake_client.cli.output import Output
 from neuralbake_client.cli.remote import JsonOption, TokenOption, UrlOption, connect, remote_errors
+from neuralbake_client.durations import seconds
 
 if TYPE_CHECKING:
     from neuralbake_client.models import QuotaLimits, TenantQuotas, Token
 
 DEFAULT = "default"  # a quota option's value that drops the tenant's own limit for the deployment's
-DURATION_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400}
 
 tokens_app = typer.Typer(
     name="tokens",
@@ -145,20 +145,13 @@ def _count(value: str | None, option: str, lowest: int) -> int | str | None:
 
 
 def _duration(value: str | None) -> float | str | None:
-    """`90`, `90s`, `30m`, `4h`, `2d` as seconds."""
+    """`90`, `90s`, `30m`, `4h`, `2d` as seconds; `default` as it is."""
     if value is None or value == DEFAULT:
         return value
-    text = value.strip().lower()
-    scale = DURATION_UNITS.get(text[-1:])
     try:
-        seconds = float(text[:-1] if scale else text) * (scale or 1)
-    except ValueError:
-        seconds = -1.0
-    if not 0 <= seconds < float("inf"):
-        raise typer.BadParameter(
-            f"{value!r}: a duration such as 90s, 30m, 4h or 2d", param_hint="--max-compute"
-        )
-    return seconds
+        return seconds(value)
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--max-compute") from None
 
 
 def _quota_lines(quotas: TenantQuotas) -> str:
