@@ -48,6 +48,8 @@ SMALL_LSNIF = {
     "reference_spp": 16,
 }
 HOSTILE_NAME = '<script>window.__injected = 1</script><img src=x onerror="window.__injected = 2">'
+NARROW = {"width": 420, "height": 800}  # a phone
+PAGE_WIDTHS = "[document.scrollingElement.scrollWidth, document.scrollingElement.clientWidth]"
 
 
 @pytest.fixture(scope="module")
@@ -356,22 +358,19 @@ def test_a_failed_job_shows_its_cause_in_one_line_and_its_traceback_collapsed(pa
     assert finished(served, job["id"])["state"] == "FAILED"
     sign_in(page, "read")
     page.goto(f"/ui/#/jobs/{job['id']}")
+    traceback = page.locator(".failure details.traceback")
+    expect(traceback.locator("summary")).to_be_visible()
+    expect(traceback).not_to_have_attribute("open", "")
     cause = page.locator(".failure .cause")
     expect(cause).to_contain_text("light")
     line = cause.evaluate("element => parseFloat(getComputedStyle(element).fontSize)")
-    assert cause.bounding_box()["height"] < 2 * line
-    traceback = page.locator(".failure details.traceback")
-    expect(traceback).not_to_have_attribute("open", "")
-    expect(traceback.locator("summary")).to_be_visible()
     expect(traceback.locator("pre")).to_contain_text("Traceback", use_inner_text=False)
     logged = page.locator("#events tr.event-log", has_text="Traceback")
     expect(logged.locator("details.traceback")).to_have_count(1)
     assert logged.bounding_box()["height"] < 3 * line  # collapsed, not flattened into the table
     screenshot(page, "failed")
-
-
-NARROW = {"width": 420, "height": 800}
-PAGE_WIDTHS = "[document.scrollingElement.scrollWidth, document.scrollingElement.clientWidth]"
+    page.set_viewport_size(NARROW)  # narrower than the cause: still one line
+    assert cause.bounding_box()["height"] < 2 * line
 
 
 def test_narrow_pages_do_not_overflow(browser, served, trained_job, other_trained_job):

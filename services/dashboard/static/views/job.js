@@ -39,7 +39,7 @@ export function jobView(jobId, requestedTab) {
 
   // The header is built once and its parts updated, so the cancel button stays the same element while
   // progress streams in (a button replaced between mousedown and mouseup would swallow the click).
-  const stateSlot = h("span"), progressSlot = h("div"), errorSlot = h("div");
+  const stateSlot = h("span"), progressSlot = h("div");
   const titleSlot = h("h2"), idSlot = h("div", { class: "job-id" });
   const cancelStatus = h("span", { class: "cancel-status" });
   const cancel = h("button", { type: "button", id: "cancel", class: "danger", hidden: true }, "Cancel");
@@ -54,17 +54,18 @@ export function jobView(jobId, requestedTab) {
     }
   });
   const compareWith = h("a", { href: `#/jobs?pick=${encodeURIComponent(jobId)}`, id: "compare-with" }, "Compare with…");
-  fill(header, h("div", { class: "title-row" }, titleSlot, stateSlot, compareWith, cancel), idSlot, progressSlot, errorSlot, cancelStatus);
-  let failureShown = null; // redrawn only when it changes, so an opened traceback stays open
+  // A failure's cause and traceback are filled in place, so an opened traceback stays open.
+  const cause = h("div", { class: "cause" }), tracebackSlot = h("div");
+  const failure = h("div", { class: "problem failure", hidden: true }, cause, tracebackSlot);
+  fill(header, h("div", { class: "title-row" }, titleSlot, stateSlot, compareWith, cancel), idSlot, progressSlot, failure, cancelStatus);
 
   function renderFailure() {
+    failure.hidden = !job.error;
+    cause.textContent = cause.title = job.error ?? "";
     const traceback = events.find((e) => e.type === "log" && e.data.message?.startsWith("Traceback"));
-    const key = `${job.error ?? ""}\u0000${traceback?.seq ?? ""}`;
-    if (key === failureShown) return;
-    failureShown = key;
-    fill(errorSlot, job.error ? h("div", { class: "problem failure" },
-      h("div", { class: "cause", title: job.error }, job.error),
-      traceback ? h("details", { class: "traceback" }, h("summary", {}, "Traceback"), h("pre", {}, traceback.data.message)) : null) : null);
+    if (traceback && !tracebackSlot.firstChild) {
+      fill(tracebackSlot, h("details", { class: "traceback" }, h("summary", {}, "Traceback"), h("pre", {}, traceback.data.message)));
+    }
   }
 
   function renderHeader() {
