@@ -174,6 +174,10 @@ def _bytes_of(parts: list[tuple[str, io.BytesIO]]) -> hostile.Files:
     return [(name, stream.getvalue()) for name, stream in parts]
 
 
+def _byte_added(data: bytes, at: int) -> bytes:
+    return data[:at] + bytes([(data[at] + 1) % 256]) + data[at + 1 :]
+
+
 def _png(width: int, height: int) -> bytes:
     encoded = io.BytesIO()
     Image.new("RGB", (width, height), (200, 100, 50)).save(encoded, format="PNG")
@@ -187,6 +191,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
     instancer = hostile.usd_point_instancer(MAX_SCENE_INSTANCES + 1)
     faceless = hostile.usd_mesh_without_faces()
     triangle = hostile.gltf_triangle()
+    instancer_usdc = usdc(hostile.usd_point_instancer(3)[0][1])
     return {
         "scene": {
             "box": scene.seed([("scene.yaml", _BOX_SCENE.encode())]),
@@ -208,7 +213,13 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "point instancer over the limit": usd.seed(instancer),
             "mesh without faces": usd.seed(faceless),
             "mesh without faces usdc": usd.seed([("scene.usdc", usdc(faceless[0][1]))]),
-            "point instancer usdc": usd.seed([("scene.usdc", usdc(hostile.usd_point_instancer(3)[0][1]))]),
+            "point instancer usdc": usd.seed([("scene.usdc", instancer_usdc)]),
+            # the same with one byte of its crate changed (fuzzing found it): a value usd-core cannot unpack
+            "usdc value that cannot be unpacked": usd.seed(
+                [("scene.usdc", _byte_added(instancer_usdc, 699))]
+            ),
+            "instancer of no prototype": usd.seed(hostile.usd_instancer_of_no_prototype()),
+            "instancer without instances": usd.seed(hostile.usd_instancer_without_instances()),
             "bytes not UTF-8": usd.seed(hostile.usd_not_utf8()),
             "instancer with fewer positions": usd.seed(hostile.usd_instancer_with_fewer_positions()),
             "points of an unknown type": usd.seed(hostile.usd_points_of_unknown_type()),

@@ -295,6 +295,19 @@ def tar_gz_header_cut_short() -> Files:
     return [("scene.tar.gz", b"\x1f\x8b\x08")]
 
 
+def usd_instancer_of_no_prototype() -> Files:
+    """A PointInstancer whose instances all name prototype 5 of its one."""
+    name, stage = usd_point_instancer(3)[0]
+    return [(name, stage.replace(b"protoIndices = [0, 0, 0]", b"protoIndices = [5, 5, 5]"))]
+
+
+def usd_instancer_without_instances() -> Files:
+    """A PointInstancer with no instances: its prototype's mesh is placed nowhere, and nothing else is."""
+    name, stage = usd_point_instancer(3)[0]
+    stage = stage.replace(b"protoIndices = [0, 0, 0]", b"protoIndices = []")
+    return [(name, stage.replace(b"positions = [(0, 0, 0), (1, 0, 0), (2, 0, 0)]", b"positions = []"))]
+
+
 def usd_points_of_unknown_type() -> Files:
     """A USD mesh whose points are declared `point6f[]`, a type usd-core does not know."""
     name, stage = usd_mesh_without_faces()[0]

@@ -130,11 +130,12 @@ def usd_shape_mesh(shape: spec.UsdShape, field: str, base_dir: Path | None) -> M
 
 def _numbers(attribute, dtype, where: str) -> np.ndarray:
     """The attribute's array; a SceneError when the file gave it a value that holds no numbers (a value of
-    a type usd-core does not know reads as an UnregisteredValue)."""
+    a type usd-core does not know reads as an UnregisteredValue) or one usd-core cannot unpack (a corrupt
+    crate file: Tf.ErrorException, a RuntimeError)."""
     try:
         return np.asarray(attribute.Get() or [], dtype=dtype)
-    except (TypeError, ValueError):
-        raise SceneError(where, f"{attribute.GetName()} is not an array of numbers") from None
+    except (TypeError, ValueError, RuntimeError):
+        raise SceneError(where, f"{attribute.GetName()} cannot be read as an array of numbers") from None
 
 
 def prim_mesh(path: Path, prim_path: str, field: str) -> MeshData:
@@ -352,6 +353,7 @@ def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
             lights.append(prim)
         elif prim.IsA(usd_geom.Gprim):
             importer.ignored.add(f"{prim.GetPath()}: {prim.GetTypeName()} (only meshes are rendered)")
+    placements = {key: matrices for key, matrices in placements.items() if matrices}  # instanced 0 times
     if not placements:
         raise SceneError(path.name, "the USD stage has no mesh to render")
 
@@ -434,6 +436,11 @@ def _instanced(instancer_prim, world: np.ndarray, placements, bound, time, impor
         raise SceneError(
             importer.path.name,
             f"{instancer_prim.GetPath()}: {placed:,} instances, over the limit of {MAX_SCENE_INSTANCES:,}",
+        )
+    if len(proto_indices) and (proto_indices.min() < 0 or proto_indices.max() >= len(prototypes)):
+        raise SceneError(
+            importer.path.name,
+            f"{instancer_prim.GetPath()}: protoIndices name prototypes it lacks (it has {len(prototypes)})",
         )
     matrices = instancer.ComputeInstanceTransformsAtTime(time, time)
     if len(matrices) != len(proto_indices):  # usd-core warns and returns none when the arrays disagree
