@@ -174,8 +174,12 @@ def _bytes_of(parts: list[tuple[str, io.BytesIO]]) -> hostile.Files:
     return [(name, stream.getvalue()) for name, stream in parts]
 
 
-def _byte_added(data: bytes, at: int) -> bytes:
-    return data[:at] + bytes([(data[at] + 1) % 256]) + data[at + 1 :]
+def _patched(data: bytes, changes: dict[int, int]) -> bytes:
+    """`data` with the byte at each offset of `changes` set to its value."""
+    patched = bytearray(data)
+    for at, value in changes.items():
+        patched[at] = value
+    return bytes(patched)
 
 
 def _png(width: int, height: int) -> bytes:
@@ -208,15 +212,20 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             **{name: gltf.seed(files) for name, files in hostile.gltf_variants().items()},
             "buffer view without byteLength": gltf.seed(hostile.gltf_view_without_length()),
             "data URI not ASCII": gltf.seed(hostile.gltf_data_uri_not_ascii()),
+            "POSITION of VEC2": gltf.seed(hostile.gltf_positions_of_two_numbers()),
         },
         "usd": {
             "point instancer over the limit": usd.seed(instancer),
             "mesh without faces": usd.seed(faceless),
             "mesh without faces usdc": usd.seed([("scene.usdc", usdc(faceless[0][1]))]),
             "point instancer usdc": usd.seed([("scene.usdc", instancer_usdc)]),
-            # the same with one byte of its crate changed (fuzzing found it): a value usd-core cannot unpack
+            # the same with bytes of its crate changed (fuzzing found them): a value usd-core cannot unpack,
+            # and upAxis metadata of another type
             "usdc value that cannot be unpacked": usd.seed(
-                [("scene.usdc", _byte_added(instancer_usdc, 699))]
+                [("scene.usdc", _patched(instancer_usdc, {699: 177}))]
+            ),
+            "usdc upAxis of another type": usd.seed(
+                [("scene.usdc", _patched(instancer_usdc, {207: 4, 633: 26}))]
             ),
             "instancer of no prototype": usd.seed(hostile.usd_instancer_of_no_prototype()),
             "instancer without instances": usd.seed(hostile.usd_instancer_without_instances()),

@@ -290,6 +290,13 @@ def gltf_data_uri_not_ascii() -> Files:
     return [("scene.gltf", json.dumps(gltf_triangle(buffers=[buffer])).encode())]
 
 
+def gltf_positions_of_two_numbers() -> Files:
+    """A glTF whose POSITION accessor is a VEC2."""
+    document = gltf_triangle()
+    document["accessors"][0] |= {"type": "VEC2", "count": 4}
+    return [("scene.gltf", json.dumps(document).encode())]
+
+
 def tar_gz_header_cut_short() -> Files:
     """The first four bytes of a gzip header (magic, method, no flags byte)."""
     return [("scene.tar.gz", b"\x1f\x8b\x08")]

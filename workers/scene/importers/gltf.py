@@ -241,6 +241,8 @@ def primitive_mesh(path: Path, mesh: int, primitive: int, field: str) -> MeshDat
     if attributes.POSITION is None:
         raise SceneError(where, "the primitive has no POSITION attribute")
     vertices = accessor(file, attributes.POSITION, where).astype(np.float64)
+    if vertices.shape[1] != 3:
+        raise SceneError(f"{where} (accessors[{attributes.POSITION}])", "POSITION must be a VEC3 accessor")
     if prim.indices is not None:
         indices = accessor(file, prim.indices, where)[:, 0].astype(np.int64)
     else:

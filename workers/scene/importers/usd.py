@@ -318,7 +318,18 @@ def _world(prim, time) -> np.ndarray:
 
 
 def import_usd(path: Path, prefix: str = "") -> spec.SceneSpec:
-    """The scene of the USD file at `path`; paths relative to the folder `prefix` names (as for glTF)."""
+    """The scene of the USD file at `path`; paths relative to the folder `prefix` names (as for glTF).
+    usd-core's own errors while it reads the stage (Tf.ErrorException: metadata of the wrong type, values
+    a corrupt crate file cannot unpack) are the file's."""
+    from pxr import Tf
+
+    try:
+        return _scene(Path(path), prefix)
+    except Tf.ErrorException as error:
+        raise SceneError(Path(path).name, f"usd-core cannot read it: {_message(error).strip()}") from None
+
+
+def _scene(path: Path, prefix: str) -> spec.SceneSpec:
     _, usd, usd_geom, usd_lux, usd_shade = _pxr()
     path = Path(path)
     stage = read_stage(path)
