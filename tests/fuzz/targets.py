@@ -29,14 +29,12 @@ from services.artifacts.uploads import UploadError, UploadLimits, ingest_upload
 from services.inference.errors import MalformedBody
 from services.inference.wire import decode_binary
 from tests.support import hostile_inputs as hostile
+from tests.support import usd_files
 from tests.support.archives import tarred, zipped
-from tests.support.usd_files import usdc
 from workers.scene.format.errors import SceneError
 from workers.scene.geometry.budget import MAX_SCENE_INSTANCES
 
-WORK_ENV = (
-    "NBAKE_FUZZ_DIR"  # a folder the caller owns and removes (libFuzzer exits without Python's clean-up)
-)
+WORK_ENV = "NBAKE_FUZZ_DIR"  # a folder the caller owns and removes (libFuzzer exits without clean-up)
 LIMITS = UploadLimits(max_total_bytes=1 << 20, max_files=20, max_file_bytes=1 << 20)
 # An upload's errors the API answers with a 4xx. The server parses in child processes with an address-space
 # ceiling and answers a MemoryError there 422 (services/geometry.py); `python -m tests.fuzz` sets such a
@@ -77,7 +75,8 @@ class UploadTarget:
 
 scene = UploadTarget(("scene.yaml", "scene.json"))
 gltf = UploadTarget(("scene.gltf", "scene.glb"))
-usd = UploadTarget(("scene.usda", "scene.usdc"))
+usd = UploadTarget(("scene.usda",))
+usdc = UploadTarget(("scene.usdc",))  # usd-core's crate reader: see tests/unit/test_fuzz_parsers.py
 mesh = UploadTarget(("mesh.obj", "mesh.ply", "mesh.stl"), hostile.mesh_scene)
 texture = UploadTarget(("texture.png", "texture.jpg", "texture.exr"), hostile.textured_scene)
 archive = UploadTarget(("upload.zip", "upload.tar", "upload.tar.gz"))
@@ -133,6 +132,7 @@ TARGETS: dict[str, Callable[[bytes], None]] = {
     "scene": scene,
     "gltf": gltf,
     "usd": usd,
+    "usdc": usdc,
     "mesh": mesh,
     "texture": texture,
     "archive": archive,
@@ -195,7 +195,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
     instancer = hostile.usd_point_instancer(MAX_SCENE_INSTANCES + 1)
     faceless = hostile.usd_mesh_without_faces()
     triangle = hostile.gltf_triangle()
-    instancer_usdc = usdc(hostile.usd_point_instancer(3)[0][1])
+    instancer_usdc = usd_files.usdc(hostile.usd_point_instancer(3)[0][1])
     return {
         "scene": {
             "box": scene.seed([("scene.yaml", _BOX_SCENE.encode())]),
@@ -213,25 +213,28 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "buffer view without byteLength": gltf.seed(hostile.gltf_view_without_length()),
             "data URI not ASCII": gltf.seed(hostile.gltf_data_uri_not_ascii()),
             "POSITION of VEC2": gltf.seed(hostile.gltf_positions_of_two_numbers()),
+            "no vertex": gltf.seed(hostile.gltf_without_vertices()),
         },
         "usd": {
             "point instancer over the limit": usd.seed(instancer),
             "mesh without faces": usd.seed(faceless),
-            "mesh without faces usdc": usd.seed([("scene.usdc", usdc(faceless[0][1]))]),
-            "point instancer usdc": usd.seed([("scene.usdc", instancer_usdc)]),
-            # the same with bytes of its crate changed (fuzzing found them): a value usd-core cannot unpack,
-            # and upAxis metadata of another type
-            "usdc value that cannot be unpacked": usd.seed(
-                [("scene.usdc", _patched(instancer_usdc, {699: 177}))]
-            ),
-            "usdc upAxis of another type": usd.seed(
-                [("scene.usdc", _patched(instancer_usdc, {207: 4, 633: 26}))]
-            ),
             "instancer of no prototype": usd.seed(hostile.usd_instancer_of_no_prototype()),
             "instancer without instances": usd.seed(hostile.usd_instancer_without_instances()),
             "bytes not UTF-8": usd.seed(hostile.usd_not_utf8()),
             "instancer with fewer positions": usd.seed(hostile.usd_instancer_with_fewer_positions()),
             "points of an unknown type": usd.seed(hostile.usd_points_of_unknown_type()),
+        },
+        "usdc": {
+            "mesh without faces": usdc.seed([("scene.usdc", usd_files.usdc(faceless[0][1]))]),
+            "point instancer": usdc.seed([("scene.usdc", instancer_usdc)]),
+            # the same with bytes of its crate changed (fuzzing found them): a value usd-core cannot unpack,
+            # and upAxis metadata of another type
+            "value that cannot be unpacked": usdc.seed(
+                [("scene.usdc", _patched(instancer_usdc, {699: 177}))]
+            ),
+            "upAxis of another type": usdc.seed(
+                [("scene.usdc", _patched(instancer_usdc, {207: 4, 633: 26}))]
+            ),
         },
         "mesh": {
             "obj": mesh.seed([("a.obj", _TRIANGLE_OBJ)]),

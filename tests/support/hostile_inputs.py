@@ -297,6 +297,13 @@ def gltf_positions_of_two_numbers() -> Files:
     return [("scene.gltf", json.dumps(document).encode())]
 
 
+def gltf_without_vertices() -> Files:
+    """A glTF (no camera) whose one primitive's POSITION accessor has count 0."""
+    document = gltf_triangle()
+    document["accessors"][0] |= {"count": 0}
+    return [("scene.gltf", json.dumps(document).encode())]
+
+
 def tar_gz_header_cut_short() -> Files:
     """The first four bytes of a gzip header (magic, method, no flags byte)."""
     return [("scene.tar.gz", b"\x1f\x8b\x08")]

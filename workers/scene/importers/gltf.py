@@ -424,8 +424,10 @@ def unique_name(name: str | None, fallback: str, taken: set[str]) -> str:
     return candidate
 
 
-def _bounds(geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[int, int], list[np.ndarray]]):
-    """World bounds of every placed primitive."""
+def _bounds(
+    geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[int, int], list[np.ndarray]], name: str
+):
+    """World bounds of every placed primitive; a SceneError naming the file `name` when none has a vertex."""
     points = np.concatenate(
         [
             geometry[key].vertices @ m[:3, :3].T + m[:3, 3]
@@ -433,6 +435,8 @@ def _bounds(geometry: dict[tuple[int, int], MeshData], placements: dict[tuple[in
             for m in matrices
         ]
     )
+    if not len(points):
+        raise SceneError(name, "no vertex to frame a camera on: the file's meshes have no vertices")
     return np.stack([points.min(0), points.max(0)])
 
 
@@ -540,7 +544,7 @@ def import_gltf(path: Path, prefix: str = "") -> spec.SceneSpec:
         if len(perspective) > 1:
             importer.notes.append(f"camera: {where}'s, the first of {len(perspective)} in node order")
     else:
-        camera = framing_camera(_bounds(geometry, placements))
+        camera = framing_camera(_bounds(geometry, placements, path.name))
         importer.notes.append("camera: none in the file; a default camera frames the scene's bounds")
     environment = None
     if not scene_lights and not any(o.emission for o in objects):
