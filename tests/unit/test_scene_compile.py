@@ -7,7 +7,7 @@ from workers.scene.format import spec
 from workers.scene.format.errors import SceneError
 from workers.scene.generators.builtin import BUILTIN_SCENES
 from workers.scene.geometry.compile import compile_scene
-from workers.scene.geometry.shapes import box
+from workers.scene.geometry.shapes import box, icosphere
 
 GREY = {"grey": spec.Diffuse()}
 LIGHT = [spec.PointLight(position=(0, 5, 0), intensity=(1, 1, 1))]
@@ -152,3 +152,13 @@ def test_every_builtin_compiles_with_the_camera_looking_at_it(name):
         inside = depth > 0 and abs(rel @ right) <= half * depth * camera.width / camera.height
         visible += bool(inside and abs(rel @ up) <= half * depth)
     assert visible >= 0.5 * len(compiled.objects)
+
+
+@pytest.mark.parametrize("subdivisions", [0, 1, 3])
+def test_icosphere_has_trimeshs_triangles_bit_for_bit(subdivisions):
+    import trimesh
+
+    expected = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    vertices, faces = icosphere(subdivisions)
+    assert np.array_equal(vertices[faces], np.asarray(expected.vertices)[np.asarray(expected.faces)])
+    assert len(vertices) == len(expected.vertices)  # no vertex twice

@@ -43,18 +43,55 @@ def box() -> MeshData:
     )
 
 
+# The icosahedron trimesh's `icosphere` starts from (its `creation` data): the spheres' triangles stay theirs.
+_A, _B = 0.5257311121191336, 0.85065080835204
+ICOSAHEDRON_VERTICES = np.array(
+    [
+        [-_A, _B, 0], [_A, _B, 0], [-_A, -_B, 0], [_A, -_B, 0], [0, -_A, _B], [0, _A, _B],
+        [0, -_A, -_B], [0, _A, -_B], [_B, 0, -_A], [_B, 0, _A], [-_B, 0, -_A], [-_B, 0, _A],
+    ],
+    dtype=np.float64,
+)  # fmt: skip
+ICOSAHEDRON_FACES = np.array(
+    [
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+        [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+        [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    ],
+    dtype=np.int64,
+)  # fmt: skip
+
+
+def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of the unit icosphere: the triangles of `trimesh.creation.icosphere`, corner for
+    corner and bit for bit (its midpoints are numbered in another order), without importing trimesh, which
+    was half a second of the start-up of every render of a scene with a sphere."""
+    vertices, faces = ICOSAHEDRON_VERTICES, ICOSAHEDRON_FACES
+    for _ in range(subdivisions):
+        edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        keys, inverse = np.unique(edges[:, 0] * len(vertices) + edges[:, 1], return_inverse=True)
+        mid = inverse.reshape(-1, 3) + len(vertices)  # the midpoints of edges 01, 12 and 20 of each face
+        a, b, c = faces.T
+        ab, bc, ca = mid.T
+        faces = np.column_stack([a, ab, ca, ab, b, bc, ca, bc, c, ab, bc, ca]).reshape(-1, 3)
+        ends = np.stack(np.divmod(keys, len(vertices)), axis=1)
+        vertices = _onto_unit_sphere(np.vstack((vertices, vertices[ends].mean(axis=1))))
+    return (vertices if subdivisions > 0 else _onto_unit_sphere(vertices)), faces
+
+
+def _onto_unit_sphere(vertices: np.ndarray) -> np.ndarray:
+    """Each vertex moved along its direction to radius 1, with trimesh's arithmetic."""
+    scalar = np.sqrt(np.dot(vertices**2, [1, 1, 1]))
+    return vertices + vertices / scalar.reshape(-1, 1) * (1.0 - scalar).reshape(-1, 1)
+
+
 def sphere(center, radius: float, subdivisions: int) -> MeshData:
     """An icosphere with smooth normals and spherical UVs (seam triangles share vertices; fine for tests)."""
-    import trimesh
-
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
-    unit = np.asarray(mesh.vertices, dtype=np.float64)
-    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    vertices, faces = icosphere(subdivisions)
+    unit = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
     u = np.arctan2(unit[:, 0], -unit[:, 2]) / (2 * np.pi) % 1.0
     v = np.arccos(np.clip(unit[:, 1], -1, 1)) / np.pi
-    return MeshData(
-        unit * radius + np.asarray(center), np.asarray(mesh.faces, dtype=np.int64), unit, np.stack([u, v], 1)
-    )
+    return MeshData(unit * radius + np.asarray(center), faces, unit, np.stack([u, v], 1))
 
 
 def rectangle_mesh(shape: spec.RectangleShape, field: str, base_dir: Path | None) -> MeshData:
