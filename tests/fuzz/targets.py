@@ -223,6 +223,7 @@ def _seeds() -> dict[str, dict[str, bytes]]:
             "bytes not UTF-8": usd.seed(hostile.usd_not_utf8()),
             "instancer with fewer positions": usd.seed(hostile.usd_instancer_with_fewer_positions()),
             "points of an unknown type": usd.seed(hostile.usd_points_of_unknown_type()),
+            "protoIndices of an unknown type": usd.seed(hostile.usd_instancer_indices_of_unknown_type()),
         },
         "usdc": {
             "mesh without faces": usdc.seed([("scene.usdc", usd_files.usdc(faceless[0][1]))]),

@@ -322,6 +322,12 @@ def usd_instancer_without_instances() -> Files:
     return [(name, stage.replace(b"positions = [(0, 0, 0), (1, 0, 0), (2, 0, 0)]", b"positions = []"))]
 
 
+def usd_instancer_indices_of_unknown_type() -> Files:
+    """A PointInstancer whose protoIndices are declared `int6[]`, a type usd-core does not know."""
+    name, stage = usd_point_instancer(3)[0]
+    return [(name, stage.replace(b"int[] protoIndices", b"int6[] protoIndices"))]
+
+
 def usd_points_of_unknown_type() -> Files:
     """A USD mesh whose points are declared `point6f[]`, a type usd-core does not know."""
     name, stage = usd_mesh_without_faces()[0]

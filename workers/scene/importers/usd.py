@@ -442,7 +442,8 @@ def _instanced(instancer_prim, world: np.ndarray, placements, bound, time, impor
     _, usd, usd_geom, _, usd_shade = _pxr()
     instancer = usd_geom.PointInstancer(instancer_prim)
     prototypes = instancer.GetPrototypesRel().GetTargets()
-    proto_indices = np.asarray(instancer.GetProtoIndicesAttr().Get(time) or [], dtype=np.int64)
+    where = f"{importer.path.name} ({instancer_prim.GetPath()})"
+    proto_indices = _numbers(instancer.GetProtoIndicesAttr(), np.int64, where)  # time is Default
     if (placed := len(proto_indices) + sum(map(len, placements.values()))) > MAX_SCENE_INSTANCES:
         raise SceneError(
             importer.path.name,
