@@ -59,6 +59,10 @@ def test_submit_wait_json_succeeds_and_download_gets_the_files(env, tmp_path):
     job = events[-1]["job"]
     assert job["state"] == "SUCCEEDED" and job["config"]["spp"] == 4
     assert all(e["job_id"] == job["id"] for e in events[1:-1])
+    again = lines(
+        nbake("submit", "cornell_box", "--kind", "render", "--preset", "quick", *TINY_SETS, env=env).stdout
+    )
+    assert again[0]["event"] == "submitted" and again[0]["reused"] and again[0]["job"]["id"] == job["id"]
 
     shown = nbake("show", job["id"], "--json", env=env)
     assert shown.returncode == 0 and lines(shown.stdout)[0]["job"]["artifact_id"] == job["artifact_id"]

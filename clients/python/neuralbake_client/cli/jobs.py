@@ -105,7 +105,7 @@ def submit_command(
             priority=priority,
             force=force,
         )
-        out.job(job, event="reused" if job.reused else "submitted")
+        out.job(job, event="submitted")
         if wait:
             follow(client, job, out, timeout)
 

@@ -28,9 +28,13 @@ class Output:
         print(json.dumps({"event": event, **fields}, default=str), flush=True)
 
     def job(self, job: Job, event: str = "job", warning: str | None = None) -> None:
-        """The job; `warning` is what its artifact was flagged with (a model worse than path tracing)."""
+        """The job; `warning` is what its artifact was flagged with (a model worse than path tracing). A
+        submission's line says whether it got an existing job back (`reused`)."""
         if self.json:
-            self.line(event, job=job.model_dump(mode="json"), **({"warning": warning} if warning else {}))
+            extra = ({"warning": warning} if warning else {}) | (
+                {"reused": job.reused} if event == "submitted" else {}
+            )
+            self.line(event, job=job.model_dump(mode="json"), **extra)
             return
         print(summary(job))
         if warning:
