@@ -62,7 +62,7 @@ def pipeline(root: Path, gate: str, trained_kinds: bool) -> Path:
             kinds.append({"kind": name, "preset": "quick", "config": config, "gates": ["flip <= 1"]})
             assets.append({"scene": folder, "kinds": [name]})
         assets = [a if isinstance(a, dict) else {"scene": a, "kinds": ["render"]} for a in assets]
-    document = {"concurrency": 4, "timeout": "20m", "assets": assets, "kinds": kinds}
+    document = {"concurrency": 8, "timeout": "20m", "assets": assets, "kinds": kinds}  # one batch
     path = root / "nbake.yaml"
     path.write_text(yaml.safe_dump(document, sort_keys=False))
     return path
